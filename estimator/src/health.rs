@@ -1,0 +1,356 @@
+//! Calibration health monitor: what runs on the vehicle to tell whether a sensor's
+//! calibration still holds.
+//!
+//! Per sensor it keeps
+//! - a window of NIS values, whose sum is compared with chi-square bounds (a filter whose
+//!   noise model or calibration is off shows a NIS sum outside them);
+//! - a step-change detector for the extrinsic rotation and translation: a generalised
+//!   likelihood-ratio test (GLR) of "the extrinsic jumped by an unknown `delta`" against "no
+//!   jump", on exponentially forgotten innovation statistics. With `H_e` the Jacobian of
+//!   the residual w.r.t. the extrinsic block and `S` the innovation covariance,
+//!   `b = sum l^k H_e^T S^-1 r_k` has covariance `A2 = sum l^2k H_e^T S^-1 H_e` under "no
+//!   jump", so `b^T A2^-1 b ~ chi2(3)`; a knock makes it grow with every update.
+//!
+//! Excitation (how much each extrinsic sigma shrank from its prior) is read off the filter
+//! covariance by `Ekf::excitation`.
+
+use crate::chi2::{self, Confidence};
+use crate::scalar::Scalar;
+use heapless::Deque;
+use nalgebra::{Cholesky, Matrix3, Vector3};
+
+/// Capacity of the NIS window.
+pub const NIS_WINDOW_CAPACITY: usize = 64;
+
+/// Tuning of the health monitor.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HealthConfig<T: Scalar> {
+    /// Number of updates in the NIS window (at most [`NIS_WINDOW_CAPACITY`]).
+    pub nis_window: usize,
+    /// Two-sided confidence of the windowed NIS bounds.
+    pub nis_confidence: Confidence,
+    /// Forgetting factor of the step detector per update (0.97 at 10 Hz ~ a 3 s memory).
+    pub step_forgetting: T,
+    /// Confidence of the step detector's chi-square(3) threshold.
+    pub step_confidence: Confidence,
+    /// Updates a detector must accumulate before it may fire (also its refractory period).
+    pub step_min_updates: u32,
+    /// Sigma (rad) added to each extrinsic rotation axis when a rotation step is detected.
+    pub inflate_rotation: T,
+    /// Sigma (m) added to each extrinsic translation axis when a translation step is detected.
+    pub inflate_translation: T,
+}
+
+impl<T: Scalar> Default for HealthConfig<T> {
+    fn default() -> Self {
+        Self {
+            nis_window: 50,
+            nis_confidence: Confidence::P999,
+            step_forgetting: T::lit(0.97),
+            step_confidence: Confidence::P9999,
+            step_min_updates: 15,
+            inflate_rotation: T::lit(0.035),
+            inflate_translation: T::lit(0.03),
+        }
+    }
+}
+
+/// Something the monitor noticed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum HealthEvent<T: Scalar> {
+    /// The extrinsic rotation of `sensor` changed; its covariance was inflated.
+    RotationStep {
+        /// Sensor index.
+        sensor: usize,
+        /// Stamp of the update that triggered it, ns.
+        stamp_ns: u64,
+        /// GLR statistic (chi-square(3) under "no change").
+        statistic: T,
+        /// Estimated size of the step, rad.
+        magnitude: T,
+    },
+    /// The extrinsic translation of `sensor` changed; its covariance was inflated.
+    TranslationStep {
+        /// Sensor index.
+        sensor: usize,
+        /// Stamp of the update that triggered it, ns.
+        stamp_ns: u64,
+        /// GLR statistic.
+        statistic: T,
+        /// Estimated size of the step, m.
+        magnitude: T,
+    },
+}
+
+/// Verdict of the windowed NIS test.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NisStatus {
+    /// Not enough updates in the window yet.
+    Filling,
+    /// Inside the chi-square bounds.
+    Consistent,
+    /// Above the upper bound: residuals larger than the model says (miscalibration, knock,
+    /// optimistic noise).
+    High,
+    /// Below the lower bound: noise model too pessimistic.
+    Low,
+}
+
+/// Exponentially forgotten GLR statistics of a 3-dof step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct StepDetector<T: Scalar> {
+    info: Matrix3<T>,
+    info_squared_weights: Matrix3<T>,
+    score: Vector3<T>,
+    updates: u32,
+}
+
+impl<T: Scalar> StepDetector<T> {
+    fn new() -> Self {
+        Self {
+            info: Matrix3::zeros(),
+            info_squared_weights: Matrix3::zeros(),
+            score: Vector3::zeros(),
+            updates: 0,
+        }
+    }
+
+    fn add(&mut self, info: &Matrix3<T>, score: &Vector3<T>, forgetting: T) {
+        self.info = self.info * forgetting + info;
+        self.info_squared_weights = self.info_squared_weights * (forgetting * forgetting) + info;
+        self.score = self.score * forgetting + score;
+        self.updates = self.updates.saturating_add(1);
+    }
+
+    /// `(statistic, |estimated step|)`, or `None` while the information is singular.
+    fn test(&self) -> Option<(T, T)> {
+        let reg = Matrix3::identity() * (self.info_squared_weights.trace() * T::lit(1e-9));
+        let cov = Cholesky::new(self.info_squared_weights + reg)?;
+        let statistic = self.score.dot(&cov.solve(&self.score));
+        let step = Cholesky::new(self.info + reg)?.solve(&self.score);
+        Some((statistic, step.norm()))
+    }
+}
+
+/// Health of one sensor's calibration.
+#[derive(Clone, Debug)]
+pub struct SensorHealth<T: Scalar> {
+    nis: Deque<(T, u8), NIS_WINDOW_CAPACITY>,
+    nis_sum: T,
+    nis_dof: usize,
+    rotation: StepDetector<T>,
+    translation: StepDetector<T>,
+    /// Updates fused.
+    pub accepted: u32,
+    /// Updates rejected by the gate.
+    pub rejected: u32,
+    /// Steps detected so far.
+    pub steps_detected: u32,
+    /// The latest event.
+    pub last_event: Option<HealthEvent<T>>,
+}
+
+impl<T: Scalar> Default for SensorHealth<T> {
+    fn default() -> Self {
+        Self {
+            nis: Deque::new(),
+            nis_sum: T::zero(),
+            nis_dof: 0,
+            rotation: StepDetector::new(),
+            translation: StepDetector::new(),
+            accepted: 0,
+            rejected: 0,
+            steps_detected: 0,
+            last_event: None,
+        }
+    }
+}
+
+impl<T: Scalar> SensorHealth<T> {
+    /// Mean NIS per degree of freedom over the window (1 for a consistent filter).
+    pub fn windowed_nis_per_dof(&self) -> T {
+        if self.nis_dof == 0 {
+            return T::zero();
+        }
+        self.nis_sum / T::lit(self.nis_dof as f64)
+    }
+
+    /// The windowed NIS test.
+    pub fn nis_status(&self, config: &HealthConfig<T>) -> NisStatus {
+        if self.nis.len() < config.nis_window.min(NIS_WINDOW_CAPACITY) {
+            return NisStatus::Filling;
+        }
+        let hi = chi2::quantile::<T>(self.nis_dof, config.nis_confidence);
+        let lo = chi2::lower_quantile::<T>(self.nis_dof, config.nis_confidence);
+        if self.nis_sum > hi {
+            NisStatus::High
+        } else if self.nis_sum < lo {
+            NisStatus::Low
+        } else {
+            NisStatus::Consistent
+        }
+    }
+
+    fn record_nis(&mut self, nis: T, dof: usize, config: &HealthConfig<T>) {
+        let window = config.nis_window.clamp(1, NIS_WINDOW_CAPACITY);
+        while self.nis.len() >= window {
+            if let Some((old, d)) = self.nis.pop_front() {
+                self.nis_sum -= old;
+                self.nis_dof -= d as usize;
+            }
+        }
+        let dof = dof.min(u8::MAX as usize) as u8;
+        if self.nis.push_back((nis, dof)).is_ok() {
+            self.nis_sum += nis;
+            self.nis_dof += dof as usize;
+        }
+    }
+}
+
+/// Innovation statistics of one update projected on a sensor's extrinsic.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ExtrinsicInnovation<T: Scalar> {
+    /// `H_R^T S^-1 H_R` for the rotation block.
+    pub rotation_info: Matrix3<T>,
+    /// `H_R^T S^-1 r`.
+    pub rotation_score: Vector3<T>,
+    /// `H_p^T S^-1 H_p` for the translation block.
+    pub translation_info: Matrix3<T>,
+    /// `H_p^T S^-1 r`.
+    pub translation_score: Vector3<T>,
+}
+
+/// The monitor for `S` sensors.
+#[derive(Clone, Debug)]
+pub struct HealthMonitor<T: Scalar, const S: usize> {
+    /// Tuning.
+    pub config: HealthConfig<T>,
+    sensors: [SensorHealth<T>; S],
+}
+
+impl<T: Scalar, const S: usize> HealthMonitor<T, S> {
+    /// A monitor with empty windows.
+    pub fn new(config: HealthConfig<T>) -> Self {
+        Self {
+            config,
+            sensors: core::array::from_fn(|_| SensorHealth::default()),
+        }
+    }
+
+    /// Health of sensor `s`.
+    pub fn sensor(&self, s: usize) -> Option<&SensorHealth<T>> {
+        self.sensors.get(s)
+    }
+
+    /// Records one update of sensor `s`; returns a step event when one is detected (the
+    /// caller then inflates the extrinsic covariance).
+    pub fn record(
+        &mut self,
+        s: usize,
+        stamp_ns: u64,
+        nis: T,
+        dof: usize,
+        accepted: bool,
+        innovation: Option<&ExtrinsicInnovation<T>>,
+    ) -> Option<HealthEvent<T>> {
+        let config = self.config;
+        let health = self.sensors.get_mut(s)?;
+        if accepted {
+            health.accepted = health.accepted.saturating_add(1);
+        } else {
+            health.rejected = health.rejected.saturating_add(1);
+        }
+        health.record_nis(nis, dof, &config);
+        let inn = innovation?;
+        let l = config.step_forgetting;
+        health
+            .rotation
+            .add(&inn.rotation_info, &inn.rotation_score, l);
+        health
+            .translation
+            .add(&inn.translation_info, &inn.translation_score, l);
+        let threshold = chi2::quantile::<T>(3, config.step_confidence);
+        let ready = |d: &StepDetector<T>| d.updates >= config.step_min_updates;
+        let event = if let Some((stat, mag)) = health.rotation.test().filter(|_| ready(&health.rotation)) {
+            (stat > threshold).then_some(HealthEvent::RotationStep {
+                sensor: s,
+                stamp_ns,
+                statistic: stat,
+                magnitude: mag,
+            })
+        } else {
+            None
+        };
+        let event = event.or_else(|| {
+            let (stat, mag) = health.translation.test().filter(|_| ready(&health.translation))?;
+            (stat > threshold).then_some(HealthEvent::TranslationStep {
+                sensor: s,
+                stamp_ns,
+                statistic: stat,
+                magnitude: mag,
+            })
+        });
+        if event.is_some() {
+            health.rotation = StepDetector::new();
+            health.translation = StepDetector::new();
+            health.steps_detected = health.steps_detected.saturating_add(1);
+            health.last_event = event;
+        }
+        event
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn innovation(r: Vector3<f64>) -> ExtrinsicInnovation<f64> {
+        // H = I, S = I: info = I, score = r.
+        ExtrinsicInnovation {
+            rotation_info: Matrix3::identity(),
+            rotation_score: r,
+            translation_info: Matrix3::identity(),
+            translation_score: Vector3::zeros(),
+        }
+    }
+
+    #[test]
+    fn persistent_bias_fires_the_rotation_detector() {
+        let mut m = HealthMonitor::<f64, 1>::new(HealthConfig::default());
+        let mut fired = None;
+        for k in 0..100 {
+            if let Some(e) = m.record(0, k, 3.0, 6, true, Some(&innovation(Vector3::new(1.5, 0.0, 0.0)))) {
+                fired = Some((k, e));
+                break;
+            }
+        }
+        let (k, e) = fired.expect("a 1.5-sigma bias on every update must be detected");
+        assert!(k < 30, "detected late: {k}");
+        assert!(matches!(e, HealthEvent::RotationStep { .. }));
+    }
+
+    #[test]
+    fn zero_mean_residuals_do_not_fire() {
+        let mut m = HealthMonitor::<f64, 1>::new(HealthConfig::default());
+        // Alternating signs: zero-mean, unit variance.
+        for k in 0..1000u64 {
+            let s = if k % 2 == 0 { 1.0 } else { -1.0 };
+            let e = m.record(0, k, 3.0, 3, true, Some(&innovation(Vector3::new(s, -s, s))));
+            assert!(e.is_none(), "false alarm at {k}");
+        }
+    }
+
+    #[test]
+    fn nis_window_flags_large_residuals() {
+        let cfg = HealthConfig::<f64>::default();
+        let mut m = HealthMonitor::<f64, 1>::new(cfg);
+        for k in 0..60 {
+            m.record(0, k, 6.0, 6, true, None);
+        }
+        assert_eq!(m.sensor(0).unwrap().nis_status(&cfg), NisStatus::Consistent);
+        for k in 0..60 {
+            m.record(0, k, 20.0, 6, true, None);
+        }
+        assert_eq!(m.sensor(0).unwrap().nis_status(&cfg), NisStatus::High);
+    }
+}

@@ -1,0 +1,127 @@
+//! Typed index ranges of the error state, fixed at compile time (PX4-style named blocks).
+
+/// A contiguous block of the error state: `idx..idx + dof`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Block {
+    /// First index.
+    pub idx: usize,
+    /// Number of degrees of freedom.
+    pub dof: usize,
+}
+
+impl Block {
+    /// One past the last index.
+    pub const fn end(&self) -> usize {
+        self.idx + self.dof
+    }
+}
+
+/// The IMU blocks, always first.
+pub mod imu {
+    use super::Block;
+    /// Orientation error `dtheta` (right perturbation of `R_G_I`).
+    pub const ORIENTATION: Block = Block { idx: 0, dof: 3 };
+    /// Position error in G.
+    pub const POSITION: Block = Block { idx: 3, dof: 3 };
+    /// Velocity error in G.
+    pub const VELOCITY: Block = Block { idx: 6, dof: 3 };
+    /// Gyroscope bias error.
+    pub const GYRO_BIAS: Block = Block { idx: 9, dof: 3 };
+    /// Accelerometer bias error.
+    pub const ACCEL_BIAS: Block = Block { idx: 12, dof: 3 };
+    /// Dimension of the IMU error state.
+    pub const DIM: usize = 15;
+    const _: () = assert!(ORIENTATION.end() == POSITION.idx);
+    const _: () = assert!(POSITION.end() == VELOCITY.idx);
+    const _: () = assert!(VELOCITY.end() == GYRO_BIAS.idx);
+    const _: () = assert!(GYRO_BIAS.end() == ACCEL_BIAS.idx);
+    const _: () = assert!(ACCEL_BIAS.end() == DIM);
+}
+
+/// Error dimension of one sensor: extrinsic rotation (3), translation (3), time offset (1).
+pub const SENSOR_DIM: usize = 7;
+/// Error dimension of one clone: orientation (3), position (3).
+pub const CLONE_DIM: usize = 6;
+
+/// The layout of a filter with `S` sensors and `C` clones.
+#[derive(Clone, Copy, Debug)]
+pub struct Layout<const S: usize, const C: usize>;
+
+impl<const S: usize, const C: usize> Layout<S, C> {
+    /// Dimension of the whole error state.
+    pub const DIM: usize = imu::DIM + SENSOR_DIM * S + CLONE_DIM * C;
+
+    const fn sensor_base(s: usize) -> usize {
+        imu::DIM + SENSOR_DIM * s
+    }
+
+    /// Extrinsic rotation error of sensor `s`.
+    pub const fn extrinsic_rotation(s: usize) -> Block {
+        Block {
+            idx: Self::sensor_base(s),
+            dof: 3,
+        }
+    }
+
+    /// Extrinsic translation error of sensor `s`.
+    pub const fn extrinsic_translation(s: usize) -> Block {
+        Block {
+            idx: Self::sensor_base(s) + 3,
+            dof: 3,
+        }
+    }
+
+    /// Both extrinsic blocks of sensor `s` (rotation then translation).
+    pub const fn extrinsic(s: usize) -> Block {
+        Block {
+            idx: Self::sensor_base(s),
+            dof: 6,
+        }
+    }
+
+    /// Time-offset error of sensor `s`.
+    pub const fn time_offset(s: usize) -> Block {
+        Block {
+            idx: Self::sensor_base(s) + 6,
+            dof: 1,
+        }
+    }
+
+    /// Orientation error of clone slot `c`.
+    pub const fn clone_orientation(c: usize) -> Block {
+        Block {
+            idx: Self::sensor_base(S) + CLONE_DIM * c,
+            dof: 3,
+        }
+    }
+
+    /// Position error of clone slot `c`.
+    pub const fn clone_position(c: usize) -> Block {
+        Block {
+            idx: Self::sensor_base(S) + CLONE_DIM * c + 3,
+            dof: 3,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn blocks_tile_the_joint_layout() {
+        type L = Layout<2, 3>;
+        let mut next = imu::DIM;
+        for s in 0..2 {
+            assert_eq!(L::extrinsic_rotation(s).idx, next);
+            assert_eq!(L::extrinsic_translation(s).idx, next + 3);
+            assert_eq!(L::time_offset(s).idx, next + 6);
+            next = L::time_offset(s).end();
+        }
+        for c in 0..3 {
+            assert_eq!(L::clone_orientation(c).idx, next);
+            next = L::clone_position(c).end();
+        }
+        assert_eq!(next, L::DIM);
+    }
+}

@@ -1,0 +1,177 @@
+//! Measurement updates: one module per measurement model (residual and Jacobian), and the
+//! one generic Kalman step they all share (gain, chi-square gate, Joseph-form covariance
+//! update, NIS record).
+
+pub mod relative_pose;
+pub mod zero_velocity;
+
+use crate::chi2::{self, Confidence};
+use crate::scalar::Scalar;
+use crate::Error;
+use nalgebra::{Cholesky, SMatrix, SVector};
+
+/// Which measurement model produced an update.
+#[non_exhaustive]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum UpdateKind {
+    /// Relative pose of a sensor between two stamps (eq. 3.19-3.21 / 4.11-4.13).
+    RelativePose,
+    /// Zero-velocity update at standstill.
+    ZeroVelocity,
+}
+
+/// The per-update diagnostic record read by the health monitor, reports, the firmware link
+/// and the tests.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UpdateReport<T: Scalar> {
+    /// Measurement model.
+    pub kind: UpdateKind,
+    /// Sensor index (0 for sensor-less updates such as zero velocity).
+    pub sensor: usize,
+    /// Measurement stamp, ns (sensor clock).
+    pub stamp_ns: u64,
+    /// Residual dimension.
+    pub dof: usize,
+    /// Normalised innovation squared `r^T S^-1 r`.
+    pub nis: T,
+    /// Gate threshold the NIS was compared with.
+    pub threshold: T,
+    /// False when the gate rejected the measurement (state then untouched by it).
+    pub accepted: bool,
+    /// A health event this update triggered (e.g. a detected extrinsic step).
+    pub event: Option<crate::health::HealthEvent<T>>,
+}
+
+/// A linearised measurement: `r = H dx + n`, `n ~ N(0, R)`.
+#[derive(Clone, Debug)]
+pub struct Linearization<T: Scalar, const M: usize, const N: usize> {
+    /// Residual `z - h(x_hat)` in the measurement's tangent space.
+    pub residual: SVector<T, M>,
+    /// `H`: derivative of the predicted measurement w.r.t. the error state.
+    pub jacobian: SMatrix<T, M, N>,
+    /// Measurement noise covariance `R`.
+    pub noise: SMatrix<T, M, M>,
+}
+
+/// What the Kalman step computed; the caller commits it only if the corrected state is
+/// finite.
+#[derive(Clone, Debug)]
+pub struct KalmanStep<T: Scalar, const M: usize, const N: usize> {
+    /// NIS of the innovation.
+    pub nis: T,
+    /// Gate threshold.
+    pub threshold: T,
+    /// Whether the gate accepted the measurement.
+    pub accepted: bool,
+    /// Error-state correction `K r` (zero when rejected).
+    pub correction: SVector<T, N>,
+    /// Updated covariance (the prior when rejected).
+    pub covariance: SMatrix<T, N, N>,
+    /// `S^-1 r`, for the health monitor's step detector.
+    pub weighted_residual: SVector<T, M>,
+    /// `S^-1`.
+    pub innovation_inverse: SMatrix<T, M, M>,
+}
+
+/// The shared Kalman step: innovation covariance, gate, gain and Joseph-form update.
+pub fn kalman_step<T: Scalar, const M: usize, const N: usize>(
+    cov: &SMatrix<T, N, N>,
+    lin: &Linearization<T, M, N>,
+    gate: Confidence,
+) -> Result<KalmanStep<T, M, N>, Error> {
+    let finite = lin.residual.iter().all(|x| x.is_finite())
+        && lin.jacobian.iter().all(|x| x.is_finite())
+        && lin.noise.iter().all(|x| x.is_finite());
+    if !finite {
+        return Err(Error::NonFinite);
+    }
+    let ph_t = cov * lin.jacobian.transpose();
+    let s = lin.jacobian * ph_t + lin.noise;
+    let s = (s + s.transpose()) * T::lit(0.5);
+    let chol = Cholesky::new(s).ok_or(Error::SingularInnovation)?;
+    let s_inv = chol.inverse();
+    let weighted_residual = s_inv * lin.residual;
+    let nis = lin.residual.dot(&weighted_residual);
+    let threshold = chi2::quantile::<T>(M, gate);
+    if !nis.is_finite() {
+        return Err(Error::DivergentUpdate);
+    }
+    if nis > threshold {
+        return Ok(KalmanStep {
+            nis,
+            threshold,
+            accepted: false,
+            correction: SVector::zeros(),
+            covariance: *cov,
+            weighted_residual,
+            innovation_inverse: s_inv,
+        });
+    }
+    let gain = ph_t * s_inv;
+    let correction = gain * lin.residual;
+    let i_kh = SMatrix::<T, N, N>::identity() - gain * lin.jacobian;
+    let joseph = i_kh * cov * i_kh.transpose() + gain * lin.noise * gain.transpose();
+    let covariance = (joseph + joseph.transpose()) * T::lit(0.5);
+    let finite = correction.iter().all(|x| x.is_finite())
+        && covariance.iter().all(|x| x.is_finite());
+    if !finite {
+        return Err(Error::DivergentUpdate);
+    }
+    Ok(KalmanStep {
+        nis,
+        threshold,
+        accepted: true,
+        correction,
+        covariance,
+        weighted_residual,
+        innovation_inverse: s_inv,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Matrix2, Vector2};
+
+    #[test]
+    fn scalar_update_matches_textbook() {
+        let cov = Matrix2::new(4.0, 0.0, 0.0, 1.0);
+        let lin = Linearization {
+            residual: SVector::<f64, 1>::new(1.0),
+            jacobian: SMatrix::<f64, 1, 2>::new(1.0, 0.0),
+            noise: SMatrix::<f64, 1, 1>::new(4.0),
+        };
+        let step = kalman_step(&cov, &lin, Confidence::P99).unwrap();
+        assert!(step.accepted);
+        assert!((step.correction - Vector2::new(0.5, 0.0)).norm() < 1e-12);
+        assert!((step.covariance[(0, 0)] - 2.0).abs() < 1e-12);
+        assert!((step.nis - 1.0 / 8.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn outlier_is_gated_and_covariance_kept() {
+        let cov = Matrix2::identity();
+        let lin = Linearization {
+            residual: SVector::<f64, 1>::new(100.0),
+            jacobian: SMatrix::<f64, 1, 2>::new(1.0, 0.0),
+            noise: SMatrix::<f64, 1, 1>::new(1.0),
+        };
+        let step = kalman_step(&cov, &lin, Confidence::P99).unwrap();
+        assert!(!step.accepted);
+        assert_eq!(step.covariance, cov);
+        assert_eq!(step.correction, Vector2::zeros());
+    }
+
+    #[test]
+    fn nan_residual_is_an_error() {
+        let lin = Linearization {
+            residual: SVector::<f64, 1>::new(f64::NAN),
+            jacobian: SMatrix::<f64, 1, 2>::new(1.0, 0.0),
+            noise: SMatrix::<f64, 1, 1>::new(1.0),
+        };
+        assert_eq!(
+            kalman_step(&Matrix2::identity(), &lin, Confidence::P99).unwrap_err(),
+            Error::NonFinite
+        );
+    }
+}
