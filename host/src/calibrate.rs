@@ -1,0 +1,6 @@
+//! Calibration pipelines: one function from a dataset to a result plus a report per task.
+//! The CLI is a thin layer over them.
+
+pub mod convert;
+pub mod init;
+pub mod pose_imu;

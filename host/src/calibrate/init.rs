@@ -1,0 +1,130 @@
+//! Initialisation before the filter runs: standstill detection at the start of a recording
+//! (gravity direction, gyro bias) and the hand-eye rotation from gyro-integrated and
+//! sensor rotation increments (eq. 3.2-3.5).
+
+use msreg_estimator::hand_eye::{HandEye, HandEyeError};
+use msreg_estimator::lie;
+use nalgebra::{UnitQuaternion, Vector3};
+
+use crate::dataset::{ImuRecord, PoseRecord};
+
+/// The stationary start of a recording.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Standstill {
+    /// Stamp of the last sample still at rest, ns.
+    pub until_ns: u64,
+    /// Number of samples at rest.
+    pub samples: usize,
+    /// Mean accelerometer reading (gravity direction).
+    pub accel_mean: Vector3<f64>,
+    /// Mean gyro reading (gyro bias).
+    pub gyro_mean: Vector3<f64>,
+}
+
+/// Largest deviation of a gyro sample from the first 0.1 s mean still counted as rest, rad/s.
+const REST_GYRO: f64 = 0.03;
+/// Largest deviation of an accelerometer sample from the first 0.1 s mean at rest, m/s^2.
+const REST_ACCEL: f64 = 0.3;
+
+/// Finds the stationary start: samples until the gyro or accelerometer leaves a band around
+/// the first 0.1 s mean; `None` when it lasts less than `min_duration_s`.
+pub fn detect_standstill(imu: &[ImuRecord], min_duration_s: f64) -> Option<Standstill> {
+    let first = imu.first()?;
+    let head: Vec<&ImuRecord> = imu
+        .iter()
+        .take_while(|r| r.stamp_ns - first.stamp_ns <= 100_000_000)
+        .collect();
+    let n = head.len() as f64;
+    let g0 = head.iter().map(|r| r.gyro).sum::<Vector3<f64>>() / n;
+    let a0 = head.iter().map(|r| r.accel).sum::<Vector3<f64>>() / n;
+    let still = imu
+        .iter()
+        .take_while(|r| (r.gyro - g0).amax() < REST_GYRO && (r.accel - a0).amax() < REST_ACCEL)
+        .count();
+    // Leave a margin: the last samples before motion may already move slightly.
+    let samples = still.saturating_sub(still / 10);
+    let last = imu.get(samples.checked_sub(1)?)?;
+    if (last.stamp_ns - first.stamp_ns) as f64 * 1e-9 < min_duration_s {
+        return None;
+    }
+    let rest = &imu[..samples];
+    let m = samples as f64;
+    Some(Standstill {
+        until_ns: last.stamp_ns,
+        samples,
+        accel_mean: rest.iter().map(|r| r.accel).sum::<Vector3<f64>>() / m,
+        gyro_mean: rest.iter().map(|r| r.gyro).sum::<Vector3<f64>>() / m,
+    })
+}
+
+/// The rotation of the IMU between two stamps from its gyro (sample held until the next),
+/// minus `gyro_bias`. `None` when the stamps are outside the IMU data.
+pub fn integrate_gyro(
+    imu: &[ImuRecord],
+    from_ns: u64,
+    to_ns: u64,
+    gyro_bias: &Vector3<f64>,
+) -> Option<UnitQuaternion<f64>> {
+    if imu.is_empty() || from_ns < imu[0].stamp_ns || to_ns <= from_ns {
+        return None;
+    }
+    let last = imu.last()?;
+    if to_ns > last.stamp_ns {
+        return None;
+    }
+    // Sample held over [t_k, t_{k+1}): start at the sample at or before `from_ns`.
+    let start = imu.partition_point(|r| r.stamp_ns <= from_ns).checked_sub(1)?;
+    let mut q = UnitQuaternion::identity();
+    let mut t = from_ns;
+    for k in start..imu.len() {
+        let end = imu.get(k + 1).map_or(to_ns, |r| r.stamp_ns.min(to_ns));
+        if end > t {
+            let dt = (end - t) as f64 * 1e-9;
+            q *= lie::exp(&((imu[k].gyro - gyro_bias) * dt));
+            t = end;
+        }
+        if t >= to_ns {
+            break;
+        }
+    }
+    Some(q)
+}
+
+/// Result of the hand-eye rotation initialisation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RotationInit {
+    /// `R_I_S`.
+    pub rotation: UnitQuaternion<f64>,
+    /// Pairs used.
+    pub pairs: usize,
+    /// Second / first eigenvalue of the sensor rotation scatter.
+    pub axis_ratio: f64,
+}
+
+/// Hand-eye rotation from consecutive odometry poses and the gyro over the same intervals.
+/// Intervals longer than `max_interval_ns` (odometry gaps) are skipped.
+pub fn hand_eye_rotation(
+    imu: &[ImuRecord],
+    poses: &[PoseRecord],
+    gyro_bias: &Vector3<f64>,
+    max_interval_ns: u64,
+) -> Result<RotationInit, HandEyeError<f64>> {
+    let mut he = HandEye::<f64>::default();
+    for pair in poses.windows(2) {
+        let (a, b) = (&pair[0], &pair[1]);
+        if b.stamp_ns - a.stamp_ns > max_interval_ns {
+            continue;
+        }
+        let Some(q_imu) = integrate_gyro(imu, a.stamp_ns, b.stamp_ns, gyro_bias) else {
+            continue;
+        };
+        let q_sensor = a.rotation.inverse() * b.rotation;
+        he.add(&lie::log(&q_imu), &lie::log(&q_sensor));
+    }
+    let rotation = he.solve(10)?;
+    Ok(RotationInit {
+        rotation,
+        pairs: he.pairs(),
+        axis_ratio: he.axis_ratio(),
+    })
+}

@@ -1,0 +1,531 @@
+//! Pose-IMU calibration (motion based, dissertation ch. 3.5 / 4.4 with a generic pose
+//! sensor): hand-eye rotation init, then the error-state EKF fed with IMU samples and the
+//! odometry's relative poses, estimating `T_imu_pose` and the time offset.
+//!
+//! Event order: a pose stamped `t_S` belongs at IMU time `t_S + t_d`; it is fused as soon as
+//! the IMU stream passes that time (the filter holds the previous IMU sample over the short
+//! remainder), with the current estimate of `t_d`.
+
+use std::time::Instant;
+
+use msreg_estimator::{
+    health::HealthEvent, Error as FilterError, FilterConfig, InitialState, PoseImuEkf,
+    RelativePose, Scalar,
+};
+use nalgebra::{Isometry3, Matrix6, Vector3};
+use serde::Serialize;
+
+use super::convert;
+use super::init::{self, Standstill};
+use crate::dataset::{ExtrinsicEstimate, ImuNoiseYaml, ImuRecord, PoseRecord, PoseSensorYaml};
+
+/// What the pipeline reads.
+#[derive(Debug, Clone, Copy)]
+pub struct PoseImuInput<'a> {
+    /// IMU samples, strictly increasing stamps.
+    pub imu: &'a [ImuRecord],
+    /// IMU noise densities.
+    pub imu_noise: &'a ImuNoiseYaml,
+    /// Odometry of the pose sensor (arbitrary origin).
+    pub poses: &'a [PoseRecord],
+    /// Noise of one odometry increment.
+    pub pose_noise: &'a PoseSensorYaml,
+}
+
+/// Tuning of the pipeline.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseImuOptions {
+    /// Estimate the pose sensor's time offset.
+    pub estimate_time_offset: bool,
+    /// Prior 1-sigma of the time offset, s.
+    pub time_offset_sigma_s: f64,
+    /// Prior 1-sigma of the extrinsic rotation after the hand-eye init, rad.
+    pub rotation_sigma_rad: f64,
+    /// Prior 1-sigma of the extrinsic translation (initialised at zero), m.
+    pub translation_sigma_m: f64,
+    /// Shortest standstill at the start that is used for the gravity/bias initialisation, s.
+    pub min_standstill_s: f64,
+}
+
+impl Default for PoseImuOptions {
+    fn default() -> Self {
+        Self {
+            estimate_time_offset: true,
+            time_offset_sigma_s: 0.05,
+            rotation_sigma_rad: 2f64.to_radians(),
+            translation_sigma_m: 0.5,
+            min_standstill_s: 0.3,
+        }
+    }
+}
+
+/// Why the pipeline could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum PoseImuError {
+    /// The input violates what the filter needs (named file and sample).
+    #[error("{0}")]
+    BadInput(String),
+    /// The motion does not determine the calibration (e.g. rotation about one axis only).
+    #[error("{0}")]
+    Unobservable(String),
+}
+
+/// One point of the convergence history (after each relative-pose update).
+#[derive(Debug, Clone, Serialize)]
+pub struct HistoryPoint {
+    /// Seconds since the first IMU sample.
+    pub t_s: f64,
+    /// Extrinsic rotation as a rotation vector, rad.
+    pub rotation_vector: [f64; 3],
+    /// Extrinsic translation, m.
+    pub translation_m: [f64; 3],
+    /// 1-sigma rotation, deg.
+    pub sigma_rot_deg: [f64; 3],
+    /// 1-sigma translation, m.
+    pub sigma_trans_m: [f64; 3],
+    /// Time offset, s.
+    pub time_offset_s: f64,
+    /// 1-sigma time offset, s.
+    pub sigma_time_offset_s: f64,
+    /// NIS of the update.
+    pub nis: f64,
+    /// Whether the gate accepted it.
+    pub accepted: bool,
+}
+
+/// A health event, for the report.
+#[derive(Debug, Clone, Serialize)]
+pub struct EventRecord {
+    /// Seconds since the first IMU sample.
+    pub t_s: f64,
+    /// `rotation_step` or `translation_step`.
+    pub kind: &'static str,
+    /// GLR statistic.
+    pub statistic: f64,
+    /// Estimated step size (rad or m).
+    pub magnitude: f64,
+}
+
+/// The JSON report of a pose-IMU calibration.
+#[derive(Debug, Clone, Serialize)]
+pub struct PoseImuReport {
+    /// True when all convergence checks passed.
+    pub converged: bool,
+    /// Why not, when not.
+    pub reasons: Vec<String>,
+    /// Scalar type the filter ran in.
+    pub scalar: &'static str,
+    /// Standstill used for initialisation, s (0 when none).
+    pub standstill_s: f64,
+    /// Hand-eye pairs used.
+    pub hand_eye_pairs: usize,
+    /// Second/first eigenvalue of the rotation scatter (excitation about two axes).
+    pub hand_eye_axis_ratio: f64,
+    /// Hand-eye rotation (rotation vector, rad) the filter started from.
+    pub hand_eye_rotation_vector: [f64; 3],
+    /// Relative-pose updates fused.
+    pub updates_accepted: usize,
+    /// Relative-pose updates rejected by the gate.
+    pub updates_rejected: usize,
+    /// Poses skipped (before the IMU, after a filter error), with reasons.
+    pub poses_skipped: Vec<String>,
+    /// Mean NIS per degree of freedom of all relative-pose updates (1 if consistent).
+    pub mean_nis_per_dof: f64,
+    /// Excitation per extrinsic DoF: 1 - sigma/prior (rx, ry, rz, tx, ty, tz, t_d).
+    pub excitation: [f64; 7],
+    /// Health events.
+    pub events: Vec<EventRecord>,
+    /// Wall time of the stages, s.
+    pub timing_s: Timing,
+    /// Convergence history.
+    pub history: Vec<HistoryPoint>,
+}
+
+/// Wall time per stage.
+#[derive(Debug, Clone, Copy, Serialize, Default)]
+pub struct Timing {
+    /// Standstill detection and hand-eye rotation.
+    pub init: f64,
+    /// The filter over the whole recording.
+    pub filter: f64,
+}
+
+/// The outcome: the estimate with its covariance, and the report.
+#[derive(Debug, Clone)]
+pub struct PoseImuCalibration {
+    /// `T_imu_pose`.
+    pub t_imu_pose: Isometry3<f64>,
+    /// Time offset `t_d`, s.
+    pub time_offset_s: f64,
+    /// 1-sigma of the time offset, s.
+    pub time_offset_sigma_s: f64,
+    /// Covariance of the extrinsic error `[dtheta (right perturbation); dp]`.
+    pub covariance: Matrix6<f64>,
+    /// The report.
+    pub report: PoseImuReport,
+}
+
+impl PoseImuCalibration {
+    /// The `pose0` section of the result file.
+    pub fn estimate(&self) -> ExtrinsicEstimate {
+        let sd = |i: usize| self.covariance[(i, i)].max(0.0).sqrt();
+        ExtrinsicEstimate {
+            transform: self.t_imu_pose,
+            timeshift_s: self.time_offset_s,
+            sigma_rot_deg: Vector3::new(sd(0), sd(1), sd(2)).map(f64::to_degrees),
+            sigma_trans_m: Vector3::new(sd(3), sd(4), sd(5)),
+        }
+    }
+}
+
+/// Runs the calibration with the filter in scalar type `T`; `progress` gets the fraction
+/// of the recording processed.
+pub fn calibrate<T: Scalar>(
+    input: &PoseImuInput<'_>,
+    options: &PoseImuOptions,
+    progress: &mut dyn FnMut(f64),
+) -> Result<PoseImuCalibration, PoseImuError> {
+    let (imu, poses) = (input.imu, input.poses);
+    let (Some(first_imu), Some(last_imu)) = (imu.first(), imu.last()) else {
+        return Err(PoseImuError::BadInput("imu0/data.csv: no IMU samples".into()));
+    };
+    if poses.len() < 3 {
+        return Err(PoseImuError::BadInput(format!(
+            "pose0/data.csv: {} poses; at least 3 are needed",
+            poses.len()
+        )));
+    }
+    let started = Instant::now();
+    let standstill = init::detect_standstill(imu, options.min_standstill_s);
+    let gyro_bias = standstill.map_or_else(Vector3::zeros, |s| s.gyro_mean);
+    let period_ns = nominal_period_ns(poses);
+    let max_interval_ns = period_ns.saturating_mul(3) / 2;
+    let rotation_init = init::hand_eye_rotation(imu, poses, &gyro_bias, max_interval_ns)
+        .map_err(|e| {
+            PoseImuError::Unobservable(format!(
+                "hand-eye rotation initialisation failed ({e:?}): the recording needs rotation \
+                 about at least two axes"
+            ))
+        })?;
+    let init_s = started.elapsed().as_secs_f64();
+
+    let initial = initial_state::<T>(imu, standstill.as_ref(), &rotation_init.rotation, options)?;
+    let config = FilterConfig::new(convert::imu_noise::<T>(input.imu_noise));
+    let mut ekf = PoseImuEkf::<T>::new(&config, &initial)
+        .map_err(|e| PoseImuError::BadInput(format!("imu0/imu.yaml: invalid noise ({e})")))?;
+
+    let started = Instant::now();
+    let mut run = Run::new(first_imu.stamp_ns, period_ns);
+    let sigma_r = input.pose_noise.rotation_noise_rad;
+    let sigma_t = input.pose_noise.translation_noise_m;
+    let total = (last_imu.stamp_ns - first_imu.stamp_ns).max(1) as f64;
+    let mut next_pose = 0;
+    for (i, rec) in imu.iter().enumerate() {
+        while let Some(pose) = poses.get(next_pose) {
+            let due = pose.stamp_ns as i128 + (ekf.time_offset(0).to_f64() * 1e9) as i128;
+            if due > rec.stamp_ns as i128 {
+                break;
+            }
+            if i == 0 {
+                run.skip(pose.stamp_ns, "before the first IMU sample");
+            } else {
+                run.fuse_pose(&mut ekf, pose, sigma_r, sigma_t);
+            }
+            next_pose += 1;
+        }
+        ekf.propagate(&convert::imu_sample::<T>(rec)).map_err(|e| {
+            PoseImuError::BadInput(format!(
+                "imu0/data.csv: sample {} (stamp {} ns, data line {}): {e}",
+                i,
+                rec.stamp_ns,
+                i + 1
+            ))
+        })?;
+        if standstill.is_some_and(|s| rec.stamp_ns <= s.until_ns) && i % 20 == 0 {
+            // Errors here only mean the gate rejected a ZUPT; nothing to report.
+            let _ = ekf.update_zero_velocity();
+        }
+        if i % 2000 == 0 {
+            progress((rec.stamp_ns - first_imu.stamp_ns) as f64 / total);
+        }
+    }
+    for pose in &poses[next_pose..] {
+        run.skip(pose.stamp_ns, "after the last IMU sample");
+    }
+    progress(1.0);
+    let filter_s = started.elapsed().as_secs_f64();
+
+    Ok(finish(
+        &ekf,
+        run,
+        standstill.as_ref(),
+        &rotation_init,
+        Timing {
+            init: init_s,
+            filter: filter_s,
+        },
+    ))
+}
+
+/// Median spacing of the odometry, ns.
+fn nominal_period_ns(poses: &[PoseRecord]) -> u64 {
+    let mut d: Vec<u64> = poses
+        .windows(2)
+        .map(|w| w[1].stamp_ns - w[0].stamp_ns)
+        .collect();
+    d.sort_unstable();
+    d.get(d.len() / 2).copied().unwrap_or(100_000_000)
+}
+
+/// The filter prior: at rest if the recording starts still, else level with large sigmas.
+fn initial_state<T: Scalar>(
+    imu: &[ImuRecord],
+    standstill: Option<&Standstill>,
+    rotation: &nalgebra::UnitQuaternion<f64>,
+    options: &PoseImuOptions,
+) -> Result<InitialState<T, 1>, PoseImuError> {
+    let accel = standstill.map_or_else(
+        || {
+            let n = imu.len().min(400);
+            imu[..n].iter().map(|r| r.accel).sum::<Vector3<f64>>() / n as f64
+        },
+        |s| s.accel_mean,
+    );
+    let mut state = InitialState::<T, 1>::at_rest(convert::vec3(&accel)).ok_or_else(|| {
+        PoseImuError::BadInput(format!(
+            "imu0/data.csv: mean accelerometer reading {:.2} m/s^2 at the start is not gravity",
+            accel.norm()
+        ))
+    })?;
+    match standstill {
+        Some(s) => {
+            state.imu.gyro_bias = convert::vec3(&s.gyro_mean);
+        }
+        None => {
+            // Moving start: gravity direction and velocity are only roughly known.
+            state.sigma_orientation = T::lit(0.1);
+            state.sigma_velocity = T::lit(1.0);
+        }
+    }
+    let extrinsic = msreg_estimator::Pose::new(
+        convert::pose::<T>(&Isometry3::from_parts(Default::default(), *rotation)).rotation,
+        Vector3::zeros(),
+    );
+    let td_sigma = if options.estimate_time_offset {
+        options.time_offset_sigma_s
+    } else {
+        0.0
+    };
+    Ok(state
+        .with_extrinsic(
+            0,
+            extrinsic,
+            T::lit(options.rotation_sigma_rad),
+            T::lit(options.translation_sigma_m),
+        )
+        .with_time_offset(0, T::zero(), T::lit(td_sigma)))
+}
+
+/// Bookkeeping of one run over the recording.
+struct Run {
+    start_ns: u64,
+    max_interval_ns: u64,
+    period_ns: u64,
+    previous: Option<PoseRecord>,
+    history: Vec<HistoryPoint>,
+    events: Vec<EventRecord>,
+    skipped: Vec<String>,
+    accepted: usize,
+    rejected: usize,
+    nis_sum: f64,
+    nis_dof: usize,
+}
+
+impl Run {
+    fn new(start_ns: u64, period_ns: u64) -> Self {
+        Self {
+            start_ns,
+            max_interval_ns: period_ns.saturating_mul(10),
+            period_ns,
+            previous: None,
+            history: Vec::new(),
+            events: Vec::new(),
+            skipped: Vec::new(),
+            accepted: 0,
+            rejected: 0,
+            nis_sum: 0.0,
+            nis_dof: 0,
+        }
+    }
+
+    fn seconds(&self, stamp_ns: u64) -> f64 {
+        stamp_ns.saturating_sub(self.start_ns) as f64 * 1e-9
+    }
+
+    fn skip(&mut self, stamp_ns: u64, why: &str) {
+        self.skipped.push(format!("pose0 stamp {stamp_ns}: {why}"));
+    }
+
+    /// Anchors a new odometry segment or fuses the increment from the previous pose.
+    fn fuse_pose<T: Scalar>(
+        &mut self,
+        ekf: &mut PoseImuEkf<T>,
+        pose: &PoseRecord,
+        sigma_r: f64,
+        sigma_t: f64,
+    ) {
+        let previous = self
+            .previous
+            .filter(|p| pose.stamp_ns - p.stamp_ns <= self.max_interval_ns);
+        let Some(prev) = previous else {
+            match ekf.anchor(0, pose.stamp_ns) {
+                Ok(()) => self.previous = Some(*pose),
+                Err(e) => self.skip(pose.stamp_ns, &format!("cannot anchor: {e}")),
+            }
+            return;
+        };
+        // Odometry noise accumulates per increment: an interval spanning several nominal
+        // periods (a gap) carries the noise of all of them.
+        let periods = ((pose.stamp_ns - prev.stamp_ns) as f64 / self.period_ns as f64)
+            .round()
+            .max(1.0);
+        let scale = periods.sqrt();
+        let delta = prev.isometry().inverse() * pose.isometry();
+        let meas = RelativePose::with_sigmas(
+            prev.stamp_ns,
+            pose.stamp_ns,
+            convert::pose::<T>(&delta),
+            T::lit(sigma_r * scale),
+            T::lit(sigma_t * scale),
+        );
+        match ekf.update_relative_pose(0, &meas) {
+            Ok(report) => {
+                self.previous = Some(*pose);
+                if report.accepted {
+                    self.accepted += 1;
+                } else {
+                    self.rejected += 1;
+                }
+                self.nis_sum += report.nis.to_f64();
+                self.nis_dof += report.dof;
+                if let Some(event) = report.event {
+                    self.events.push(self.event_record(&event));
+                }
+                self.history.push(history_point(ekf, self.seconds(pose.stamp_ns), report.nis.to_f64(), report.accepted));
+            }
+            Err(FilterError::NoAnchor | FilterError::OlderThanWindow) => {
+                self.previous = None;
+                self.fuse_pose(ekf, pose, sigma_r, sigma_t);
+            }
+            Err(e) => self.skip(pose.stamp_ns, &format!("{e}")),
+        }
+    }
+
+    fn event_record<T: Scalar>(&self, event: &HealthEvent<T>) -> EventRecord {
+        match *event {
+            HealthEvent::RotationStep {
+                stamp_ns,
+                statistic,
+                magnitude,
+                ..
+            } => EventRecord {
+                t_s: self.seconds(stamp_ns),
+                kind: "rotation_step",
+                statistic: statistic.to_f64(),
+                magnitude: magnitude.to_f64(),
+            },
+            HealthEvent::TranslationStep {
+                stamp_ns,
+                statistic,
+                magnitude,
+                ..
+            } => EventRecord {
+                t_s: self.seconds(stamp_ns),
+                kind: "translation_step",
+                statistic: statistic.to_f64(),
+                magnitude: magnitude.to_f64(),
+            },
+        }
+    }
+}
+
+fn history_point<T: Scalar>(ekf: &PoseImuEkf<T>, t_s: f64, nis: f64, accepted: bool) -> HistoryPoint {
+    let x = convert::isometry(&ekf.extrinsic(0));
+    let (sr, st) = ekf.extrinsic_sigma(0);
+    let rv = x.rotation.scaled_axis();
+    HistoryPoint {
+        t_s,
+        rotation_vector: [rv.x, rv.y, rv.z],
+        translation_m: [x.translation.x, x.translation.y, x.translation.z],
+        sigma_rot_deg: [0, 1, 2].map(|i| sr[i].to_f64().to_degrees()),
+        sigma_trans_m: [0, 1, 2].map(|i| st[i].to_f64()),
+        time_offset_s: ekf.time_offset(0).to_f64(),
+        sigma_time_offset_s: ekf.time_offset_sigma(0).to_f64(),
+        nis,
+        accepted,
+    }
+}
+
+/// Largest final 1-sigma rotation (deg) of a converged calibration.
+const CONVERGED_SIGMA_ROT_DEG: f64 = 0.5;
+/// Largest final 1-sigma translation (m) of a converged calibration.
+const CONVERGED_SIGMA_TRANS_M: f64 = 0.02;
+
+fn finish<T: Scalar>(
+    ekf: &PoseImuEkf<T>,
+    run: Run,
+    standstill: Option<&Standstill>,
+    rotation_init: &init::RotationInit,
+    timing: Timing,
+) -> PoseImuCalibration {
+    let covariance = Matrix6::from_fn(|r, c| ekf.extrinsic_covariance(0)[(r, c)].to_f64());
+    let (sr, st) = ekf.extrinsic_sigma(0);
+    let mut reasons = Vec::new();
+    let max_sr = sr.amax().to_f64().to_degrees();
+    let max_st = st.amax().to_f64();
+    if max_sr > CONVERGED_SIGMA_ROT_DEG {
+        reasons.push(format!(
+            "rotation sigma {max_sr:.3} deg > {CONVERGED_SIGMA_ROT_DEG} deg: not enough rotation"
+        ));
+    }
+    if max_st > CONVERGED_SIGMA_TRANS_M {
+        reasons.push(format!(
+            "translation sigma {max_st:.4} m > {CONVERGED_SIGMA_TRANS_M} m: not enough rotation \
+             to observe the lever arm"
+        ));
+    }
+    let total = run.accepted + run.rejected;
+    if total == 0 || run.rejected * 10 > total {
+        reasons.push(format!(
+            "{} of {} relative poses rejected by the gate: odometry noise or time offset \
+             mismatched",
+            run.rejected, total
+        ));
+    }
+    let mean_nis = run.nis_sum / run.nis_dof.max(1) as f64;
+    let rv = rotation_init.rotation.scaled_axis();
+    let report = PoseImuReport {
+        converged: reasons.is_empty(),
+        reasons,
+        scalar: core::any::type_name::<T>(),
+        standstill_s: standstill.map_or(0.0, |s| run.seconds(s.until_ns)),
+        hand_eye_pairs: rotation_init.pairs,
+        hand_eye_axis_ratio: rotation_init.axis_ratio,
+        hand_eye_rotation_vector: [rv.x, rv.y, rv.z],
+        updates_accepted: run.accepted,
+        updates_rejected: run.rejected,
+        poses_skipped: run.skipped,
+        mean_nis_per_dof: mean_nis,
+        excitation: ekf.excitation(0).map(|x| x.to_f64()),
+        events: run.events,
+        timing_s: timing,
+        history: run.history,
+    };
+    PoseImuCalibration {
+        t_imu_pose: convert::isometry(&ekf.extrinsic(0)),
+        time_offset_s: ekf.time_offset(0).to_f64(),
+        time_offset_sigma_s: ekf.time_offset_sigma(0).to_f64(),
+        covariance,
+        report,
+    }
+}

@@ -1,0 +1,90 @@
+//! Errors of a calibration result against the simulator's ground truth.
+//!
+//! Rotation error per axis is `Log(R_est^T R_true)` (the right perturbation every sigma in
+//! the result file refers to); translation error is `p_true - p_est`; time error is
+//! `t_d,est - t_d,true`. "Within 3 sigma" means every axis and the time offset are.
+
+use nalgebra::Vector3;
+use serde::Serialize;
+
+use crate::dataset::{CalibrationResult, ExtrinsicEstimate};
+
+/// Errors of one result section.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct SectionErrors {
+    /// Section name (`pose0`, `lidar0`, ...).
+    pub section: &'static str,
+    /// Rotation error angle, deg.
+    pub rotation_deg: f64,
+    /// Per-axis rotation error, deg.
+    pub rotation_axes_deg: [f64; 3],
+    /// Translation error norm, m.
+    pub translation_m: f64,
+    /// Per-axis translation error, m.
+    pub translation_axes_m: [f64; 3],
+    /// Time offset error, s.
+    pub time_offset_s: f64,
+    /// Reported 1-sigma rotation per axis, deg.
+    pub sigma_rot_deg: [f64; 3],
+    /// Reported 1-sigma translation per axis, m.
+    pub sigma_trans_m: [f64; 3],
+    /// Every rotation and translation axis inside its reported 3 sigma.
+    pub within_3_sigma: bool,
+}
+
+/// Compares one estimate with the truth.
+pub fn compare(section: &'static str, est: &ExtrinsicEstimate, truth: &ExtrinsicEstimate) -> SectionErrors {
+    let d_rot = (est.transform.rotation.inverse() * truth.transform.rotation).scaled_axis();
+    let d_trans = truth.transform.translation.vector - est.transform.translation.vector;
+    let rot_deg: Vector3<f64> = d_rot.map(f64::to_degrees);
+    let within = (0..3).all(|i| {
+        rot_deg[i].abs() <= 3.0 * est.sigma_rot_deg[i] && d_trans[i].abs() <= 3.0 * est.sigma_trans_m[i]
+    });
+    SectionErrors {
+        section,
+        rotation_deg: d_rot.norm().to_degrees(),
+        rotation_axes_deg: [rot_deg.x, rot_deg.y, rot_deg.z],
+        translation_m: d_trans.norm(),
+        translation_axes_m: [d_trans.x, d_trans.y, d_trans.z],
+        time_offset_s: est.timeshift_s - truth.timeshift_s,
+        sigma_rot_deg: [est.sigma_rot_deg.x, est.sigma_rot_deg.y, est.sigma_rot_deg.z],
+        sigma_trans_m: [est.sigma_trans_m.x, est.sigma_trans_m.y, est.sigma_trans_m.z],
+        within_3_sigma: within,
+    }
+}
+
+/// Errors of every section present in both files.
+pub fn evaluate(result: &CalibrationResult, truth: &CalibrationResult) -> Vec<SectionErrors> {
+    let pairs = [
+        ("cam0", &result.cam0, &truth.cam0),
+        ("lidar0", &result.lidar0, &truth.lidar0),
+        ("pose0", &result.pose0, &truth.pose0),
+        ("cam0_lidar0", &result.cam0_lidar0, &truth.cam0_lidar0),
+    ];
+    pairs
+        .into_iter()
+        .filter_map(|(name, e, t)| Some(compare(name, e.as_ref()?, t.as_ref()?)))
+        .collect()
+}
+
+/// A plain-text table of the errors.
+pub fn table(errors: &[SectionErrors]) -> String {
+    let mut out = String::from(
+        "section      rot err [deg]  3-sigma [deg]  trans err [mm]  3-sigma [mm]  time err [ms]  inside 3 sigma\n",
+    );
+    for e in errors {
+        let s3r = 3.0 * e.sigma_rot_deg.iter().cloned().fold(0.0, f64::max);
+        let s3t = 3.0 * e.sigma_trans_m.iter().cloned().fold(0.0, f64::max) * 1e3;
+        out.push_str(&format!(
+            "{:<12} {:>13.4}  {:>13.4}  {:>14.2}  {:>12.2}  {:>13.3}  {}\n",
+            e.section,
+            e.rotation_deg,
+            s3r,
+            e.translation_m * 1e3,
+            s3t,
+            e.time_offset_s * 1e3,
+            if e.within_3_sigma { "yes" } else { "NO" }
+        ));
+    }
+    out
+}
