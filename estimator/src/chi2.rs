@@ -32,7 +32,9 @@ impl Confidence {
 
     /// The standard normal quantile at this confidence.
     pub fn normal_quantile(self) -> f64 {
-        [1.281552, 1.644854, 2.326348, 2.575829, 3.090232, 3.719016, 4.264891][self.column()]
+        [
+            1.281552, 1.644854, 2.326348, 2.575829, 3.090232, 3.719016, 4.264891,
+        ][self.column()]
     }
 }
 
@@ -74,7 +76,11 @@ const TABLE: [[f64; 7]; TABLE_DOF] = [
 
 /// Upper quantile: `P(chi2(dof) <= q) = confidence`. `dof = 0` gives 0.
 pub fn quantile<T: Scalar>(dof: usize, confidence: Confidence) -> T {
-    T::lit(quantile_f64(dof, confidence.normal_quantile(), confidence.column()))
+    T::lit(quantile_f64(
+        dof,
+        confidence.normal_quantile(),
+        confidence.column(),
+    ))
 }
 
 /// Lower quantile: `P(chi2(dof) <= q) = 1 - confidence` (Wilson-Hilferty; meant for the

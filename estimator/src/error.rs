@@ -45,7 +45,10 @@ impl fmt::Display for Error {
         match self {
             Error::NonFinite => write!(f, "input contains NaN or infinity"),
             Error::OutOfRange => write!(f, "input value out of the plausible range"),
-            Error::TimeWentBackwards { filter_ns, stamp_ns } => write!(
+            Error::TimeWentBackwards {
+                filter_ns,
+                stamp_ns,
+            } => write!(
                 f,
                 "time went backwards: stamp {stamp_ns} ns is before filter time {filter_ns} ns"
             ),

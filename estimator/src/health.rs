@@ -35,9 +35,11 @@ pub struct HealthConfig<T: Scalar> {
     pub step_confidence: Confidence,
     /// Updates a detector must accumulate before it may fire (also its refractory period).
     pub step_min_updates: u32,
-    /// Sigma (rad) added to each extrinsic rotation axis when a rotation step is detected.
+    /// Sigma (rad) added to each extrinsic rotation axis, on top of the step estimate's own
+    /// covariance, when a rotation step is detected (the step estimate is biased low by
+    /// what the filter absorbed before the detection).
     pub inflate_rotation: T,
-    /// Sigma (m) added to each extrinsic translation axis when a translation step is detected.
+    /// Sigma (m) added likewise to each translation axis on a translation step.
     pub inflate_translation: T,
 }
 
@@ -49,8 +51,8 @@ impl<T: Scalar> Default for HealthConfig<T> {
             step_forgetting: T::lit(0.97),
             step_confidence: Confidence::P9999,
             step_min_updates: 15,
-            inflate_rotation: T::lit(0.035),
-            inflate_translation: T::lit(0.03),
+            inflate_rotation: T::lit(0.0035),
+            inflate_translation: T::lit(0.005),
         }
     }
 }
@@ -66,8 +68,10 @@ pub enum HealthEvent<T: Scalar> {
         stamp_ns: u64,
         /// GLR statistic (chi-square(3) under "no change").
         statistic: T,
-        /// Estimated size of the step, rad.
-        magnitude: T,
+        /// Estimated step (right perturbation of `R_I_S`), rad.
+        step: Vector3<T>,
+        /// Covariance of the estimated step, rad^2.
+        step_covariance: Matrix3<T>,
     },
     /// The extrinsic translation of `sensor` changed; its covariance was inflated.
     TranslationStep {
@@ -77,8 +81,10 @@ pub enum HealthEvent<T: Scalar> {
         stamp_ns: u64,
         /// GLR statistic.
         statistic: T,
-        /// Estimated size of the step, m.
-        magnitude: T,
+        /// Estimated step of `p_I_S`, m.
+        step: Vector3<T>,
+        /// Covariance of the estimated step, m^2.
+        step_covariance: Matrix3<T>,
     },
 }
 
@@ -122,13 +128,29 @@ impl<T: Scalar> StepDetector<T> {
         self.updates = self.updates.saturating_add(1);
     }
 
-    /// `(statistic, |estimated step|)`, or `None` while the information is singular.
-    fn test(&self) -> Option<(T, T)> {
+    /// The GLR statistic, or `None` while the information is singular.
+    fn statistic(&self) -> Option<T> {
         let reg = Matrix3::identity() * (self.info_squared_weights.trace() * T::lit(1e-9));
         let cov = Cholesky::new(self.info_squared_weights + reg)?;
-        let statistic = self.score.dot(&cov.solve(&self.score));
-        let step = Cholesky::new(self.info + reg)?.solve(&self.score);
-        Some((statistic, step.norm()))
+        Some(self.score.dot(&cov.solve(&self.score)))
+    }
+
+    /// The maximum-likelihood step `A1^-1 b` and its covariance `A1^-1 A2 A1^-1`.
+    fn step(&self) -> Option<(Vector3<T>, Matrix3<T>)> {
+        let reg = Matrix3::identity() * (self.info.trace() * T::lit(1e-9));
+        let info_inv = Cholesky::new(self.info + reg)?.inverse();
+        let cov = info_inv * self.info_squared_weights * info_inv;
+        Some((info_inv * self.score, (cov + cov.transpose()) * T::lit(0.5)))
+    }
+
+    /// Statistic and step when the detector is ready and the statistic exceeds `threshold`.
+    fn fire(&self, min_updates: u32, threshold: T) -> Option<(T, Vector3<T>, Matrix3<T>)> {
+        if self.updates < min_updates {
+            return None;
+        }
+        let statistic = self.statistic().filter(|s| *s > threshold)?;
+        let (step, cov) = self.step()?;
+        Some((statistic, step, cov))
     }
 }
 
@@ -270,26 +292,31 @@ impl<T: Scalar, const S: usize> HealthMonitor<T, S> {
             .translation
             .add(&inn.translation_info, &inn.translation_score, l);
         let threshold = chi2::quantile::<T>(3, config.step_confidence);
-        let ready = |d: &StepDetector<T>| d.updates >= config.step_min_updates;
-        let event = if let Some((stat, mag)) = health.rotation.test().filter(|_| ready(&health.rotation)) {
-            (stat > threshold).then_some(HealthEvent::RotationStep {
+        let min = config.step_min_updates;
+        let event = if let Some((statistic, step, step_covariance)) =
+            health.rotation.fire(min, threshold)
+        {
+            Some(HealthEvent::RotationStep {
                 sensor: s,
                 stamp_ns,
-                statistic: stat,
-                magnitude: mag,
+                statistic,
+                step,
+                step_covariance,
             })
         } else {
-            None
+            health
+                .translation
+                .fire(min, threshold)
+                .map(
+                    |(statistic, step, step_covariance)| HealthEvent::TranslationStep {
+                        sensor: s,
+                        stamp_ns,
+                        statistic,
+                        step,
+                        step_covariance,
+                    },
+                )
         };
-        let event = event.or_else(|| {
-            let (stat, mag) = health.translation.test().filter(|_| ready(&health.translation))?;
-            (stat > threshold).then_some(HealthEvent::TranslationStep {
-                sensor: s,
-                stamp_ns,
-                statistic: stat,
-                magnitude: mag,
-            })
-        });
         if event.is_some() {
             health.rotation = StepDetector::new();
             health.translation = StepDetector::new();
@@ -319,7 +346,14 @@ mod tests {
         let mut m = HealthMonitor::<f64, 1>::new(HealthConfig::default());
         let mut fired = None;
         for k in 0..100 {
-            if let Some(e) = m.record(0, k, 3.0, 6, true, Some(&innovation(Vector3::new(1.5, 0.0, 0.0)))) {
+            if let Some(e) = m.record(
+                0,
+                k,
+                3.0,
+                6,
+                true,
+                Some(&innovation(Vector3::new(1.5, 0.0, 0.0))),
+            ) {
                 fired = Some((k, e));
                 break;
             }
@@ -335,7 +369,14 @@ mod tests {
         // Alternating signs: zero-mean, unit variance.
         for k in 0..1000u64 {
             let s = if k % 2 == 0 { 1.0 } else { -1.0 };
-            let e = m.record(0, k, 3.0, 3, true, Some(&innovation(Vector3::new(s, -s, s))));
+            let e = m.record(
+                0,
+                k,
+                3.0,
+                3,
+                true,
+                Some(&innovation(Vector3::new(s, -s, s))),
+            );
             assert!(e.is_none(), "false alarm at {k}");
         }
     }

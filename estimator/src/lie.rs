@@ -206,9 +206,7 @@ mod tests {
     fn right_jacobian_matches_central_differences() {
         for phi in vecs() {
             // d/dd Log(Exp(phi)^-1 Exp(phi + d)) = Jr(phi)
-            let numeric = central_diff_so3(|d| {
-                log(&(exp(&phi).inverse() * exp(&(phi + d))))
-            });
+            let numeric = central_diff_so3(|d| log(&(exp(&phi).inverse() * exp(&(phi + d)))));
             assert_mat_close(&right_jacobian(&phi), &numeric, 1e-7);
         }
     }
@@ -230,7 +228,10 @@ mod tests {
 
     #[test]
     fn pose_inverse_and_compose() {
-        let t = Pose::new(exp(&Vector3::new(0.3, -1.0, 2.0)), Vector3::new(1.0, 2.0, 3.0));
+        let t = Pose::new(
+            exp(&Vector3::new(0.3, -1.0, 2.0)),
+            Vector3::new(1.0, 2.0, 3.0),
+        );
         let id = t.compose(&t.inverse());
         assert!(id.rotation.angle() < 1e-12 && id.translation.norm() < 1e-12);
         let p = Vector3::new(0.5, -0.5, 2.0);

@@ -32,7 +32,11 @@ pub struct ImuSample<T: Scalar> {
 impl<T: Scalar> ImuSample<T> {
     /// Rejects NaN/Inf and values beyond any real IMU's range (1000 rad/s, 1000 m/s^2).
     pub fn validate(&self) -> Result<(), crate::Error> {
-        let finite = self.gyro.iter().chain(self.accel.iter()).all(|x| x.is_finite());
+        let finite = self
+            .gyro
+            .iter()
+            .chain(self.accel.iter())
+            .all(|x| x.is_finite());
         if !finite {
             return Err(crate::Error::NonFinite);
         }
@@ -135,7 +139,12 @@ pub fn step<T: Scalar>(
         imu::ACCEL_BIAS.idx,
     );
     let dt2 = half * dt * dt;
-    set3(&mut phi, o, o, &dq.to_rotation_matrix().into_inner().transpose());
+    set3(
+        &mut phi,
+        o,
+        o,
+        &dq.to_rotation_matrix().into_inner().transpose(),
+    );
     set3(&mut phi, o, bg, &d_theta_d_bg);
     set3(&mut phi, p, o, &(d_force_d_theta * dt2));
     set3(&mut phi, p, v, &(Matrix3::identity() * dt));
@@ -189,7 +198,8 @@ pub fn boxplus<T: Scalar>(x: &ImuState<T>, dx: &nalgebra::SVector<T, 15>) -> Imu
 pub fn boxminus<T: Scalar>(a: &ImuState<T>, b: &ImuState<T>) -> nalgebra::SVector<T, 15> {
     let mut dx = nalgebra::SVector::<T, 15>::zeros();
     let dtheta = crate::lie::log(&(b.rotation.inverse() * a.rotation));
-    dx.fixed_rows_mut::<3>(imu::ORIENTATION.idx).copy_from(&dtheta);
+    dx.fixed_rows_mut::<3>(imu::ORIENTATION.idx)
+        .copy_from(&dtheta);
     dx.fixed_rows_mut::<3>(imu::POSITION.idx)
         .copy_from(&(a.position - b.position));
     dx.fixed_rows_mut::<3>(imu::VELOCITY.idx)
@@ -237,7 +247,13 @@ mod tests {
     #[test]
     fn noise_is_symmetric_and_positive() {
         let x = moving_state();
-        let s = step(&x, &Vector3::new(1.0, 0.5, 0.0), &Vector3::z(), 0.0025, &ImuNoise::vn300());
+        let s = step(
+            &x,
+            &Vector3::new(1.0, 0.5, 0.0),
+            &Vector3::z(),
+            0.0025,
+            &ImuNoise::vn300(),
+        );
         assert_mat_close(&s.noise, &s.noise.transpose(), 1e-18);
         assert!((0..15).all(|i| s.noise[(i, i)] > 0.0));
     }

@@ -7,7 +7,7 @@ pub const STEP: f64 = 1e-6;
 
 /// Numeric Jacobian of `f: R^3 -> R^3` at 0 by central differences.
 pub fn central_diff_so3(f: impl Fn(Vector3<f64>) -> Vector3<f64>) -> Matrix3<f64> {
-    central_diff::<3, 3>(|d| f(d))
+    central_diff::<3, 3>(f)
 }
 
 /// Numeric Jacobian of `f: R^K -> R^M` at 0 by central differences.

@@ -112,8 +112,8 @@ pub fn kalman_step<T: Scalar, const M: usize, const N: usize>(
     let i_kh = SMatrix::<T, N, N>::identity() - gain * lin.jacobian;
     let joseph = i_kh * cov * i_kh.transpose() + gain * lin.noise * gain.transpose();
     let covariance = (joseph + joseph.transpose()) * T::lit(0.5);
-    let finite = correction.iter().all(|x| x.is_finite())
-        && covariance.iter().all(|x| x.is_finite());
+    let finite =
+        correction.iter().all(|x| x.is_finite()) && covariance.iter().all(|x| x.is_finite());
     if !finite {
         return Err(Error::DivergentUpdate);
     }

@@ -143,12 +143,18 @@ fn measurement_older_than_the_window_is_a_typed_error() {
     let before = snapshot(&ekf);
     let t = ekf.time_ns();
     let m = RelativePose::with_sigmas(t - 900_000_000, t, Pose::identity(), 0.0035, 0.005);
-    assert_eq!(ekf.update_relative_pose(0, &m).unwrap_err(), Error::OlderThanWindow);
+    assert_eq!(
+        ekf.update_relative_pose(0, &m).unwrap_err(),
+        Error::OlderThanWindow
+    );
     assert_eq!(before, snapshot(&ekf));
 }
 
 #[test]
 fn unknown_sensor_is_a_typed_error() {
     let mut ekf = warmed_up();
-    assert_eq!(ekf.anchor(5, ekf.time_ns()).unwrap_err(), Error::UnknownSensor);
+    assert_eq!(
+        ekf.anchor(5, ekf.time_ns()).unwrap_err(),
+        Error::UnknownSensor
+    );
 }

@@ -33,12 +33,17 @@ pub struct SectionErrors {
 }
 
 /// Compares one estimate with the truth.
-pub fn compare(section: &'static str, est: &ExtrinsicEstimate, truth: &ExtrinsicEstimate) -> SectionErrors {
+pub fn compare(
+    section: &'static str,
+    est: &ExtrinsicEstimate,
+    truth: &ExtrinsicEstimate,
+) -> SectionErrors {
     let d_rot = (est.transform.rotation.inverse() * truth.transform.rotation).scaled_axis();
     let d_trans = truth.transform.translation.vector - est.transform.translation.vector;
     let rot_deg: Vector3<f64> = d_rot.map(f64::to_degrees);
     let within = (0..3).all(|i| {
-        rot_deg[i].abs() <= 3.0 * est.sigma_rot_deg[i] && d_trans[i].abs() <= 3.0 * est.sigma_trans_m[i]
+        rot_deg[i].abs() <= 3.0 * est.sigma_rot_deg[i]
+            && d_trans[i].abs() <= 3.0 * est.sigma_trans_m[i]
     });
     SectionErrors {
         section,
@@ -47,8 +52,16 @@ pub fn compare(section: &'static str, est: &ExtrinsicEstimate, truth: &Extrinsic
         translation_m: d_trans.norm(),
         translation_axes_m: [d_trans.x, d_trans.y, d_trans.z],
         time_offset_s: est.timeshift_s - truth.timeshift_s,
-        sigma_rot_deg: [est.sigma_rot_deg.x, est.sigma_rot_deg.y, est.sigma_rot_deg.z],
-        sigma_trans_m: [est.sigma_trans_m.x, est.sigma_trans_m.y, est.sigma_trans_m.z],
+        sigma_rot_deg: [
+            est.sigma_rot_deg.x,
+            est.sigma_rot_deg.y,
+            est.sigma_rot_deg.z,
+        ],
+        sigma_trans_m: [
+            est.sigma_trans_m.x,
+            est.sigma_trans_m.y,
+            est.sigma_trans_m.z,
+        ],
         within_3_sigma: within,
     }
 }

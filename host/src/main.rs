@@ -15,7 +15,11 @@ use msreg_host::eval;
 use msreg_host::sim::{self, SimConfig};
 
 #[derive(Parser)]
-#[command(name = "msreg", version, about = "Extrinsic calibration of LiDARs, cameras and IMUs")]
+#[command(
+    name = "msreg",
+    version,
+    about = "Extrinsic calibration of LiDARs, cameras and IMUs"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -165,7 +169,10 @@ fn simulate_pose_imu(args: &SimulatePoseImu) -> Result<SimConfig, Failure> {
     Ok(config)
 }
 
-fn calibrate_pose_imu(args: &CalibratePoseImu, show_progress: bool) -> Result<PoseImuCalibration, Failure> {
+fn calibrate_pose_imu(
+    args: &CalibratePoseImu,
+    show_progress: bool,
+) -> Result<PoseImuCalibration, Failure> {
     let dataset = Dataset::open(&args.dataset)?;
     let input = PoseImuInput {
         imu: dataset.require_imu()?,
@@ -186,7 +193,9 @@ fn calibrate_pose_imu(args: &CalibratePoseImu, show_progress: bool) -> Result<Po
     };
     bar.finish_and_clear();
     let calibration = outcome.map_err(|e| match e {
-        pose_imu::PoseImuError::BadInput(m) => Failure::BadInput(anyhow!("{}: {m}", args.dataset.display())),
+        pose_imu::PoseImuError::BadInput(m) => {
+            Failure::BadInput(anyhow!("{}: {m}", args.dataset.display()))
+        }
         pose_imu::PoseImuError::Unobservable(m) => Failure::NotConverged(m),
     })?;
     let result = CalibrationResult {
@@ -196,7 +205,8 @@ fn calibrate_pose_imu(args: &CalibratePoseImu, show_progress: bool) -> Result<Po
     result.write(&args.output)?;
     if let Some(path) = &args.report {
         let json = serde_json::to_string_pretty(&calibration.report)?;
-        std::fs::write(path, json).with_context(|| format!("{}: cannot write report", path.display()))?;
+        std::fs::write(path, json)
+            .with_context(|| format!("{}: cannot write report", path.display()))?;
     }
     eprintln!("msreg: wrote {}", args.output.display());
     if !calibration.report.converged {
@@ -210,7 +220,9 @@ fn progress_bar(visible: bool) -> ProgressBar {
         return ProgressBar::hidden();
     }
     let bar = ProgressBar::new(1000);
-    if let Ok(style) = ProgressStyle::with_template("{spinner} filtering [{bar:40}] {percent}% {elapsed}") {
+    if let Ok(style) =
+        ProgressStyle::with_template("{spinner} filtering [{bar:40}] {percent}% {elapsed}")
+    {
         bar.set_style(style.progress_chars("=> "));
     }
     bar

@@ -27,7 +27,6 @@ fn run(seed: u64) -> SeedResult {
         ..SimConfig::default()
     };
     // Deterministic per seed, spread over +-20 ms.
-    config.trajectory.rate_amplitude_rad_s = std::env::var("RATE").ok().and_then(|s| s.parse().ok()).unwrap_or(0.6);
     config.pose.time_offset_s = ((seed * 7919) % 41) as f64 * 1e-3 - 0.020;
     let data = simulate(&config);
     let c = calibrate::<f64>(&data, &PoseImuOptions::default());
@@ -71,13 +70,40 @@ fn twenty_seeds_are_accurate_and_consistent() {
     );
 
     // Accuracy (foundation issue): medians and every seed.
-    assert!(median(&rot) < 0.1, "median rotation error {:.4} deg", median(&rot));
-    assert!(median(&trans) < 0.003, "median translation error {:.2} mm", median(&trans) * 1e3);
+    assert!(
+        median(&rot) < 0.1,
+        "median rotation error {:.4} deg",
+        median(&rot)
+    );
+    assert!(
+        median(&trans) < 0.003,
+        "median translation error {:.2} mm",
+        median(&trans) * 1e3
+    );
     for r in &results {
-        assert!(r.rot_deg < 0.25, "seed {}: rotation error {:.4} deg", r.seed, r.rot_deg);
-        assert!(r.trans_m < 0.006, "seed {}: translation error {:.2} mm", r.seed, r.trans_m * 1e3);
-        assert!(r.time_err_s.abs() < 1e-3, "seed {}: time offset error {:.3} ms", r.seed, r.time_err_s * 1e3);
-        assert!(r.inside, "seed {}: error outside the reported 3 sigma", r.seed);
+        assert!(
+            r.rot_deg < 0.25,
+            "seed {}: rotation error {:.4} deg",
+            r.seed,
+            r.rot_deg
+        );
+        assert!(
+            r.trans_m < 0.006,
+            "seed {}: translation error {:.2} mm",
+            r.seed,
+            r.trans_m * 1e3
+        );
+        assert!(
+            r.time_err_s.abs() < 1e-3,
+            "seed {}: time offset error {:.3} ms",
+            r.seed,
+            r.time_err_s * 1e3
+        );
+        assert!(
+            r.inside,
+            "seed {}: error outside the reported 3 sigma",
+            r.seed
+        );
     }
     // Consistency: the mean of 20 chi2(6) NEES values lies in the two-sided 95 % band
     // [chi2.ppf(0.025, 120), chi2.ppf(0.975, 120)] / 20 = [91.573, 152.211] / 20.
@@ -85,5 +111,8 @@ fn twenty_seeds_are_accurate_and_consistent() {
         (91.573 / 20.0..=152.211 / 20.0).contains(&mean_nees),
         "mean NEES {mean_nees:.2} outside [4.58, 7.61]"
     );
-    assert!(inside * 100 >= 95 * results.len(), "only {inside} runs inside 3 sigma");
+    assert!(
+        inside * 100 >= 95 * results.len(),
+        "only {inside} runs inside 3 sigma"
+    );
 }

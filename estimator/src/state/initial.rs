@@ -124,8 +124,6 @@ impl<T: Scalar, const S: usize> InitialState<T, S> {
                     .iter()
                     .all(|s| s.is_finite() && *s >= T::zero())
         });
-        self.imu.is_finite()
-            && sig.iter().all(|s| s.is_finite() && *s > T::zero())
-            && sensors_ok
+        self.imu.is_finite() && sig.iter().all(|s| s.is_finite() && *s > T::zero()) && sensors_ok
     }
 }

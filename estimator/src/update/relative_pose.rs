@@ -198,9 +198,15 @@ mod tests {
         let lin = linearize(&ii, &ij, &ext, &predict(&ii, &ij, &ext));
         let numeric = central_diff::<6, 18>(|d| perturbed_prediction(&ii, &ij, &ext, &d));
         let mut analytic = SMatrix::<f64, 6, 18>::zeros();
-        analytic.fixed_view_mut::<6, 6>(0, 0).copy_from(&lin.clone_from);
-        analytic.fixed_view_mut::<6, 6>(0, 6).copy_from(&lin.clone_to);
-        analytic.fixed_view_mut::<6, 6>(0, 12).copy_from(&lin.extrinsic);
+        analytic
+            .fixed_view_mut::<6, 6>(0, 0)
+            .copy_from(&lin.clone_from);
+        analytic
+            .fixed_view_mut::<6, 6>(0, 6)
+            .copy_from(&lin.clone_to);
+        analytic
+            .fixed_view_mut::<6, 6>(0, 12)
+            .copy_from(&lin.extrinsic);
         assert_mat_close(&analytic, &numeric, 1e-7);
     }
 

@@ -29,21 +29,20 @@ pub fn linearize<T: Scalar>(
 
     let mut h = SMatrix::<T, DIM, 15>::zeros();
     let eye = Matrix3::identity();
-    h.fixed_view_mut::<3, 3>(0, imu::GYRO_BIAS.idx).copy_from(&eye);
-    h.fixed_view_mut::<3, 3>(3, imu::ACCEL_BIAS.idx).copy_from(&eye);
+    h.fixed_view_mut::<3, 3>(0, imu::GYRO_BIAS.idx)
+        .copy_from(&eye);
+    h.fixed_view_mut::<3, 3>(3, imu::ACCEL_BIAS.idx)
+        .copy_from(&eye);
     h.fixed_view_mut::<3, 3>(3, imu::ORIENTATION.idx)
         .copy_from(&(-skew(&g_in_imu)));
-    h.fixed_view_mut::<3, 3>(6, imu::VELOCITY.idx).copy_from(&eye);
+    h.fixed_view_mut::<3, 3>(6, imu::VELOCITY.idx)
+        .copy_from(&eye);
     (r, h)
 }
 
 /// Noise of the zero-velocity residual: one IMU sample's white noise (densities over the
 /// sample period) and a velocity sigma for "standing still" (hand tremor, vibration).
-pub fn noise<T: Scalar>(
-    gyro_sigma: T,
-    accel_sigma: T,
-    velocity_sigma: T,
-) -> SMatrix<T, DIM, DIM> {
+pub fn noise<T: Scalar>(gyro_sigma: T, accel_sigma: T, velocity_sigma: T) -> SMatrix<T, DIM, DIM> {
     let mut r = SMatrix::<T, DIM, DIM>::zeros();
     for i in 0..3 {
         r[(i, i)] = gyro_sigma * gyro_sigma;

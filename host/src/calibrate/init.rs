@@ -73,7 +73,9 @@ pub fn integrate_gyro(
         return None;
     }
     // Sample held over [t_k, t_{k+1}): start at the sample at or before `from_ns`.
-    let start = imu.partition_point(|r| r.stamp_ns <= from_ns).checked_sub(1)?;
+    let start = imu
+        .partition_point(|r| r.stamp_ns <= from_ns)
+        .checked_sub(1)?;
     let mut q = UnitQuaternion::identity();
     let mut t = from_ns;
     for k in start..imu.len() {

@@ -187,7 +187,9 @@ pub fn calibrate<T: Scalar>(
 ) -> Result<PoseImuCalibration, PoseImuError> {
     let (imu, poses) = (input.imu, input.poses);
     let (Some(first_imu), Some(last_imu)) = (imu.first(), imu.last()) else {
-        return Err(PoseImuError::BadInput("imu0/data.csv: no IMU samples".into()));
+        return Err(PoseImuError::BadInput(
+            "imu0/data.csv: no IMU samples".into(),
+        ));
     };
     if poses.len() < 3 {
         return Err(PoseImuError::BadInput(format!(
@@ -200,8 +202,8 @@ pub fn calibrate<T: Scalar>(
     let gyro_bias = standstill.map_or_else(Vector3::zeros, |s| s.gyro_mean);
     let period_ns = nominal_period_ns(poses);
     let max_interval_ns = period_ns.saturating_mul(3) / 2;
-    let rotation_init = init::hand_eye_rotation(imu, poses, &gyro_bias, max_interval_ns)
-        .map_err(|e| {
+    let rotation_init =
+        init::hand_eye_rotation(imu, poses, &gyro_bias, max_interval_ns).map_err(|e| {
             PoseImuError::Unobservable(format!(
                 "hand-eye rotation initialisation failed ({e:?}): the recording needs rotation \
                  about at least two axes"
@@ -411,7 +413,12 @@ impl Run {
                 if let Some(event) = report.event {
                     self.events.push(self.event_record(&event));
                 }
-                self.history.push(history_point(ekf, self.seconds(pose.stamp_ns), report.nis.to_f64(), report.accepted));
+                self.history.push(history_point(
+                    ekf,
+                    self.seconds(pose.stamp_ns),
+                    report.nis.to_f64(),
+                    report.accepted,
+                ));
             }
             Err(FilterError::NoAnchor | FilterError::OlderThanWindow) => {
                 self.previous = None;
@@ -426,30 +433,35 @@ impl Run {
             HealthEvent::RotationStep {
                 stamp_ns,
                 statistic,
-                magnitude,
+                step,
                 ..
             } => EventRecord {
                 t_s: self.seconds(stamp_ns),
                 kind: "rotation_step",
                 statistic: statistic.to_f64(),
-                magnitude: magnitude.to_f64(),
+                magnitude: step.norm().to_f64(),
             },
             HealthEvent::TranslationStep {
                 stamp_ns,
                 statistic,
-                magnitude,
+                step,
                 ..
             } => EventRecord {
                 t_s: self.seconds(stamp_ns),
                 kind: "translation_step",
                 statistic: statistic.to_f64(),
-                magnitude: magnitude.to_f64(),
+                magnitude: step.norm().to_f64(),
             },
         }
     }
 }
 
-fn history_point<T: Scalar>(ekf: &PoseImuEkf<T>, t_s: f64, nis: f64, accepted: bool) -> HistoryPoint {
+fn history_point<T: Scalar>(
+    ekf: &PoseImuEkf<T>,
+    t_s: f64,
+    nis: f64,
+    accepted: bool,
+) -> HistoryPoint {
     let x = convert::isometry(&ekf.extrinsic(0));
     let (sr, st) = ekf.extrinsic_sigma(0);
     let rv = x.rotation.scaled_axis();

@@ -32,7 +32,10 @@ pub fn extrinsic_error(estimate: &Isometry3<f64>, truth: &Isometry3<f64>) -> Vec
 /// Normalised estimation error squared of the extrinsic.
 pub fn nees(c: &PoseImuCalibration, truth: &Isometry3<f64>) -> f64 {
     let e = extrinsic_error(&c.t_imu_pose, truth);
-    let info = c.covariance.try_inverse().expect("extrinsic covariance invertible");
+    let info = c
+        .covariance
+        .try_inverse()
+        .expect("extrinsic covariance invertible");
     e.dot(&(info * e))
 }
 
@@ -68,7 +71,11 @@ pub fn median(values: &[f64]) -> f64 {
 pub fn par_map<R: Send>(seeds: &[u64], f: impl Fn(u64) -> R + Sync) -> Vec<R> {
     let mut out: Vec<Option<R>> = seeds.iter().map(|_| None).collect();
     std::thread::scope(|scope| {
-        let (even, odd): (Vec<_>, Vec<_>) = out.iter_mut().zip(seeds).enumerate().partition(|(i, _)| i % 2 == 0);
+        let (even, odd): (Vec<_>, Vec<_>) = out
+            .iter_mut()
+            .zip(seeds)
+            .enumerate()
+            .partition(|(i, _)| i % 2 == 0);
         let f = &f;
         for half in [even, odd] {
             scope.spawn(move || {
@@ -78,5 +85,7 @@ pub fn par_map<R: Send>(seeds: &[u64], f: impl Fn(u64) -> R + Sync) -> Vec<R> {
             });
         }
     });
-    out.into_iter().map(|r| r.expect("every seed ran")).collect()
+    out.into_iter()
+        .map(|r| r.expect("every seed ran"))
+        .collect()
 }

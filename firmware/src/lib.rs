@@ -1,0 +1,17 @@
+//! msreg firmware: the estimator on a Cortex-M4F, with the QEMU mps2-an386 board as the
+//! reference target.
+//!
+//! The library holds what the binaries share: the embedded sensor sequence (an analytic
+//! trajectory sampled in `f32`, [`scenario`]), the self-test that runs the filter over it
+//! ([`selftest`]), and the measuring tools (stack painting, SysTick instruction clock).
+//! Everything is `no_std` and allocation-free.
+#![no_std]
+#![warn(missing_docs)]
+
+pub mod generator_check;
+pub mod noise;
+pub mod scenario;
+pub mod selftest;
+pub mod stack;
+pub mod ticks;
+pub mod trajectory;

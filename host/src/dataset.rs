@@ -1,0 +1,30 @@
+//! Readers and writers of the dataset directory layout and the calibration
+//! result file (docs: CONVENTIONS.md, "Dataset directory" and "Calibration
+//! result").
+//!
+//! Every reader validates what it reads and fails with a [`DatasetError`]
+//! naming the file and, for line-oriented formats, the 1-based line, so the
+//! CLI can report bad input (exit code 2) instead of panicking. Every writer
+//! emits floats in their shortest exact decimal form, so a write followed by a
+//! read reproduces the values bit for bit.
+
+mod csv;
+mod error;
+mod groundtruth;
+mod imu;
+mod layout;
+mod meta;
+mod pose;
+mod result;
+mod yaml;
+
+pub use error::DatasetError;
+pub use groundtruth::{read_groundtruth_csv, write_groundtruth_csv, GroundTruthRecord};
+pub use imu::{read_imu_csv, write_imu_csv, ImuNoiseYaml, ImuRecord};
+pub use layout::{
+    Dataset, DATASET_YAML, GROUNDTRUTH_EXTRINSICS_YAML, GROUNDTRUTH_TRAJECTORY_CSV, IMU_CSV,
+    IMU_YAML, POSE_CSV, POSE_SENSOR_YAML,
+};
+pub use meta::DatasetYaml;
+pub use pose::{read_pose_csv, write_pose_csv, PoseRecord, PoseSensorYaml};
+pub use result::{isometry_from_matrix, CalibrationResult, ExtrinsicEstimate};

@@ -1,0 +1,188 @@
+//! The dataset directory as a whole: file names of the layout and a loader
+//! that reads every part present, so a task asks for what it needs and gets
+//! an error naming the missing file otherwise.
+
+use std::path::{Path, PathBuf};
+
+use super::error::DatasetError;
+use super::groundtruth::{read_groundtruth_csv, GroundTruthRecord};
+use super::imu::{read_imu_csv, ImuNoiseYaml, ImuRecord};
+use super::meta::DatasetYaml;
+use super::pose::{read_pose_csv, PoseRecord, PoseSensorYaml};
+use super::result::CalibrationResult;
+
+/// `dataset.yaml`, relative to the dataset root.
+pub const DATASET_YAML: &str = "dataset.yaml";
+/// IMU samples.
+pub const IMU_CSV: &str = "imu0/data.csv";
+/// IMU noise (Kalibr).
+pub const IMU_YAML: &str = "imu0/imu.yaml";
+/// Pose-sensor odometry.
+pub const POSE_CSV: &str = "pose0/data.csv";
+/// Pose-sensor increment noise.
+pub const POSE_SENSOR_YAML: &str = "pose0/sensor.yaml";
+/// Ground-truth IMU trajectory (simulator output).
+pub const GROUNDTRUTH_TRAJECTORY_CSV: &str = "groundtruth/trajectory.csv";
+/// Ground-truth extrinsics (simulator output, result-file format).
+pub const GROUNDTRUTH_EXTRINSICS_YAML: &str = "groundtruth/extrinsics.yaml";
+
+/// A dataset directory with every supported part that is present loaded.
+///
+/// Loading is eager: a present but malformed file is an error at
+/// [`Dataset::open`], even when the task would not have needed it.
+#[derive(Debug, Clone)]
+pub struct Dataset {
+    /// The dataset directory.
+    pub root: PathBuf,
+    /// `dataset.yaml`.
+    pub meta: Option<DatasetYaml>,
+    /// `imu0/data.csv`.
+    pub imu: Option<Vec<ImuRecord>>,
+    /// `imu0/imu.yaml`.
+    pub imu_noise: Option<ImuNoiseYaml>,
+    /// `pose0/data.csv`.
+    pub pose0: Option<Vec<PoseRecord>>,
+    /// `pose0/sensor.yaml`.
+    pub pose0_sensor: Option<PoseSensorYaml>,
+    /// `groundtruth/trajectory.csv`.
+    pub groundtruth_trajectory: Option<Vec<GroundTruthRecord>>,
+    /// `groundtruth/extrinsics.yaml`.
+    pub groundtruth_extrinsics: Option<CalibrationResult>,
+}
+
+impl Dataset {
+    /// Opens `dir` and reads every part present. Absent files are `None`;
+    /// present but malformed ones are errors.
+    pub fn open(dir: impl AsRef<Path>) -> Result<Self, DatasetError> {
+        let root = dir.as_ref().to_path_buf();
+        if !root.is_dir() {
+            return Err(DatasetError::MissingDirectory { path: root });
+        }
+        Ok(Self {
+            meta: optional(root.join(DATASET_YAML), DatasetYaml::read)?,
+            imu: optional(root.join(IMU_CSV), read_imu_csv)?,
+            imu_noise: optional(root.join(IMU_YAML), ImuNoiseYaml::read)?,
+            pose0: optional(root.join(POSE_CSV), read_pose_csv)?,
+            pose0_sensor: optional(root.join(POSE_SENSOR_YAML), PoseSensorYaml::read)?,
+            groundtruth_trajectory: optional(
+                root.join(GROUNDTRUTH_TRAJECTORY_CSV),
+                read_groundtruth_csv,
+            )?,
+            groundtruth_extrinsics: optional(
+                root.join(GROUNDTRUTH_EXTRINSICS_YAML),
+                CalibrationResult::read,
+            )?,
+            root,
+        })
+    }
+
+    /// `relative` (one of the layout constants) under the dataset root.
+    pub fn path(&self, relative: &str) -> PathBuf {
+        self.root.join(relative)
+    }
+
+    /// IMU samples, or an error naming `imu0/data.csv`.
+    pub fn require_imu(&self) -> Result<&[ImuRecord], DatasetError> {
+        self.require(self.imu.as_deref(), IMU_CSV)
+    }
+
+    /// IMU noise, or an error naming `imu0/imu.yaml`.
+    pub fn require_imu_noise(&self) -> Result<&ImuNoiseYaml, DatasetError> {
+        self.require(self.imu_noise.as_ref(), IMU_YAML)
+    }
+
+    /// Odometry poses, or an error naming `pose0/data.csv`.
+    pub fn require_pose0(&self) -> Result<&[PoseRecord], DatasetError> {
+        self.require(self.pose0.as_deref(), POSE_CSV)
+    }
+
+    /// Odometry noise, or an error naming `pose0/sensor.yaml`.
+    pub fn require_pose0_sensor(&self) -> Result<&PoseSensorYaml, DatasetError> {
+        self.require(self.pose0_sensor.as_ref(), POSE_SENSOR_YAML)
+    }
+
+    /// Ground-truth trajectory, or an error naming `groundtruth/trajectory.csv`.
+    pub fn require_groundtruth_trajectory(&self) -> Result<&[GroundTruthRecord], DatasetError> {
+        self.require(
+            self.groundtruth_trajectory.as_deref(),
+            GROUNDTRUTH_TRAJECTORY_CSV,
+        )
+    }
+
+    /// Ground-truth extrinsics, or an error naming `groundtruth/extrinsics.yaml`.
+    pub fn require_groundtruth_extrinsics(&self) -> Result<&CalibrationResult, DatasetError> {
+        self.require(
+            self.groundtruth_extrinsics.as_ref(),
+            GROUNDTRUTH_EXTRINSICS_YAML,
+        )
+    }
+
+    fn require<'a, T: ?Sized>(
+        &self,
+        part: Option<&'a T>,
+        relative: &str,
+    ) -> Result<&'a T, DatasetError> {
+        part.ok_or_else(|| DatasetError::MissingFile {
+            path: self.path(relative),
+        })
+    }
+}
+
+/// Reads `path` with `read`, mapping a missing file to `None`.
+fn optional<T>(
+    path: PathBuf,
+    read: impl FnOnce(PathBuf) -> Result<T, DatasetError>,
+) -> Result<Option<T>, DatasetError> {
+    match read(path) {
+        Ok(value) => Ok(Some(value)),
+        Err(DatasetError::MissingFile { .. }) => Ok(None),
+        Err(e) => Err(e),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    type TestResult = Result<(), Box<dyn std::error::Error>>;
+
+    #[test]
+    fn missing_directory_is_an_error() {
+        let err = Dataset::open("/definitely/not/here");
+        assert!(matches!(err, Err(DatasetError::MissingDirectory { .. })));
+    }
+
+    #[test]
+    fn absent_parts_are_none_and_required_ones_name_the_file() -> TestResult {
+        let dir = tempfile::tempdir()?;
+        std::fs::create_dir(dir.path().join("imu0"))?;
+        std::fs::write(
+            dir.path().join(IMU_CSV),
+            "1,0,0,0,0,0,9.81\n2,0,0,0,0,0,9.81\n",
+        )?;
+        let dataset = Dataset::open(dir.path())?;
+        assert_eq!(dataset.require_imu()?.len(), 2);
+        assert!(dataset.pose0.is_none() && dataset.meta.is_none());
+        let err = dataset
+            .require_imu_noise()
+            .err()
+            .ok_or("expected an error")?;
+        assert!(err.to_string().contains("imu0/imu.yaml"), "{err}");
+        let err = dataset.require_pose0().err().ok_or("expected an error")?;
+        assert!(
+            matches!(&err, DatasetError::MissingFile { path } if path.ends_with(POSE_CSV)),
+            "{err}"
+        );
+        Ok(())
+    }
+
+    #[test]
+    fn a_malformed_present_part_fails_open() -> TestResult {
+        let dir = tempfile::tempdir()?;
+        std::fs::create_dir(dir.path().join("pose0"))?;
+        std::fs::write(dir.path().join(POSE_SENSOR_YAML), "rotation_noise_rad: [\n")?;
+        let err = Dataset::open(dir.path()).err().ok_or("expected an error")?;
+        assert!(err.to_string().contains("sensor.yaml"), "{err}");
+        Ok(())
+    }
+}

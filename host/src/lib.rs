@@ -1,0 +1,10 @@
+//! msreg host library: dataset readers and writers, the simulator, the calibration
+//! pipelines and their evaluation. The `msreg` binary is a thin CLI over it; the estimator
+//! core it drives lives in `msreg-estimator` (no_std, shared with the firmware).
+
+pub mod calibrate;
+pub mod dataset;
+pub mod eval;
+pub mod ndt;
+pub mod pointcloud;
+pub mod sim;

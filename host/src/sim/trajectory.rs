@@ -1,0 +1,280 @@
+//! A smooth, excitation-rich hand-held IMU trajectory `T_G_I(t)` with exact
+//! analytic velocity, body angular rate and specific force.
+//!
+//! Position and the ZYX Euler angles (roll, pitch, yaw; `R_G_I = Rz(yaw)
+//! Ry(pitch) Rx(roll)`) are each a base value plus a smooth step times a sum
+//! of sinusoids. The body rate follows exactly from the Euler-rate kinematics
+//! `omega_I = E(roll, pitch) * [roll', pitch', yaw']`, the specific force from
+//! `f_I = R_G_I^T (p''(t) - g)`. Roll and pitch amplitudes are capped so
+//! the motion stays far from the pitch = +-90 deg singularity.
+
+use std::f64::consts::{PI, TAU};
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use rand::Rng;
+
+use super::signal::{EnvelopedSignal, Jet, Sinusoid, SmoothStep};
+
+/// Standard gravity [m/s^2]; gravity in `G` is `(0, 0, -GRAVITY)`.
+pub const GRAVITY: f64 = 9.81;
+
+/// Gravity vector in `G`.
+pub fn gravity_in_g() -> Vector3<f64> {
+    Vector3::new(0.0, 0.0, -GRAVITY)
+}
+
+/// Shape of the random trajectory.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrajectoryConfig {
+    /// Still period at the start (s) (for bias/gravity initialisation).
+    pub stationary_s: f64,
+    /// Duration of the smooth-step fade-in after it (s), > 0.
+    pub ramp_s: f64,
+    /// Sinusoids per position axis and per Euler angle.
+    pub sinusoids_per_axis: usize,
+    /// Lowest sinusoid frequency (Hz).
+    pub min_frequency_hz: f64,
+    /// Highest sinusoid frequency (Hz).
+    pub max_frequency_hz: f64,
+    /// Angular-rate amplitude of each Euler-angle sinusoid [rad/s].
+    pub rate_amplitude_rad_s: f64,
+    /// Speed amplitude of each position sinusoid [m/s].
+    pub speed_amplitude_m_s: f64,
+    /// Cap on the summed roll amplitudes (rad).
+    pub max_roll_amplitude_rad: f64,
+    /// Cap on the summed pitch amplitudes (rad) (keeps away from gimbal lock).
+    pub max_pitch_amplitude_rad: f64,
+}
+
+impl Default for TrajectoryConfig {
+    fn default() -> Self {
+        Self {
+            stationary_s: 1.0,
+            ramp_s: 1.0,
+            sinusoids_per_axis: 3,
+            min_frequency_hz: 0.2,
+            max_frequency_hz: 1.2,
+            rate_amplitude_rad_s: 0.9,
+            speed_amplitude_m_s: 0.25,
+            max_roll_amplitude_rad: 1.0,
+            max_pitch_amplitude_rad: 0.7,
+        }
+    }
+}
+
+/// The ground-truth motion of the IMU in `G`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Trajectory {
+    /// `p_G_I` x, y, z.
+    position: [EnvelopedSignal; 3],
+    /// Roll, pitch, yaw of `R_G_I` (ZYX).
+    euler: [EnvelopedSignal; 3],
+}
+
+impl Trajectory {
+    /// A random trajectory drawn from `rng` with the shape of `config`.
+    pub fn random(config: &TrajectoryConfig, rng: &mut impl Rng) -> Self {
+        let envelope = SmoothStep {
+            start_s: config.stationary_s,
+            duration_s: config.ramp_s,
+        };
+        let position_base = [rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), 1.0];
+        let euler_base = [
+            rng.gen_range(-0.2..0.2),
+            rng.gen_range(-0.2..0.2),
+            rng.gen_range(-PI..PI),
+        ];
+        let euler_cap = [
+            config.max_roll_amplitude_rad,
+            config.max_pitch_amplitude_rad,
+            f64::INFINITY,
+        ];
+        let speed = config.speed_amplitude_m_s;
+        let rate = config.rate_amplitude_rad_s;
+        let position = position_base
+            .map(|base| random_signal(config, envelope, rng, base, speed, f64::INFINITY));
+        let euler = [0, 1, 2]
+            .map(|k| random_signal(config, envelope, rng, euler_base[k], rate, euler_cap[k]));
+        Self { position, euler }
+    }
+
+    /// `(R_G_I, p_G_I)` at `t` [s since the start stamp].
+    pub fn pose(&self, t: f64) -> (UnitQuaternion<f64>, Vector3<f64>) {
+        let [roll, pitch, yaw] = self.euler_jets(t);
+        let r_g_i = UnitQuaternion::from_euler_angles(roll.v, pitch.v, yaw.v);
+        (r_g_i, self.position_jets(t).map(|j| j.v).into())
+    }
+
+    /// `T_G_I` at `t`.
+    pub fn isometry(&self, t: f64) -> Isometry3<f64> {
+        let (r_g_i, p_g_i) = self.pose(t);
+        Isometry3::from_parts(Translation3::from(p_g_i), r_g_i)
+    }
+
+    /// `v_G_I`, velocity of `I` in `G` [m/s].
+    pub fn velocity(&self, t: f64) -> Vector3<f64> {
+        self.position_jets(t).map(|j| j.d1).into()
+    }
+
+    /// Acceleration of `I` in `G` [m/s^2] (without gravity).
+    pub fn acceleration(&self, t: f64) -> Vector3<f64> {
+        self.position_jets(t).map(|j| j.d2).into()
+    }
+
+    /// `omega_I`, angular velocity of `I` relative to `G` in `I` [rad/s]:
+    /// `R_G_I(t + h) ~ R_G_I(t) Exp(omega_I h)`.
+    pub fn body_rate(&self, t: f64) -> Vector3<f64> {
+        let [roll, pitch, yaw] = self.euler_jets(t);
+        let (sr, cr) = roll.v.sin_cos();
+        let (sp, cp) = pitch.v.sin_cos();
+        Vector3::new(
+            roll.d1 - sp * yaw.d1,
+            cr * pitch.d1 + sr * cp * yaw.d1,
+            -sr * pitch.d1 + cr * cp * yaw.d1,
+        )
+    }
+
+    /// `f_I = R_G_I^T (a_G - g)`, what an ideal accelerometer reads [m/s^2].
+    pub fn specific_force(&self, t: f64) -> Vector3<f64> {
+        let (r_g_i, _) = self.pose(t);
+        r_g_i.inverse_transform_vector(&(self.acceleration(t) - gravity_in_g()))
+    }
+
+    fn position_jets(&self, t: f64) -> [Jet; 3] {
+        [0, 1, 2].map(|k| self.position[k].eval(t))
+    }
+
+    fn euler_jets(&self, t: f64) -> [Jet; 3] {
+        [0, 1, 2].map(|k| self.euler[k].eval(t))
+    }
+}
+
+/// One axis: `sinusoids_per_axis` sinusoids with random frequency and phase;
+/// each amplitude gives a derivative amplitude of `derivative_amplitude`,
+/// and all are scaled down together if their sum exceeds `cap`.
+fn random_signal(
+    config: &TrajectoryConfig,
+    envelope: SmoothStep,
+    rng: &mut impl Rng,
+    base: f64,
+    derivative_amplitude: f64,
+    cap: f64,
+) -> EnvelopedSignal {
+    let mut sinusoids: Vec<Sinusoid> = (0..config.sinusoids_per_axis)
+        .map(|_| {
+            let frequency_hz = if config.max_frequency_hz > config.min_frequency_hz {
+                rng.gen_range(config.min_frequency_hz..config.max_frequency_hz)
+            } else {
+                config.min_frequency_hz
+            };
+            Sinusoid {
+                amplitude: derivative_amplitude / (TAU * frequency_hz),
+                frequency_hz,
+                phase: rng.gen_range(-PI..PI),
+            }
+        })
+        .collect();
+    let total: f64 = sinusoids.iter().map(|s| s.amplitude).sum();
+    if total > cap {
+        for s in &mut sinusoids {
+            s.amplitude *= cap / total;
+        }
+    }
+    EnvelopedSignal {
+        base,
+        sinusoids,
+        envelope,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+
+    fn trajectory(seed: u64) -> Trajectory {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        Trajectory::random(&TrajectoryConfig::default(), &mut rng)
+    }
+
+    /// Still, inside the fade-in (envelope product-rule terms) and in full motion;
+    /// not exactly at the fade-in ends, where the jerk jumps and central
+    /// differences of the acceleration lose an order.
+    const TIMES: [f64; 9] = [0.3, 1.01, 1.2, 1.5, 1.98, 2.02, 3.7, 17.25, 55.5];
+
+    #[test]
+    fn velocity_and_acceleration_match_finite_differences_of_position() {
+        let h = 1e-4;
+        for seed in 0..4 {
+            let traj = trajectory(seed);
+            for t in TIMES {
+                let (_, p_minus) = traj.pose(t - h);
+                let (_, p_plus) = traj.pose(t + h);
+                let v_fd = (p_plus - p_minus) / (2.0 * h);
+                assert!((v_fd - traj.velocity(t)).norm() < 1e-6, "seed {seed} t {t}");
+                let a_fd = (traj.velocity(t + h) - traj.velocity(t - h)) / (2.0 * h);
+                assert!(
+                    (a_fd - traj.acceleration(t)).norm() < 1e-5,
+                    "seed {seed} t {t}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn body_rate_matches_log_of_relative_rotation() {
+        let h = 1e-4;
+        for seed in 0..4 {
+            let traj = trajectory(seed);
+            for t in TIMES {
+                let (r_minus, _) = traj.pose(t - h);
+                let (r_plus, _) = traj.pose(t + h);
+                let omega_fd = (r_minus.inverse() * r_plus).scaled_axis() / (2.0 * h);
+                let omega = traj.body_rate(t);
+                assert!(
+                    (omega_fd - omega).norm() < 1e-6,
+                    "seed {seed} t {t}: {omega_fd} vs {omega}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn specific_force_matches_finite_differences_in_the_body_frame() {
+        let h = 1e-4;
+        let traj = trajectory(9);
+        for t in TIMES {
+            let (_, p_minus) = traj.pose(t - h);
+            let (r, p) = traj.pose(t);
+            let (_, p_plus) = traj.pose(t + h);
+            let a_fd = (p_plus - 2.0 * p + p_minus) / (h * h);
+            let f_fd = r.inverse_transform_vector(&(a_fd - gravity_in_g()));
+            assert!((f_fd - traj.specific_force(t)).norm() < 1e-3, "t {t}");
+        }
+    }
+
+    #[test]
+    fn still_at_the_start_then_excited_on_every_axis() {
+        let traj = trajectory(1);
+        assert!(traj.body_rate(0.5).norm() < 1e-15);
+        assert!(traj.velocity(0.99).norm() < 1e-15);
+        let f = traj.specific_force(0.5);
+        assert!((f.norm() - GRAVITY).abs() < 1e-12);
+
+        let mut max_rate = Vector3::<f64>::zeros();
+        let (mut max_speed, mut max_accel) = (0.0_f64, 0.0_f64);
+        for k in 0..6000 {
+            let t = 2.0 + f64::from(k) * 0.01;
+            max_rate = max_rate.zip_map(&traj.body_rate(t), |m, w| m.max(w.abs()));
+            max_speed = max_speed.max(traj.velocity(t).norm());
+            max_accel = max_accel.max(traj.acceleration(t).norm());
+        }
+        assert!(
+            max_rate.iter().all(|&w| (0.8..3.0).contains(&w)),
+            "{max_rate}"
+        );
+        assert!((0.3..2.0).contains(&max_speed), "{max_speed}");
+        assert!((1.0..10.0).contains(&max_accel), "{max_accel}");
+    }
+}
