@@ -192,11 +192,8 @@ fn calibrate_pose_imu(
         pose_imu::calibrate::<f64>(&input, &options, &mut progress)
     };
     bar.finish_and_clear();
-    let calibration = outcome.map_err(|e| match e {
-        pose_imu::PoseImuError::BadInput(m) => {
-            Failure::BadInput(anyhow!("{}: {m}", args.dataset.display()))
-        }
-        pose_imu::PoseImuError::Unobservable(m) => Failure::NotConverged(m),
+    let calibration = outcome.map_err(|pose_imu::PoseImuError::BadInput(m)| {
+        Failure::BadInput(anyhow!("{}: {m}", args.dataset.display()))
     })?;
     let result = CalibrationResult {
         pose0: Some(calibration.estimate()),

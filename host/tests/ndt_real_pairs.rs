@@ -42,7 +42,7 @@ fn register(target: &Path, source: &Path, guess: &Isometry3<f64>) -> NdtResult {
         result.iterations,
         result.fitness,
         result.converged,
-        result.degenerate.as_ref().map(|d| d.ratio),
+        result.degenerate,
     );
     result
 }

@@ -65,9 +65,6 @@ pub enum PoseImuError {
     /// The input violates what the filter needs (named file and sample).
     #[error("{0}")]
     BadInput(String),
-    /// The motion does not determine the calibration (e.g. rotation about one axis only).
-    #[error("{0}")]
-    Unobservable(String),
 }
 
 /// One point of the convergence history (after each relative-pose update).
@@ -202,13 +199,28 @@ pub fn calibrate<T: Scalar>(
     let gyro_bias = standstill.map_or_else(Vector3::zeros, |s| s.gyro_mean);
     let period_ns = nominal_period_ns(poses);
     let max_interval_ns = period_ns.saturating_mul(3) / 2;
-    let rotation_init =
-        init::hand_eye_rotation(imu, poses, &gyro_bias, max_interval_ns).map_err(|e| {
-            PoseImuError::Unobservable(format!(
-                "hand-eye rotation initialisation failed ({e:?}): the recording needs rotation \
-                 about at least two axes"
-            ))
-        })?;
+    // Without rotation about two axes the hand-eye rotation is undetermined: the filter still
+    // runs (from identity, wide open) so the result and report exist, but it cannot converge.
+    let (rotation_init, init_problem) =
+        match init::hand_eye_rotation(imu, poses, &gyro_bias, max_interval_ns) {
+            Ok(r) => (r, None),
+            Err(e) => (
+                init::RotationInit {
+                    rotation: nalgebra::UnitQuaternion::identity(),
+                    pairs: 0,
+                    axis_ratio: 0.0,
+                },
+                Some(format!(
+                    "hand-eye rotation initialisation failed ({e:?}): the recording needs \
+                     rotation about at least two axes"
+                )),
+            ),
+        };
+    let mut options = *options;
+    if init_problem.is_some() {
+        options.rotation_sigma_rad = 0.5;
+    }
+    let options = &options;
     let init_s = started.elapsed().as_secs_f64();
 
     let initial = initial_state::<T>(imu, standstill.as_ref(), &rotation_init.rotation, options)?;
@@ -237,8 +249,7 @@ pub fn calibrate<T: Scalar>(
         }
         ekf.propagate(&convert::imu_sample::<T>(rec)).map_err(|e| {
             PoseImuError::BadInput(format!(
-                "imu0/data.csv: sample {} (stamp {} ns, data line {}): {e}",
-                i,
+                "imu0/data.csv: {e}, ending at the sample stamped {} ns (sample {} of the file)",
                 rec.stamp_ns,
                 i + 1
             ))
@@ -257,7 +268,7 @@ pub fn calibrate<T: Scalar>(
     progress(1.0);
     let filter_s = started.elapsed().as_secs_f64();
 
-    Ok(finish(
+    let mut calibration = finish(
         &ekf,
         run,
         standstill.as_ref(),
@@ -266,7 +277,12 @@ pub fn calibrate<T: Scalar>(
             init: init_s,
             filter: filter_s,
         },
-    ))
+    );
+    if let Some(problem) = init_problem {
+        calibration.report.reasons.insert(0, problem);
+        calibration.report.converged = false;
+    }
+    Ok(calibration)
 }
 
 /// Median spacing of the odometry, ns.

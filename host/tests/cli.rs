@@ -1,0 +1,199 @@
+//! The `msreg` command line as a user meets it: exit codes, messages naming file and line,
+//! result files in the CONVENTIONS.md format.
+
+#[path = "support/common.rs"]
+mod common;
+
+use std::fs;
+use std::path::Path;
+use std::process::{Command, Output};
+
+use msreg_host::dataset::CalibrationResult;
+use msreg_host::sim::SimConfig;
+
+fn msreg(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_msreg"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("msreg runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A simulated dataset written to `dir/name`.
+fn dataset(dir: &Path, name: &str, config: &SimConfig) -> String {
+    let path = dir.join(name);
+    common::simulate(config)
+        .write(&path)
+        .expect("write dataset");
+    path.to_string_lossy().into_owned()
+}
+
+fn short(seed: u64) -> SimConfig {
+    SimConfig {
+        seed,
+        duration_s: 20.0,
+        ..SimConfig::default()
+    }
+}
+
+/// Replaces 1-based line `line` of `file`.
+fn replace_line(file: &Path, line: usize, text: &str) {
+    let content = fs::read_to_string(file).expect("read");
+    let mut lines: Vec<String> = content.lines().map(String::from).collect();
+    lines[line - 1] = text.to_string();
+    fs::write(file, lines.join("\n") + "\n").expect("write");
+}
+
+#[test]
+fn calibrate_simulate_eval_round_trip() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let sim = msreg(
+        &[
+            "simulate",
+            "pose-imu",
+            "data",
+            "--seed",
+            "3",
+            "--duration",
+            "30",
+        ],
+        d,
+    );
+    assert!(sim.status.success(), "{}", stderr(&sim));
+    let cal = msreg(
+        &[
+            "calibrate",
+            "pose-imu",
+            "data",
+            "-o",
+            "out.yaml",
+            "--report",
+            "r.json",
+        ],
+        d,
+    );
+    assert_eq!(cal.status.code(), Some(0), "{}", stderr(&cal));
+    let result = CalibrationResult::read(d.join("out.yaml")).expect("result parses");
+    assert!(result.pose0.is_some() && result.lidar0.is_none() && result.cam0.is_none());
+    let report: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(d.join("r.json")).expect("report")).expect("json");
+    assert_eq!(report["converged"], true);
+    assert!(report["history"].as_array().is_some_and(|h| h.len() > 200));
+    let eval = msreg(&["eval", "out.yaml", "data", "--json"], d);
+    assert!(eval.status.success(), "{}", stderr(&eval));
+    let errors: serde_json::Value = serde_json::from_slice(&eval.stdout).expect("eval json");
+    assert_eq!(errors[0]["section"], "pose0");
+    assert!(errors[0]["rotation_deg"].as_f64().is_some_and(|e| e < 0.5));
+}
+
+#[test]
+fn missing_dataset_is_exit_code_2_naming_the_path() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let o = msreg(&["calibrate", "pose-imu", "no-such-dir"], dir.path());
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("no-such-dir"), "{}", stderr(&o));
+}
+
+#[test]
+fn missing_pose_file_is_exit_code_2_naming_the_file() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let data = dataset(dir.path(), "d", &short(1));
+    fs::remove_file(Path::new(&data).join("pose0/data.csv")).expect("rm");
+    let o = msreg(&["calibrate", "pose-imu", &data], dir.path());
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("pose0/data.csv"), "{}", stderr(&o));
+}
+
+#[test]
+fn malformed_imu_line_is_exit_code_2_naming_file_and_line() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let data = dataset(dir.path(), "d", &short(1));
+    replace_line(
+        &Path::new(&data).join("imu0/data.csv"),
+        7,
+        "123,not-a-number,0,0,0,0",
+    );
+    let o = msreg(&["calibrate", "pose-imu", &data], dir.path());
+    assert_eq!(o.status.code(), Some(2));
+    let msg = stderr(&o);
+    assert!(msg.contains("imu0/data.csv:7"), "{msg}");
+    assert!(!msg.contains("panicked"), "{msg}");
+}
+
+#[test]
+fn time_going_backwards_is_exit_code_2_naming_file_and_line() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let data = dataset(dir.path(), "d", &short(1));
+    let file = Path::new(&data).join("pose0/data.csv");
+    let content = fs::read_to_string(&file).expect("read");
+    // Swap the stamps of data lines 10 and 11 (file lines 11 and 12 after the header).
+    let mut lines: Vec<String> = content.lines().map(String::from).collect();
+    let (a, b) = (lines[10].clone(), lines[11].clone());
+    let stamp = |l: &str| l.split(',').next().expect("stamp").to_string();
+    lines[10] = a.replacen(&stamp(&a), &stamp(&b), 1);
+    lines[11] = b.replacen(&stamp(&b), &stamp(&a), 1);
+    fs::write(&file, lines.join("\n") + "\n").expect("write");
+    let o = msreg(&["calibrate", "pose-imu", &data], dir.path());
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("pose0/data.csv:12"), "{}", stderr(&o));
+}
+
+#[test]
+fn gap_in_imu_data_is_exit_code_2_naming_the_stamp() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let data = dataset(dir.path(), "d", &short(1));
+    let file = Path::new(&data).join("imu0/data.csv");
+    let content = fs::read_to_string(&file).expect("read");
+    // Drop 0.5 s of samples (data lines 4000..4200).
+    let kept: Vec<&str> = content
+        .lines()
+        .enumerate()
+        .filter(|(i, _)| !(4000..4200).contains(i))
+        .map(|(_, l)| l)
+        .collect();
+    fs::write(&file, kept.join("\n") + "\n").expect("write");
+    let o = msreg(&["calibrate", "pose-imu", &data], dir.path());
+    assert_eq!(o.status.code(), Some(2));
+    let msg = stderr(&o);
+    assert!(
+        msg.contains("imu0/data.csv") && msg.contains("gap"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn rotation_about_one_axis_is_exit_code_1_with_result_and_reason() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut config = short(2);
+    config.trajectory.max_roll_amplitude_rad = 0.0;
+    config.trajectory.max_pitch_amplitude_rad = 0.0;
+    let data = dataset(dir.path(), "d", &config);
+    let o = msreg(
+        &["calibrate", "pose-imu", &data, "-o", "r.yaml"],
+        dir.path(),
+    );
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains("two axes"), "{}", stderr(&o));
+    assert!(
+        dir.path().join("r.yaml").exists(),
+        "the result is still written"
+    );
+}
+
+#[test]
+fn demo_prints_the_table() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let keep = dir.path().join("demo");
+    let o = msreg(&["demo", "--keep", &keep.to_string_lossy()], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.contains("pose0") && out.contains("inside 3 sigma"),
+        "{out}"
+    );
+}
