@@ -16,6 +16,7 @@
 
 pub use nalgebra as na;
 
+pub mod camera;
 pub mod chi2;
 pub mod error;
 pub mod filter;
