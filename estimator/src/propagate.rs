@@ -18,6 +18,15 @@ use nalgebra::{Matrix3, SMatrix, Vector3};
 /// Standard gravity, m/s^2; gravity in G is `(0, 0, -GRAVITY)`.
 pub const GRAVITY: f64 = 9.81;
 
+/// First indices of the IMU blocks: orientation, position, velocity, gyro bias, accel bias.
+const BLOCKS: (usize, usize, usize, usize, usize) = (
+    imu::ORIENTATION.idx,
+    imu::POSITION.idx,
+    imu::VELOCITY.idx,
+    imu::GYRO_BIAS.idx,
+    imu::ACCEL_BIAS.idx,
+);
+
 /// One IMU reading.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ImuSample<T: Scalar> {
@@ -131,13 +140,7 @@ pub fn step<T: Scalar>(
     let d_theta_d_bg = -(right_jacobian(&(w * dt)) * dt);
 
     let mut phi = SMatrix::<T, 15, 15>::identity();
-    let (o, p, v, bg, ba) = (
-        imu::ORIENTATION.idx,
-        imu::POSITION.idx,
-        imu::VELOCITY.idx,
-        imu::GYRO_BIAS.idx,
-        imu::ACCEL_BIAS.idx,
-    );
+    let (o, p, v, bg, ba) = BLOCKS;
     let dt2 = half * dt * dt;
     set3(
         &mut phi,
@@ -186,13 +189,7 @@ pub fn transition_mul<T: Scalar, const K: usize>(
     phi: &SMatrix<T, 15, 15>,
     m: &SMatrix<T, 15, K>,
 ) -> SMatrix<T, 15, K> {
-    let (o, p, v, bg, ba) = (
-        imu::ORIENTATION.idx,
-        imu::POSITION.idx,
-        imu::VELOCITY.idx,
-        imu::GYRO_BIAS.idx,
-        imu::ACCEL_BIAS.idx,
-    );
+    let (o, p, v, bg, ba) = BLOCKS;
     let b = |r: usize, c: usize| phi.fixed_view::<3, 3>(r, c);
     let rows = |r: usize| m.fixed_view::<3, K>(r, 0);
     let mut out = SMatrix::<T, 15, K>::zeros();
