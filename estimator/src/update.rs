@@ -3,6 +3,7 @@
 //! update, NIS record).
 
 pub mod relative_pose;
+pub mod reprojection;
 pub mod zero_velocity;
 
 use crate::chi2::{self, Confidence};
