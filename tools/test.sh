@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The project's test command (README, .ci/run): installs the embedded toolchain if missing,
 # checks formatting and lints, runs the host workspace's tests, then builds the Cortex-M4F
-# firmware, runs its self-test in QEMU and prints its flash/RAM use.
+# firmware, runs its self-test in QEMU and prints its flash/RAM use, then the HIL suite
+# (hil-tests/: the link firmware in QEMU driven over a pty by `msreg link`).
 # Idempotent; needs no stdin; CI runs it as `bash .ci/run` in a fresh clone with CI=true.
 set -euo pipefail
 
@@ -48,6 +49,9 @@ tools/firmware.sh run
 
 step "firmware size (tools/firmware.sh size)"
 tools/firmware.sh size
+
+step "HIL: link firmware in QEMU over a pty (tools/hil.sh)"
+tools/hil.sh
 
 printf '(%ss)\n\ntools/test.sh: all steps passed in %ss\n' \
   $((SECONDS - step_start)) $((SECONDS - total_start))

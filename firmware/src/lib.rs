@@ -3,15 +3,20 @@
 //!
 //! The library holds what the binaries share: the embedded sensor sequence (an analytic
 //! trajectory sampled in `f32`, [`scenario`]), the self-test that runs the filter over it
-//! ([`selftest`]), and the measuring tools (stack painting, SysTick instruction clock).
+//! ([`selftest`]), the measuring tools (stack painting, SysTick instruction clock), and the
+//! serial link: the CMSDK UART driver ([`uart`], [`ring`]) and the protocol session
+//! ([`session`]) of the `link` binary.
 //! Everything is `no_std` and allocation-free.
 #![no_std]
 #![warn(missing_docs)]
 
 pub mod generator_check;
 pub mod noise;
+pub mod ring;
 pub mod scenario;
 pub mod selftest;
+pub mod session;
 pub mod stack;
 pub mod ticks;
 pub mod trajectory;
+pub mod uart;

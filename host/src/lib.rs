@@ -5,6 +5,7 @@
 pub mod calibrate;
 pub mod dataset;
 pub mod eval;
+pub mod link;
 pub mod ndt;
 pub mod pointcloud;
 pub mod sim;

@@ -56,6 +56,11 @@ enum Command {
         #[arg(long)]
         keep: Option<PathBuf>,
     },
+    /// Talk to the firmware over a serial port: replay a dataset, monitor, show a recording.
+    Link {
+        #[command(subcommand)]
+        command: msreg_host::link::cli::LinkCommand,
+    },
 }
 
 #[derive(Subcommand)]
@@ -147,6 +152,7 @@ fn run(command: Command) -> Result<(), Failure> {
             json,
         } => evaluate(&result, &dataset, json),
         Command::Demo { seed, keep } => demo(seed, keep),
+        Command::Link { command } => Ok(msreg_host::link::cli::run(command)?),
     }
 }
 

@@ -1,0 +1,603 @@
+//! The link session: applies decoded host packets to the f32 filter, in order, and answers
+//! through any `embedded_io::Write`. Independent of the board.
+//!
+//! Sequencing follows the host pipeline (`host/src/calibrate/pose_imu.rs`): pose messages
+//! wait in a bounded queue until the IMU stream reaches their IMU time `stamp + t_d` (with
+//! the current `t_d` estimate) and are applied just before the IMU sample that passes it;
+//! an increment without a matching anchor re-anchors at its end, as the host does.
+//! Every refusal is counted by [`ErrorKind`] and reported; nothing resets the device.
+
+use heapless::Deque;
+use msreg_estimator::chi2::Confidence;
+use msreg_estimator::health::{HealthEvent, NisStatus};
+use msreg_estimator::na::{Matrix6, Quaternion, UnitQuaternion, Vector3};
+use msreg_estimator::{
+    Error as FilterError, FilterConfig, ImuNoise, ImuSample, InitialState, Pose, PoseImuEkf,
+    RelativePose as FilterRelativePose, UpdateReport,
+};
+use msreg_protocol::{
+    self as protocol, frame, Ack, AckStatus, AlarmKind, Anchor, Config, DeviceMsg, ErrorKind,
+    ErrorReport, Estimate, FrameError, Gate, HealthAlarm, HealthState, Hello, HostMsg, ImuBatch,
+    NisState, Packet, RelativePose, Status, UpdateDiagnostic, UpdateKind, DEVICE_FRAME_MAX,
+    HOST_FRAME_MAX,
+};
+
+/// The filter of the link firmware.
+pub type Filter = PoseImuEkf<f32>;
+const SENSOR: usize = 0;
+/// Pose messages that may wait for the IMU stream.
+pub const PENDING_MAX: usize = 16;
+
+#[derive(Clone, Copy)]
+enum Pending {
+    Anchor(Anchor, u32),
+    Increment(RelativePose, u32),
+}
+
+impl Pending {
+    fn stamp_ns(&self) -> u64 {
+        match self {
+            Pending::Anchor(a, _) => a.stamp_ns,
+            Pending::Increment(r, _) => r.stamp_to_ns,
+        }
+    }
+}
+
+/// Counters of the session.
+#[derive(Clone, Copy, Default)]
+struct Counts {
+    frames_ok: u32,
+    imu_samples: u32,
+    anchors: u32,
+    updates: u32,
+    accepted: u32,
+    rejected: u32,
+    zero_velocity: u32,
+    alarms: u16,
+    errors: [u32; ErrorKind::COUNT],
+}
+
+/// Session state. Large (it holds the filter): keep it in a `static`.
+pub struct Session {
+    filter: Option<Filter>,
+    config: Option<Config>,
+    pending: Deque<Pending, PENDING_MAX>,
+    counts: Counts,
+    last_seq: Option<u32>,
+    tx_seq: u32,
+    imu_index: u32,
+    last_estimate_ns: u64,
+    alarm: bool,
+    /// Sequence number of the frame being applied (estimates carry it, for latency).
+    current_seq: u32,
+}
+
+impl Default for Session {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Where answers go; write errors are ignored (nothing else could be done with them).
+pub struct Tx<'a, W: embedded_io::Write> {
+    writer: &'a mut W,
+    seq: &'a mut u32,
+}
+
+impl<W: embedded_io::Write> Tx<'_, W> {
+    fn send(&mut self, msg: &DeviceMsg) {
+        let mut buf = [0u8; DEVICE_FRAME_MAX];
+        if let Ok(n) = frame::encode(*self.seq, msg, &mut buf) {
+            *self.seq = self.seq.wrapping_add(1);
+            let _ = self.writer.write_all(&buf[..n]);
+        }
+    }
+}
+
+impl Session {
+    /// Not configured.
+    pub const fn new() -> Self {
+        Self {
+            filter: None,
+            config: None,
+            pending: Deque::new(),
+            counts: Counts {
+                frames_ok: 0,
+                imu_samples: 0,
+                anchors: 0,
+                updates: 0,
+                accepted: 0,
+                rejected: 0,
+                zero_velocity: 0,
+                alarms: 0,
+                errors: [0; ErrorKind::COUNT],
+            },
+            last_seq: None,
+            tx_seq: 0,
+            imu_index: 0,
+            last_estimate_ns: 0,
+            alarm: false,
+            current_seq: 0,
+        }
+    }
+
+    fn tx<'a, W: embedded_io::Write>(seq: &'a mut u32, writer: &'a mut W) -> Tx<'a, W> {
+        Tx { writer, seq }
+    }
+
+    /// The handshake message of this device.
+    pub fn hello() -> Hello {
+        Hello {
+            version: protocol::VERSION,
+            max_frame: HOST_FRAME_MAX as u16,
+            rx_buffer: crate::uart::RX_RING as u16,
+        }
+    }
+
+    /// Announces the device (at boot).
+    pub fn announce<W: embedded_io::Write>(&mut self, w: &mut W) {
+        Self::tx(&mut self.tx_seq, w).send(&DeviceMsg::Hello(Self::hello()));
+    }
+
+    /// Counts and reports a fault.
+    pub fn fault<W: embedded_io::Write>(
+        &mut self,
+        w: &mut W,
+        kind: ErrorKind,
+        seq: u32,
+        stamp_ns: u64,
+    ) {
+        let count = &mut self.counts.errors[kind.index()];
+        *count = count.saturating_add(1);
+        let report = ErrorReport {
+            kind,
+            count: *count,
+            seq,
+            stamp_ns,
+        };
+        Self::tx(&mut self.tx_seq, w).send(&DeviceMsg::ErrorReport(report));
+    }
+
+    /// A frame that failed to decode.
+    pub fn frame_error<W: embedded_io::Write>(&mut self, w: &mut W, e: FrameError) {
+        let kind = match e {
+            FrameError::Crc => ErrorKind::Crc,
+            FrameError::Decode => ErrorKind::Decode,
+            FrameError::Oversize => ErrorKind::Oversize,
+            _ => ErrorKind::Framing,
+        };
+        self.fault(w, kind, 0, 0);
+    }
+
+    /// Bytes lost in the receive ring.
+    pub fn overrun<W: embedded_io::Write>(&mut self, w: &mut W, bytes: u32) {
+        if bytes > 0 {
+            self.fault(w, ErrorKind::RxOverrun, 0, u64::from(bytes));
+        }
+    }
+
+    /// Applies one decoded packet and acknowledges it.
+    pub fn handle<W: embedded_io::Write>(&mut self, w: &mut W, packet: Packet<HostMsg>) {
+        let seq = packet.seq;
+        let is_hello = matches!(packet.msg, HostMsg::Hello(_));
+        if !is_hello {
+            if let Some(last) = self.last_seq {
+                let ahead = seq.wrapping_sub(last);
+                if ahead == 0 || ahead > u32::MAX / 2 {
+                    self.fault(w, ErrorKind::Duplicate, seq, 0);
+                    self.ack(w, seq, AckStatus::Duplicate);
+                    return;
+                }
+                if ahead > 1 {
+                    self.fault(w, ErrorKind::SequenceGap, seq, u64::from(ahead - 1));
+                }
+            }
+        }
+        self.last_seq = Some(seq);
+        self.current_seq = seq;
+        self.counts.frames_ok = self.counts.frames_ok.wrapping_add(1);
+        let status = match packet.msg {
+            HostMsg::Hello(h) => self.on_hello(w, seq, &h),
+            HostMsg::Config(c) => self.on_config(w, seq, &c),
+            HostMsg::ImuBatch(b) => self.on_imu(w, seq, &b),
+            HostMsg::Anchor(a) => self.on_pose(w, seq, Pending::Anchor(a, seq)),
+            HostMsg::RelativePose(r) => self.on_pose(w, seq, Pending::Increment(r, seq)),
+            HostMsg::GetStatus => {
+                let status = DeviceMsg::Status(self.status());
+                Self::tx(&mut self.tx_seq, w).send(&status);
+                AckStatus::Ok
+            }
+        };
+        self.ack(w, seq, status);
+    }
+
+    fn ack<W: embedded_io::Write>(&mut self, w: &mut W, seq: u32, status: AckStatus) {
+        Self::tx(&mut self.tx_seq, w).send(&DeviceMsg::Ack(Ack { seq, status }));
+    }
+
+    fn on_hello<W: embedded_io::Write>(&mut self, w: &mut W, seq: u32, h: &Hello) -> AckStatus {
+        Self::tx(&mut self.tx_seq, w).send(&DeviceMsg::Hello(Self::hello()));
+        if h.version != protocol::VERSION {
+            self.fault(w, ErrorKind::VersionMismatch, seq, u64::from(h.version));
+            return AckStatus::Rejected;
+        }
+        AckStatus::Ok
+    }
+
+    fn on_config<W: embedded_io::Write>(&mut self, w: &mut W, seq: u32, c: &Config) -> AckStatus {
+        match new_filter(c) {
+            Ok(f) => {
+                self.filter = Some(f);
+                self.config = Some(*c);
+                self.pending.clear();
+                self.imu_index = 0;
+                self.last_estimate_ns = 0;
+                self.alarm = false;
+                let errors = self.counts.errors;
+                self.counts = Counts {
+                    errors,
+                    frames_ok: self.counts.frames_ok,
+                    ..Counts::default()
+                };
+                AckStatus::Ok
+            }
+            Err(_) => {
+                self.fault(w, ErrorKind::InvalidConfig, seq, 0);
+                AckStatus::Rejected
+            }
+        }
+    }
+
+    fn on_pose<W: embedded_io::Write>(&mut self, w: &mut W, seq: u32, p: Pending) -> AckStatus {
+        if self.filter.is_none() {
+            self.fault(w, ErrorKind::NotConfigured, seq, p.stamp_ns());
+            return AckStatus::Rejected;
+        }
+        if self.pending.push_back(p).is_err() {
+            self.fault(w, ErrorKind::QueueFull, seq, p.stamp_ns());
+            return AckStatus::Rejected;
+        }
+        AckStatus::Ok
+    }
+
+    fn on_imu<W: embedded_io::Write>(&mut self, w: &mut W, seq: u32, b: &ImuBatch) -> AckStatus {
+        if self.filter.is_none() {
+            self.fault(w, ErrorKind::NotConfigured, seq, b.base_stamp_ns);
+            return AckStatus::Rejected;
+        }
+        for s in b.samples.as_slice() {
+            let Some(stamp_ns) = b.base_stamp_ns.checked_add(u64::from(s.offset_ns)) else {
+                self.fault(w, ErrorKind::OutOfRange, seq, b.base_stamp_ns);
+                continue;
+            };
+            self.apply_due(w, stamp_ns);
+            let sample = ImuSample {
+                stamp_ns,
+                gyro: Vector3::from(s.gyro),
+                accel: Vector3::from(s.accel),
+            };
+            let Some(filter) = self.filter.as_mut() else {
+                return AckStatus::Rejected;
+            };
+            match filter.propagate(&sample) {
+                Ok(()) => {
+                    self.counts.imu_samples += 1;
+                    self.zero_velocity(w, stamp_ns);
+                    self.imu_index += 1;
+                }
+                Err(e) => self.fault(w, error_kind(&e), seq, stamp_ns),
+            }
+        }
+        self.periodic_estimate(w, seq);
+        AckStatus::Ok
+    }
+
+    /// Applies every pending pose whose IMU time is at or before `imu_stamp_ns`.
+    fn apply_due<W: embedded_io::Write>(&mut self, w: &mut W, imu_stamp_ns: u64) {
+        while let Some(front) = self.pending.front().copied() {
+            let Some(filter) = self.filter.as_ref() else {
+                return;
+            };
+            let offset_ns = (f64::from(filter.time_offset(SENSOR)) * 1e9) as i128;
+            if i128::from(front.stamp_ns()) + offset_ns > i128::from(imu_stamp_ns) {
+                return;
+            }
+            self.pending.pop_front();
+            if self.imu_index == 0 {
+                self.fault(
+                    w,
+                    ErrorKind::NotInitialized,
+                    seq_of(&front),
+                    front.stamp_ns(),
+                );
+                continue;
+            }
+            match front {
+                Pending::Anchor(a, seq) => self.anchor(w, a.stamp_ns, seq),
+                Pending::Increment(r, seq) => self.increment(w, &r, seq),
+            }
+        }
+    }
+
+    fn anchor<W: embedded_io::Write>(&mut self, w: &mut W, stamp_ns: u64, seq: u32) {
+        let Some(filter) = self.filter.as_mut() else {
+            return;
+        };
+        match filter.anchor(SENSOR, stamp_ns) {
+            Ok(()) => self.counts.anchors += 1,
+            Err(e) => self.fault(w, error_kind(&e), seq, stamp_ns),
+        }
+    }
+
+    fn increment<W: embedded_io::Write>(&mut self, w: &mut W, r: &RelativePose, seq: u32) {
+        let Some(filter) = self.filter.as_mut() else {
+            return;
+        };
+        let meas = relative_pose(r);
+        match filter.update_relative_pose(SENSOR, &meas) {
+            Ok(report) => self.on_report(w, &report, seq),
+            Err(e @ (FilterError::NoAnchor | FilterError::OlderThanWindow)) => {
+                // The chain broke (a lost or refused pose): start a new segment here.
+                self.fault(w, error_kind(&e), seq, r.stamp_to_ns);
+                self.anchor(w, r.stamp_to_ns, seq);
+            }
+            Err(e) => self.fault(w, error_kind(&e), seq, r.stamp_to_ns),
+        }
+    }
+
+    fn zero_velocity<W: embedded_io::Write>(&mut self, w: &mut W, stamp_ns: u64) {
+        let Some(c) = self.config else { return };
+        let every = u32::from(c.zero_velocity_every.max(1));
+        if stamp_ns > c.zero_velocity_until_ns || self.imu_index % every != 0 {
+            return;
+        }
+        let Some(filter) = self.filter.as_mut() else {
+            return;
+        };
+        // As on the host, a gated-out zero-velocity update is not a fault.
+        if let Ok(report) = filter.update_zero_velocity() {
+            self.counts.zero_velocity += 1;
+            let diag = diagnostic(&report);
+            Self::tx(&mut self.tx_seq, w).send(&DeviceMsg::UpdateDiagnostic(diag));
+        }
+    }
+
+    fn on_report<W: embedded_io::Write>(
+        &mut self,
+        w: &mut W,
+        report: &UpdateReport<f32>,
+        _frame_seq: u32,
+    ) {
+        self.counts.updates += 1;
+        if report.accepted {
+            self.counts.accepted += 1;
+        } else {
+            self.counts.rejected += 1;
+        }
+        Self::tx(&mut self.tx_seq, w).send(&DeviceMsg::UpdateDiagnostic(diagnostic(report)));
+        if let Some(event) = &report.event {
+            self.alarm = true;
+            self.counts.alarms = self.counts.alarms.saturating_add(1);
+            Self::tx(&mut self.tx_seq, w).send(&DeviceMsg::HealthAlarm(alarm(event)));
+        }
+        if self.config.is_some_and(|c| c.estimate_period_ns == 0) {
+            self.send_estimate(w, self.current_seq);
+        }
+    }
+
+    fn periodic_estimate<W: embedded_io::Write>(&mut self, w: &mut W, seq: u32) {
+        let (Some(c), Some(f)) = (self.config, self.filter.as_ref()) else {
+            return;
+        };
+        let now = f.time_ns();
+        if c.estimate_period_ns > 0
+            && now
+                >= self
+                    .last_estimate_ns
+                    .saturating_add(u64::from(c.estimate_period_ns))
+        {
+            self.send_estimate(w, seq);
+        }
+    }
+
+    fn send_estimate<W: embedded_io::Write>(&mut self, w: &mut W, seq: u32) {
+        let Some(f) = self.filter.as_ref() else {
+            return;
+        };
+        self.last_estimate_ns = f.time_ns();
+        let e = estimate(f, &self.counts, self.alarm, seq);
+        Self::tx(&mut self.tx_seq, w).send(&DeviceMsg::Estimate(e));
+    }
+
+    /// Counters and state.
+    pub fn status(&self) -> Status {
+        Status {
+            configured: self.filter.is_some(),
+            filter_time_ns: self.filter.as_ref().map_or(0, Filter::time_ns),
+            frames_ok: self.counts.frames_ok,
+            last_seq: self.last_seq.unwrap_or(0),
+            imu_samples: self.counts.imu_samples,
+            anchors: self.counts.anchors,
+            updates: self.counts.updates,
+            zero_velocity_updates: self.counts.zero_velocity,
+            errors: self.counts.errors,
+        }
+    }
+}
+
+fn seq_of(p: &Pending) -> u32 {
+    match p {
+        Pending::Anchor(_, s) | Pending::Increment(_, s) => *s,
+    }
+}
+
+fn confidence(g: Gate) -> Confidence {
+    match g {
+        Gate::P90 => Confidence::P90,
+        Gate::P95 => Confidence::P95,
+        Gate::P99 => Confidence::P99,
+        Gate::P995 => Confidence::P995,
+        Gate::P999 => Confidence::P999,
+        Gate::P9999 => Confidence::P9999,
+        Gate::P99999 => Confidence::P99999,
+    }
+}
+
+fn pose(p: &protocol::Pose) -> Pose<f32> {
+    let [w, x, y, z] = p.rotation_wxyz;
+    Pose::new(
+        UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z)),
+        Vector3::from(p.translation_m),
+    )
+}
+
+fn wire_pose(p: &Pose<f32>) -> protocol::Pose {
+    let q = p.rotation.quaternion();
+    protocol::Pose {
+        rotation_wxyz: [q.w, q.i, q.j, q.k],
+        translation_m: p.translation.into(),
+    }
+}
+
+/// A filter from a configuration.
+pub fn new_filter(c: &Config) -> Result<Filter, FilterError> {
+    let n = &c.imu_noise;
+    let mut fc = FilterConfig::new(ImuNoise {
+        gyro_noise_density: n.gyro_noise_density,
+        accel_noise_density: n.accel_noise_density,
+        gyro_random_walk: n.gyro_random_walk,
+        accel_random_walk: n.accel_random_walk,
+    });
+    fc.gate = confidence(c.gate);
+    if c.max_imu_gap_ns > 0 {
+        fc.max_imu_gap_ns = u64::from(c.max_imu_gap_ns);
+    }
+    let p = &c.imu_prior;
+    let mut init = InitialState::<f32, 1>::at_rest(Vector3::from(p.accel_mean))
+        .ok_or(FilterError::InvalidConfig)?;
+    init.imu.gyro_bias = Vector3::from(p.gyro_bias);
+    if p.sigma_orientation_rad > 0.0 {
+        init.sigma_orientation = p.sigma_orientation_rad;
+    }
+    if p.sigma_velocity_m_s > 0.0 {
+        init.sigma_velocity = p.sigma_velocity_m_s;
+    }
+    let extrinsic = pose(&c.extrinsic);
+    if !extrinsic.is_finite() {
+        return Err(FilterError::NonFinite);
+    }
+    let init = init
+        .with_extrinsic(
+            SENSOR,
+            extrinsic,
+            c.sigma_rotation_rad,
+            c.sigma_translation_m,
+        )
+        .with_time_offset(SENSOR, c.time_offset_s, c.sigma_time_offset_s);
+    Filter::new(&fc, &init)
+}
+
+fn relative_pose(r: &RelativePose) -> FilterRelativePose<f32> {
+    let mut covariance = Matrix6::zeros();
+    for i in 0..3 {
+        covariance[(i, i)] = r.sigma_rotation_rad[i] * r.sigma_rotation_rad[i];
+        covariance[(i + 3, i + 3)] = r.sigma_translation_m[i] * r.sigma_translation_m[i];
+    }
+    FilterRelativePose {
+        stamp_from_ns: r.stamp_from_ns,
+        stamp_to_ns: r.stamp_to_ns,
+        delta: pose(&r.delta),
+        covariance,
+    }
+}
+
+fn error_kind(e: &FilterError) -> ErrorKind {
+    match e {
+        FilterError::NonFinite => ErrorKind::NonFinite,
+        FilterError::OutOfRange => ErrorKind::OutOfRange,
+        FilterError::TimeWentBackwards { .. } => ErrorKind::TimeWentBackwards,
+        FilterError::ImuGap { .. } => ErrorKind::ImuGap,
+        FilterError::NotInitialized => ErrorKind::NotInitialized,
+        FilterError::NoAnchor | FilterError::OlderThanWindow => ErrorKind::NoAnchor,
+        FilterError::CloneWindowFull => ErrorKind::CloneWindowFull,
+        FilterError::SingularInnovation => ErrorKind::SingularInnovation,
+        FilterError::DivergentUpdate => ErrorKind::DivergentUpdate,
+        FilterError::InvalidConfig => ErrorKind::InvalidConfig,
+        _ => ErrorKind::Other,
+    }
+}
+
+fn diagnostic(r: &UpdateReport<f32>) -> UpdateDiagnostic {
+    UpdateDiagnostic {
+        stamp_ns: r.stamp_ns,
+        kind: match r.kind {
+            msreg_estimator::UpdateKind::ZeroVelocity => UpdateKind::ZeroVelocity,
+            _ => UpdateKind::RelativePose,
+        },
+        dof: r.dof as u8,
+        nis: r.nis,
+        threshold: r.threshold,
+        accepted: r.accepted,
+    }
+}
+
+fn alarm(e: &HealthEvent<f32>) -> HealthAlarm {
+    match *e {
+        HealthEvent::RotationStep {
+            stamp_ns,
+            statistic,
+            step,
+            ..
+        } => HealthAlarm {
+            stamp_ns,
+            kind: AlarmKind::RotationStep,
+            statistic,
+            step: step.into(),
+        },
+        HealthEvent::TranslationStep {
+            stamp_ns,
+            statistic,
+            step,
+            ..
+        } => HealthAlarm {
+            stamp_ns,
+            kind: AlarmKind::TranslationStep,
+            statistic,
+            step: step.into(),
+        },
+    }
+}
+
+fn estimate(f: &Filter, c: &Counts, alarm: bool, seq: u32) -> Estimate {
+    let (sr, st) = f.extrinsic_sigma(SENSOR);
+    let health = f.health();
+    let sensor = health.sensor(SENSOR);
+    let (nis_per_dof, nis_state) = sensor.map_or((0.0, NisState::Filling), |s| {
+        let state = match s.nis_status(&f.config().health) {
+            NisStatus::Filling => NisState::Filling,
+            NisStatus::Consistent => NisState::Consistent,
+            NisStatus::High => NisState::High,
+            NisStatus::Low => NisState::Low,
+        };
+        (s.windowed_nis_per_dof(), state)
+    });
+    Estimate {
+        stamp_ns: f.time_ns(),
+        extrinsic: wire_pose(&f.extrinsic(SENSOR)),
+        sigma_rotation_rad: sr.into(),
+        sigma_translation_m: st.into(),
+        time_offset_s: f.time_offset(SENSOR),
+        sigma_time_offset_s: f.time_offset_sigma(SENSOR),
+        nis_per_dof,
+        nis_state,
+        health: if alarm {
+            HealthState::Alarm
+        } else {
+            HealthState::Nominal
+        },
+        alarms: c.alarms,
+        updates_accepted: c.accepted,
+        updates_rejected: c.rejected,
+        last_seq: seq,
+    }
+}

@@ -1,0 +1,192 @@
+//! Driver of the CMSDK APB UART (QEMU mps2-an386 UART0 at `0x4000_4000`) behind
+//! `embedded_io` 0.7 `Read`, `ReadReady` and `Write`, so a board HAL's UART can take its
+//! place. Receive is interrupt driven (UART0 RX = IRQ 0) into a bounded [`Ring`]; transmit
+//! polls the TX-full flag.
+//!
+//! Registers: `DATA` +0x00, `STATE` +0x04 (bit 0 TX full, bit 1 RX full, bits 2-3 overrun,
+//! write 1 to clear), `CTRL` +0x08 (bit 0 TX enable, bit 1 RX enable, bit 3 RX interrupt),
+//! `INTSTATUS/INTCLEAR` +0x0C (bit 1 RX), `BAUDDIV` +0x10.
+
+use core::convert::Infallible;
+use core::ptr::{read_volatile, write_volatile};
+
+use cortex_m::interrupt::InterruptNumber;
+use cortex_m::peripheral::NVIC;
+
+use crate::ring::Ring;
+
+const UART0: usize = 0x4000_4000;
+const DATA: usize = 0x00;
+const STATE: usize = 0x04;
+const CTRL: usize = 0x08;
+const INTCLEAR: usize = 0x0C;
+const BAUDDIV: usize = 0x10;
+const STATE_TX_FULL: u32 = 1 << 0;
+const STATE_RX_FULL: u32 = 1 << 1;
+const STATE_OVERRUN: u32 = 0b11 << 2;
+const CTRL_TX_EN: u32 = 1 << 0;
+const CTRL_RX_EN: u32 = 1 << 1;
+const CTRL_RX_IRQ: u32 = 1 << 3;
+const INT_RX: u32 = 1 << 1;
+
+/// Receive ring size, bytes (the host keeps fewer than this in flight).
+pub const RX_RING: usize = 4096;
+
+/// Bytes received by the interrupt handler, not yet read.
+static RX: Ring<RX_RING> = Ring::new();
+
+/// External interrupts of mps2-an386 used here.
+#[derive(Clone, Copy)]
+#[repr(u16)]
+enum Irq {
+    Uart0Rx = 0,
+}
+
+// SAFETY: IRQ 0 exists on mps2-an386 (UART0 RX).
+unsafe impl InterruptNumber for Irq {
+    fn number(self) -> u16 {
+        self as u16
+    }
+}
+
+fn reg(offset: usize) -> *mut u32 {
+    (UART0 + offset) as *mut u32
+}
+
+fn read_reg(offset: usize) -> u32 {
+    // SAFETY: a documented register of the UART0 block.
+    unsafe { read_volatile(reg(offset)) }
+}
+
+fn write_reg(offset: usize, value: u32) {
+    // SAFETY: a documented register of the UART0 block.
+    unsafe { write_volatile(reg(offset), value) }
+}
+
+/// UART0 RX interrupt: moves every received byte into the ring. The interrupt is cleared
+/// before the register is drained, so a byte that lands meanwhile raises it again (clearing
+/// afterwards could lose that edge and leave the byte, and the link, stuck).
+extern "C" fn uart0_rx_isr() {
+    write_reg(INTCLEAR, INT_RX);
+    drain_rx_register();
+}
+
+fn drain_rx_register() {
+    while read_reg(STATE) & STATE_RX_FULL != 0 {
+        RX.push(read_reg(DATA) as u8);
+    }
+    if read_reg(STATE) & STATE_OVERRUN != 0 {
+        write_reg(STATE, STATE_OVERRUN);
+    }
+}
+
+/// Vector table in RAM: the core's 16 entries, then the device interrupts. 256-byte
+/// alignment satisfies VTOR for up to 64 entries.
+#[repr(C, align(256))]
+struct Vectors([usize; 16 + 32]);
+
+static mut RAM_VECTORS: Vectors = Vectors([0; 48]);
+
+/// UART0 with interrupt-driven receive.
+pub struct Uart {
+    _private: (),
+}
+
+impl Uart {
+    /// Copies the vector table to RAM, installs the RX handler, enables the UART and its RX
+    /// interrupt. Call once, before anything else uses the interrupt controller.
+    ///
+    /// # Safety
+    /// Takes over VTOR and UART0; must be called once with interrupts not yet in use.
+    pub unsafe fn init(scb: &mut cortex_m::peripheral::SCB) -> Self {
+        let table = core::ptr::addr_of_mut!(RAM_VECTORS);
+        let flash_table = scb.vtor.read() as *const usize;
+        for i in 0..48 {
+            (*table).0[i] = read_volatile(flash_table.add(i));
+        }
+        (*table).0[16 + Irq::Uart0Rx as usize] = uart0_rx_isr as extern "C" fn() as usize;
+        scb.vtor.write(table as u32);
+        cortex_m::asm::dsb();
+        cortex_m::asm::isb();
+        write_reg(BAUDDIV, 16);
+        write_reg(CTRL, CTRL_TX_EN | CTRL_RX_EN | CTRL_RX_IRQ);
+        NVIC::unmask(Irq::Uart0Rx);
+        Self { _private: () }
+    }
+
+    /// Bytes dropped because the receive ring was full, since the last call.
+    pub fn take_dropped(&self) -> u32 {
+        RX.take_dropped()
+    }
+
+    /// Next received byte, if any (non-blocking).
+    pub fn try_read_byte(&mut self) -> Option<u8> {
+        RX.pop()
+    }
+
+    /// Sleeps until an interrupt unless a byte is already waiting.
+    pub fn wait_for_input(&self) {
+        cortex_m::interrupt::free(|_| {
+            // Belt and braces: a byte left in the data register is taken here too.
+            drain_rx_register();
+            if RX.is_empty() {
+                // WFI wakes on a pending interrupt even with PRIMASK set; the handler runs
+                // once the critical section ends.
+                cortex_m::asm::wfi();
+            }
+        });
+    }
+
+    fn write_byte(&mut self, byte: u8) {
+        while read_reg(STATE) & STATE_TX_FULL != 0 {}
+        write_reg(DATA, u32::from(byte));
+    }
+}
+
+impl embedded_io::ErrorType for Uart {
+    type Error = Infallible;
+}
+
+impl embedded_io::Read for Uart {
+    /// Blocks until at least one byte is there, then returns what is buffered.
+    fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
+        if buf.is_empty() {
+            return Ok(0);
+        }
+        let mut n = 0;
+        while n == 0 {
+            while let Some(slot) = buf.get_mut(n) {
+                match RX.pop() {
+                    Some(b) => {
+                        *slot = b;
+                        n += 1;
+                    }
+                    None => break,
+                }
+            }
+            if n == 0 {
+                self.wait_for_input();
+            }
+        }
+        Ok(n)
+    }
+}
+
+impl embedded_io::ReadReady for Uart {
+    fn read_ready(&mut self) -> Result<bool, Self::Error> {
+        Ok(!RX.is_empty())
+    }
+}
+
+impl embedded_io::Write for Uart {
+    fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
+        for &b in buf {
+            self.write_byte(b);
+        }
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> Result<(), Self::Error> {
+        Ok(())
+    }
+}

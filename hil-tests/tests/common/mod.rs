@@ -1,0 +1,340 @@
+//! Shared helpers of the HIL tests.
+#![allow(dead_code)]
+
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use msreg_hil_tests::Qemu;
+use msreg_host::calibrate::pose_imu::{self, PoseImuCalibration, PoseImuInput, PoseImuOptions};
+use msreg_host::dataset::Dataset;
+use msreg_host::link::stream::{build_stream, ReplayStream, StreamOptions};
+use msreg_host::link::{Client, ClientOptions, Collected};
+use msreg_host::sim::{self, SimConfig, SimDataset};
+use msreg_protocol::{
+    cobs, crc, frame, Bounded, Estimate, FrameError, HostMsg, ImuBatch, ImuSample, Pose,
+    RelativePose,
+};
+use nalgebra::{Isometry3, Quaternion, UnitQuaternion, Vector3};
+
+/// Recording length of every HIL dataset, s: long enough to converge, short for CI.
+pub const SHORT_S: f64 = 25.0;
+
+/// Largest device-vs-host difference, in host sigmas (see docs/firmware.md, "HIL").
+pub const AGREE_SIGMAS: f64 = 0.1;
+
+/// Simulates (panics on an invalid config: test setup error).
+pub fn simulate(config: &SimConfig) -> SimDataset {
+    sim::simulate_pose_imu(config).expect("valid simulation config")
+}
+
+/// Writes the dataset into a temporary directory.
+pub fn write(data: &SimDataset) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().expect("temp dir");
+    data.write(dir.path()).expect("dataset written");
+    dir
+}
+
+/// Boots QEMU with the link firmware.
+pub fn boot() -> Qemu {
+    match Qemu::boot(Duration::from_secs(20)) {
+        Ok(q) => q,
+        Err(e) => panic!("HIL setup: {e}"),
+    }
+}
+
+/// The host f64 pipeline on the same data.
+pub fn calibrate_f64(data: &SimDataset) -> PoseImuCalibration {
+    let input = PoseImuInput {
+        imu: &data.imu,
+        imu_noise: &data.imu_noise,
+        poses: &data.pose,
+        pose_noise: &data.pose_sensor,
+    };
+    pose_imu::calibrate::<f64>(&input, &PoseImuOptions::default(), &mut |_| {})
+        .expect("host calibration runs")
+}
+
+/// The device's last estimate.
+pub fn last_estimate(c: &Collected) -> Estimate {
+    c.estimates.last().expect("the device sent estimates").1
+}
+
+/// `T_imu_sensor` of an estimate.
+pub fn isometry(e: &Estimate) -> Isometry3<f64> {
+    let [w, x, y, z] = e.extrinsic.rotation_wxyz.map(f64::from);
+    let t = e.extrinsic.translation_m.map(f64::from);
+    Isometry3::from_parts(
+        Vector3::from(t).into(),
+        UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z)),
+    )
+}
+
+/// Error `[Log(R_a^T R_b); p_b - p_a]`.
+fn error6(a: &Isometry3<f64>, b: &Isometry3<f64>) -> [f64; 6] {
+    let r = (a.rotation.inverse() * b.rotation).scaled_axis();
+    let p = b.translation.vector - a.translation.vector;
+    [r.x, r.y, r.z, p.x, p.y, p.z]
+}
+
+/// Device against host, per axis in units of the host's sigma (largest axis).
+#[derive(Debug)]
+pub struct Agreement {
+    /// Largest rotation difference / host sigma.
+    pub rotation_sigmas: f64,
+    /// Largest translation difference / host sigma.
+    pub translation_sigmas: f64,
+    /// Time-offset difference / host sigma.
+    pub time_offset_sigmas: f64,
+    /// Rotation difference, deg.
+    pub rotation_deg: f64,
+    /// Translation difference, mm.
+    pub translation_mm: f64,
+    /// Time-offset difference, ms.
+    pub time_offset_ms: f64,
+}
+
+/// Compares the device's estimate with the host's f64 result.
+pub fn compare(device: &Estimate, host: &PoseImuCalibration) -> Agreement {
+    let d = isometry(device);
+    let e = error6(&host.t_imu_pose, &d);
+    let sd = |i: usize| host.covariance[(i, i)].sqrt();
+    let ratio = |r: std::ops::Range<usize>| r.map(|i| e[i].abs() / sd(i)).fold(0.0, f64::max);
+    let td = f64::from(device.time_offset_s) - host.time_offset_s;
+    Agreement {
+        rotation_sigmas: ratio(0..3),
+        translation_sigmas: ratio(3..6),
+        time_offset_sigmas: td.abs() / host.time_offset_sigma_s,
+        rotation_deg: d.rotation.angle_to(&host.t_imu_pose.rotation).to_degrees(),
+        translation_mm: (d.translation.vector - host.t_imu_pose.translation.vector).norm() * 1e3,
+        time_offset_ms: td * 1e3,
+    }
+}
+
+/// Device against ground truth.
+#[derive(Debug)]
+pub struct TruthErrors {
+    /// Per-axis error / device sigma: rx, ry, rz, tx, ty, tz, t_d.
+    pub normalised: [f64; 7],
+    /// Rotation error, deg.
+    pub rotation_deg: f64,
+    /// Translation error, mm.
+    pub translation_mm: f64,
+    /// Every axis inside 3 sigma.
+    pub within_three_sigma: bool,
+}
+
+/// Errors of the device's estimate against the truth.
+pub fn truth_errors(device: &Estimate, truth: &Isometry3<f64>, truth_td_s: f64) -> TruthErrors {
+    let d = isometry(device);
+    let e = error6(&d, truth);
+    let mut normalised = [0.0; 7];
+    for i in 0..3 {
+        normalised[i] = e[i] / f64::from(device.sigma_rotation_rad[i]);
+        normalised[i + 3] = e[i + 3] / f64::from(device.sigma_translation_m[i]);
+    }
+    normalised[6] =
+        (truth_td_s - f64::from(device.time_offset_s)) / f64::from(device.sigma_time_offset_s);
+    TruthErrors {
+        normalised,
+        rotation_deg: d.rotation.angle_to(&truth.rotation).to_degrees(),
+        translation_mm: (d.translation.vector - truth.translation.vector).norm() * 1e3,
+        within_three_sigma: normalised.iter().all(|x| x.abs() <= 3.0),
+    }
+}
+
+/// A replay driven step by step, for fault injection.
+pub struct FaultRun {
+    /// The client.
+    pub client: Client,
+    stream: ReplayStream,
+    next: usize,
+    burst_acks: u64,
+    last_imu_stamp: u64,
+}
+
+impl FaultRun {
+    /// Connects, handshakes and configures.
+    pub fn start(pty: &str, dataset: &Path) -> Self {
+        let data = Dataset::open(dataset).expect("dataset opens");
+        let input = PoseImuInput {
+            imu: data.require_imu().expect("imu"),
+            imu_noise: data.require_imu_noise().expect("imu noise"),
+            poses: data.require_pose0().expect("poses"),
+            pose_noise: data.require_pose0_sensor().expect("pose noise"),
+        };
+        let stream = build_stream(&input, &StreamOptions::default()).expect("stream");
+        let mut client = Client::connect(pty, ClientOptions::default(), None).expect("port opens");
+        client
+            .handshake(Duration::from_secs(10))
+            .expect("handshake");
+        client
+            .send(&HostMsg::Config(stream.config))
+            .expect("config sent");
+        Self {
+            client,
+            stream,
+            next: 0,
+            burst_acks: 0,
+            last_imu_stamp: 0,
+        }
+    }
+
+    /// Sends the stream up to `fraction` of its messages.
+    pub fn stream_until(&mut self, fraction: f64) {
+        let end = ((self.stream.messages.len() as f64 * fraction) as usize)
+            .min(self.stream.messages.len());
+        while self.next < end {
+            let (stamp, msg) = self.stream.messages[self.next];
+            if matches!(msg, HostMsg::ImuBatch(_)) {
+                self.last_imu_stamp = stamp;
+            }
+            self.client.send(&msg).expect("send");
+            self.next += 1;
+        }
+        self.client.flush(Duration::from_secs(20)).expect("flush");
+    }
+
+    /// Acks received for the burst.
+    pub fn burst_answers(&self) -> u64 {
+        self.burst_acks
+    }
+
+    fn raw(&mut self, bytes: &[u8]) {
+        self.client.send_raw(bytes).expect("raw write");
+    }
+
+    /// Injects every fault once; returns what was injected.
+    pub fn inject_all(&mut self) -> Vec<&'static str> {
+        let mut done = Vec::new();
+        // Garbage: deterministic pseudo-random bytes, then a malformed COBS block.
+        let mut x = 0x1234_5678u32;
+        let garbage: Vec<u8> = (0..300)
+            .map(|_| {
+                x ^= x << 13;
+                x ^= x >> 17;
+                x ^= x << 5;
+                x as u8
+            })
+            .collect();
+        self.raw(&garbage);
+        self.raw(&[0, 0x05, 0x01, 0x00]);
+        done.push("garbage + malformed COBS");
+        // Truncated frame.
+        let (_, bytes) = self.client.encode_next(&HostMsg::GetStatus);
+        let half = bytes[..bytes.len() / 2].to_vec();
+        self.raw(&half);
+        self.raw(&[0]);
+        done.push("truncated frame");
+        // CRC error: a flipped byte that still decodes as COBS.
+        let (_, bytes) = self.client.encode_next(&HostMsg::GetStatus);
+        let bad = crc_error_variant(&bytes);
+        self.raw(&bad);
+        done.push("crc error");
+        // Valid CRC, unknown message.
+        let (seq, _) = self.client.encode_next(&HostMsg::GetStatus);
+        let mut body = vec![seq as u8 & 0x7f, 99];
+        body.extend_from_slice(&crc::crc16(&body).to_le_bytes());
+        let mut enc = [0u8; 16];
+        let n = cobs::encode(&body, &mut enc).expect("fits");
+        let mut frame_bytes = enc[..n].to_vec();
+        frame_bytes.push(0);
+        self.raw(&frame_bytes);
+        done.push("undecodable payload");
+        // Oversize frame.
+        let mut long = vec![0x55u8; 1500];
+        long.push(0);
+        self.raw(&long);
+        done.push("oversize frame");
+        // Duplicated frame (same sequence number twice) and a dropped one (never sent).
+        let (seq, bytes) = self.client.encode_next(&HostMsg::GetStatus);
+        self.client.write_tracked(seq, &bytes).expect("send");
+        self.client.write_tracked(seq, &bytes).expect("send");
+        let _dropped = self.client.encode_next(&HostMsg::GetStatus);
+        done.push("duplicated + dropped frame");
+        // Out-of-order stamps: a sample 1 s in the past.
+        let old = self.last_imu_stamp.saturating_sub(1_000_000_000);
+        self.client.send(&imu_batch(old, 0.0)).expect("send");
+        done.push("out-of-order stamp");
+        // NaN payloads: an IMU sample and a relative pose.
+        self.client
+            .send(&imu_batch(self.last_imu_stamp + 1, f32::NAN))
+            .expect("send");
+        self.client.send(&nan_pose()).expect("send");
+        done.push("NaN payloads");
+        self.client.flush(Duration::from_secs(10)).expect("flush");
+        self.burst();
+        done.push("burst of 1000 frames");
+        done
+    }
+
+    /// 1000 frames in one write, faster than the UART takes them.
+    fn burst(&mut self) {
+        let before = self.client.collected.acks.iter().sum::<u64>();
+        let mut bytes = Vec::new();
+        for _ in 0..1000 {
+            let (_, f) = self.client.encode_next(&HostMsg::GetStatus);
+            bytes.extend_from_slice(&f);
+        }
+        self.raw(&bytes);
+        let deadline = Instant::now() + Duration::from_secs(60);
+        let mut last_change = Instant::now();
+        let mut seen = 0;
+        while Instant::now() < deadline && last_change.elapsed() < Duration::from_secs(3) {
+            self.client.pump(Duration::from_millis(50)).expect("pump");
+            let acks = self.client.collected.acks.iter().sum::<u64>() - before;
+            if acks != seen {
+                seen = acks;
+                last_change = Instant::now();
+            }
+            if acks >= 1000 {
+                break;
+            }
+        }
+        self.burst_acks = seen;
+        self.raw(&[0, 0]);
+    }
+}
+
+fn crc_error_variant(frame_bytes: &[u8]) -> Vec<u8> {
+    for i in (1..frame_bytes.len() - 1).rev() {
+        for flip in [0x01u8, 0x02, 0x04] {
+            let mut b = frame_bytes.to_vec();
+            b[i] ^= flip;
+            if b[i] == 0 {
+                continue;
+            }
+            let mut body = b[..b.len() - 1].to_vec();
+            if frame::decode::<HostMsg>(&mut body) == Err(FrameError::Crc) {
+                return b;
+            }
+        }
+    }
+    panic!("no single-bit flip gives a CRC error");
+}
+
+fn imu_batch(stamp_ns: u64, gyro: f32) -> HostMsg {
+    let samples: Bounded<ImuSample, { msreg_protocol::IMU_BATCH_MAX }> = [ImuSample {
+        offset_ns: 0,
+        gyro: [gyro, 0.0, 0.0],
+        accel: [0.0, 0.0, 9.81],
+    }]
+    .into_iter()
+    .collect();
+    HostMsg::ImuBatch(ImuBatch {
+        base_stamp_ns: stamp_ns,
+        samples,
+    })
+}
+
+fn nan_pose() -> HostMsg {
+    HostMsg::RelativePose(RelativePose {
+        stamp_from_ns: 0,
+        stamp_to_ns: 1,
+        delta: Pose {
+            rotation_wxyz: [f32::NAN, 0.0, 0.0, 0.0],
+            translation_m: [0.0; 3],
+        },
+        sigma_rotation_rad: [0.01; 3],
+        sigma_translation_m: [0.01; 3],
+    })
+}

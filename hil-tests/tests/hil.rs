@@ -1,0 +1,188 @@
+//! HIL: the link firmware in QEMU (Cortex-M4F, f32) driven through the real serial path
+//! (pty, `msreg_host::link`), compared with the host's f64 pipeline and ground truth; the
+//! knock alarm on the device; fault injection.
+//!
+//! Run: `cargo test -p msreg-hil-tests --release --test hil` (tools/test.sh does, after
+//! `tools/firmware.sh build`).
+
+mod common;
+
+use std::time::Duration;
+
+use common::*;
+use msreg_host::link::cli::{replay, ReplayOptions};
+use msreg_host::sim::{Knock, SimConfig};
+use msreg_protocol::{ErrorKind, HealthState};
+use nalgebra::{Isometry3, UnitQuaternion, Vector3};
+
+#[test]
+fn firmware_estimate_matches_host_f64_pipeline_and_ground_truth() {
+    // Given a 25 s simulated recording with a 10 ms time offset
+    let data = simulate(&SimConfig {
+        seed: 11,
+        duration_s: SHORT_S,
+        ..SimConfig::default()
+    });
+    let dir = write(&data);
+    // When it is replayed to the firmware and calibrated on the host in f64
+    let qemu = boot();
+    let record = dir.path().join("session.jsonl");
+    let outcome = replay(
+        dir.path(),
+        &qemu.pty,
+        Some(&record),
+        &ReplayOptions::default(),
+    )
+    .expect("replay runs");
+    let host = calibrate_f64(&data);
+    // Then the device ran every sample and update without a fault
+    let status = outcome.status.expect("device status");
+    println!(
+        "{}",
+        msreg_host::link::cli::summary(&outcome.collected, Some(&status))
+    );
+    assert_eq!(status.imu_samples as usize, data.imu.len());
+    assert_eq!(
+        status.errors.iter().sum::<u32>(),
+        0,
+        "faults: {:?}",
+        status.errors
+    );
+    assert_eq!(
+        status.updates as usize,
+        host.report.updates_accepted + host.report.updates_rejected
+    );
+    // and its final estimate agrees with the f64 filter within a fraction of the sigma
+    let device = last_estimate(&outcome.collected);
+    let cmp = compare(&device, &host);
+    println!("device vs host f64: {cmp:?}");
+    assert!(
+        cmp.rotation_sigmas <= AGREE_SIGMAS && cmp.translation_sigmas <= AGREE_SIGMAS,
+        "device and host differ by {cmp:?} (> {AGREE_SIGMAS} sigma)"
+    );
+    assert!(cmp.time_offset_sigmas <= AGREE_SIGMAS, "{cmp:?}");
+    // and with the truth inside 3 sigma of its own covariance
+    let truth = truth_errors(&device, &data.t_imu_pose, data.time_offset_s);
+    println!("device vs truth: {truth:?}");
+    assert!(truth.within_three_sigma, "{truth:?}");
+    // and the recording re-opens
+    let shown = msreg_host::link::cli::show(&record).expect("recording re-opens");
+    assert!(shown.contains("updates"), "{shown}");
+}
+
+#[test]
+fn knocked_mounting_raises_the_alarm_on_the_device_within_five_seconds() {
+    // Given a recording whose sensor mounting turns by 1 deg at 14 s
+    let knock_at_s = 14.0;
+    let axis = Vector3::new(0.3, -0.8, 0.5).normalize();
+    let mut config = SimConfig {
+        seed: 12,
+        duration_s: SHORT_S,
+        ..SimConfig::default()
+    };
+    config.pose.knock = Some(Knock {
+        at_s: knock_at_s,
+        delta: Isometry3::from_parts(
+            Default::default(),
+            UnitQuaternion::from_scaled_axis(axis * 1f64.to_radians()),
+        ),
+    });
+    let data = simulate(&config);
+    let dir = write(&data);
+    // When it is replayed to the firmware
+    let qemu = boot();
+    let outcome =
+        replay(dir.path(), &qemu.pty, None, &ReplayOptions::default()).expect("replay runs");
+    // Then the device raised a rotation alarm between the knock and 5 s after it, once
+    let c = &outcome.collected;
+    let start = data.imu[0].stamp_ns;
+    let times: Vec<f64> = c
+        .alarms
+        .iter()
+        .map(|(_, a)| a.stamp_ns.saturating_sub(start) as f64 * 1e-9)
+        .collect();
+    println!(
+        "alarms at {times:?} s (knock at {knock_at_s} s): {:?}",
+        c.alarms
+    );
+    let first = times
+        .first()
+        .copied()
+        .expect("the device must raise an alarm");
+    assert!(
+        first >= knock_at_s && first <= knock_at_s + 5.0,
+        "alarm at {first:.2} s, knock at {knock_at_s} s"
+    );
+    assert_eq!(c.alarms[0].1.kind, msreg_protocol::AlarmKind::RotationStep);
+    assert_eq!(last_estimate(c).health, HealthState::Alarm);
+}
+
+#[test]
+fn faults_are_typed_counted_and_the_session_recovers() {
+    // Given a configured device halfway through a recording
+    let data = simulate(&SimConfig {
+        seed: 13,
+        duration_s: SHORT_S,
+        ..SimConfig::default()
+    });
+    let dir = write(&data);
+    let mut qemu = boot();
+    let mut run = FaultRun::start(&qemu.pty, dir.path());
+    run.stream_until(0.5);
+    // When every kind of fault is injected
+    let injected = run.inject_all();
+    // and the rest of the recording follows
+    run.stream_until(1.0);
+    // Then the device is alive, counted each fault by type, and kept its state
+    assert!(
+        qemu.is_running(),
+        "QEMU exited: the firmware must never stop"
+    );
+    let status = run
+        .client
+        .status(Duration::from_secs(10))
+        .expect("device answers after the faults");
+    let counts = |k: ErrorKind| status.errors[k.index()];
+    println!("injected {injected:?}");
+    println!(
+        "{}",
+        msreg_host::link::cli::summary(&run.client.collected, Some(&status))
+    );
+    for kind in [
+        ErrorKind::Framing,
+        ErrorKind::Crc,
+        ErrorKind::Decode,
+        ErrorKind::Oversize,
+        ErrorKind::Duplicate,
+        ErrorKind::SequenceGap,
+        ErrorKind::TimeWentBackwards,
+        ErrorKind::NonFinite,
+    ] {
+        assert!(
+            counts(kind) >= 1,
+            "{} not counted: {:?}",
+            kind.name(),
+            status.errors
+        );
+        assert!(
+            run.client.collected.errors_of(kind) >= 1,
+            "{} not reported",
+            kind.name()
+        );
+    }
+    // the burst was answered (the device kept up or reported what it lost)
+    assert!(
+        run.burst_answers() >= 900 || counts(ErrorKind::RxOverrun) > 0,
+        "burst: {} answers, overrun {}",
+        run.burst_answers(),
+        counts(ErrorKind::RxOverrun)
+    );
+    // no reset: the configuration survived and every valid IMU sample was applied
+    assert!(status.configured);
+    assert_eq!(status.imu_samples as usize, data.imu.len());
+    // and the estimate still converges to the truth
+    let device = last_estimate(&run.client.collected);
+    let truth = truth_errors(&device, &data.t_imu_pose, data.time_offset_s);
+    println!("device vs truth after faults: {truth:?}");
+    assert!(truth.within_three_sigma, "{truth:?}");
+}

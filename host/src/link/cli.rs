@@ -1,0 +1,325 @@
+//! `msreg link replay | monitor | show`.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use clap::Subcommand;
+use msreg_protocol::{DeviceMsg, ErrorKind, Estimate, HealthState, HostMsg, Status};
+use nalgebra::{Quaternion, UnitQuaternion};
+
+use super::client::{Client, ClientOptions, Collected};
+use super::record::{self, Line};
+use super::stream::{build_stream, StreamOptions};
+use super::LinkError;
+use crate::calibrate::pose_imu::PoseImuInput;
+use crate::dataset::Dataset;
+
+/// `msreg link ...`.
+#[derive(Debug, Subcommand)]
+pub enum LinkCommand {
+    /// Stream a dataset (IMU + odometry increments) to the firmware and record its answers.
+    Replay {
+        /// Dataset directory (imu0/, pose0/).
+        dataset: PathBuf,
+        /// Serial device (e.g. the /dev/pts/N QEMU prints).
+        #[arg(long)]
+        port: String,
+        /// Pace the stream at the dataset's own rate instead of as fast as the link allows.
+        #[arg(long)]
+        realtime: bool,
+        /// Session recording (JSON lines).
+        #[arg(long, default_value = "link-replay.jsonl")]
+        record: PathBuf,
+        /// Estimate period, ms (0: after every update).
+        #[arg(long, default_value_t = 0.0)]
+        estimate_period_ms: f64,
+        /// IMU samples per frame (1-16).
+        #[arg(long, default_value_t = 10)]
+        batch: usize,
+    },
+    /// Show live estimates, sigmas, NIS and health from a running device.
+    Monitor {
+        /// Serial device.
+        #[arg(long)]
+        port: String,
+        /// Stop after this many seconds (default: until interrupted).
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Session recording (JSON lines).
+        #[arg(long, default_value = "link-monitor.jsonl")]
+        record: PathBuf,
+    },
+    /// Summarise a recorded session.
+    Show {
+        /// Recording written by `replay` or `monitor`.
+        file: PathBuf,
+    },
+}
+
+/// Runs a `link` subcommand.
+pub fn run(command: LinkCommand) -> anyhow::Result<()> {
+    match command {
+        LinkCommand::Replay {
+            dataset,
+            port,
+            realtime,
+            record,
+            estimate_period_ms,
+            batch,
+        } => {
+            let options = ReplayOptions {
+                realtime,
+                stream: StreamOptions {
+                    batch,
+                    estimate_period_ns: (estimate_period_ms * 1e6).clamp(0.0, 4.0e9) as u32,
+                    ..StreamOptions::default()
+                },
+                ..ReplayOptions::default()
+            };
+            let outcome = replay(&dataset, &port, Some(&record), &options)?;
+            print!("{}", summary(&outcome.collected, outcome.status.as_ref()));
+            println!(
+                "link: {} frames, {} bytes in {:.2} s = {:.0} frames/s, {:.1} kB/s; recorded to {}",
+                outcome.frames,
+                outcome.bytes,
+                outcome.elapsed_s,
+                outcome.frames as f64 / outcome.elapsed_s.max(1e-9),
+                outcome.bytes as f64 / outcome.elapsed_s.max(1e-9) / 1e3,
+                record.display()
+            );
+            Ok(())
+        }
+        LinkCommand::Monitor {
+            port,
+            duration,
+            record,
+        } => monitor(&port, duration, &record),
+        LinkCommand::Show { file } => {
+            print!("{}", show(&file)?);
+            Ok(())
+        }
+    }
+}
+
+/// Options of [`replay`].
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ReplayOptions {
+    /// Pace at the data rate.
+    pub realtime: bool,
+    /// Stream options.
+    pub stream: StreamOptions,
+    /// Client options.
+    pub client: ClientOptions,
+}
+
+/// What a replay produced.
+#[derive(Debug, Clone)]
+pub struct ReplayOutcome {
+    /// Everything the device sent.
+    pub collected: Collected,
+    /// Device status at the end.
+    pub status: Option<Status>,
+    /// Frames sent.
+    pub frames: u64,
+    /// Bytes sent.
+    pub bytes: u64,
+    /// Wall time of the streaming, s.
+    pub elapsed_s: f64,
+    /// First IMU stamp of the dataset, ns.
+    pub start_ns: u64,
+}
+
+/// Replays `dataset` to the device at `port`.
+pub fn replay(
+    dataset: &Path,
+    port: &str,
+    record: Option<&Path>,
+    options: &ReplayOptions,
+) -> Result<ReplayOutcome, LinkError> {
+    let data = Dataset::open(dataset).map_err(|e| LinkError::Dataset(e.to_string()))?;
+    let missing = |e: crate::dataset::DatasetError| LinkError::Dataset(e.to_string());
+    let input = PoseImuInput {
+        imu: data.require_imu().map_err(missing)?,
+        imu_noise: data.require_imu_noise().map_err(missing)?,
+        poses: data.require_pose0().map_err(missing)?,
+        pose_noise: data.require_pose0_sensor().map_err(missing)?,
+    };
+    let stream = build_stream(&input, &options.stream)?;
+    let mut client = Client::connect(port, options.client, record.map(|r| (r, "replay")))?;
+    client.handshake(Duration::from_secs(10))?;
+    client.send(&HostMsg::Config(stream.config))?;
+    let started = Instant::now();
+    let (frames0, bytes0) = client.sent;
+    for (stamp_ns, msg) in &stream.messages {
+        if options.realtime {
+            let due = Duration::from_nanos(stamp_ns.saturating_sub(stream.start_ns));
+            while started.elapsed() < due {
+                client.pump(Duration::from_millis(1))?;
+            }
+        }
+        client.send(msg)?;
+    }
+    client.flush(Duration::from_secs(10))?;
+    let elapsed_s = started.elapsed().as_secs_f64();
+    let status = client.status(Duration::from_secs(5)).ok();
+    client.pump(Duration::from_millis(50))?;
+    client.finish()?;
+    Ok(ReplayOutcome {
+        collected: client.collected.clone(),
+        status,
+        frames: client.sent.0 - frames0,
+        bytes: client.sent.1 - bytes0,
+        elapsed_s,
+        start_ns: stream.start_ns,
+    })
+}
+
+fn monitor(port: &str, duration: Option<f64>, record: &Path) -> anyhow::Result<()> {
+    let mut client = Client::connect(port, ClientOptions::default(), Some((record, "monitor")))?;
+    client.handshake(Duration::from_secs(10))?;
+    let started = Instant::now();
+    let mut shown = 0;
+    loop {
+        client.pump(Duration::from_millis(100))?;
+        let c = &client.collected;
+        if c.estimates.len() + c.alarms.len() + c.errors.len() != shown {
+            shown = c.estimates.len() + c.alarms.len() + c.errors.len();
+            println!("{}", live_view(c));
+        }
+        if duration.is_some_and(|d| started.elapsed().as_secs_f64() >= d) {
+            break;
+        }
+    }
+    client.finish()?;
+    Ok(())
+}
+
+fn rpy_deg(e: &Estimate) -> [f64; 3] {
+    let [w, x, y, z] = e.extrinsic.rotation_wxyz.map(f64::from);
+    let q = UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z));
+    let (r, p, yaw) = q.euler_angles();
+    [r.to_degrees(), p.to_degrees(), yaw.to_degrees()]
+}
+
+/// A few lines a person can read at a glance: estimate, sigmas, NIS, health, faults.
+pub fn live_view(c: &Collected) -> String {
+    let mut out = String::new();
+    let Some((t, e)) = c.estimates.last() else {
+        return format!(
+            "t {:>7.2} s | waiting for estimates | errors {}",
+            c.errors.last().map_or(0.0, |x| x.0),
+            c.errors.len()
+        );
+    };
+    let r = rpy_deg(e);
+    let sr = e.sigma_rotation_rad.map(|s| f64::from(s).to_degrees());
+    let health = match e.health {
+        HealthState::Alarm => "ALARM",
+        HealthState::Nominal => "ok",
+        HealthState::Idle => "idle",
+    };
+    out.push_str(&format!(
+        "t {t:>7.2} s | rpy {:>8.3} {:>8.3} {:>8.3} deg (+-{:.3} {:.3} {:.3}) | xyz {:>7.4} {:>7.4} {:>7.4} m (+-{:.4} {:.4} {:.4}) | td {:>6.2} ms (+-{:.2}) | NIS/dof {:.2} {:?} | health {health} ({} alarms) | upd {}/{} | errors {}",
+        r[0], r[1], r[2], sr[0], sr[1], sr[2],
+        e.extrinsic.translation_m[0], e.extrinsic.translation_m[1], e.extrinsic.translation_m[2],
+        e.sigma_translation_m[0], e.sigma_translation_m[1], e.sigma_translation_m[2],
+        e.time_offset_s * 1e3, e.sigma_time_offset_s * 1e3,
+        e.nis_per_dof, e.nis_state, e.alarms,
+        e.updates_accepted, e.updates_accepted + e.updates_rejected,
+        c.errors.len(),
+    ));
+    out
+}
+
+fn percentile(v: &[f64], q: f64) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    s[((s.len() - 1) as f64 * q).round() as usize]
+}
+
+/// Multi-line summary of a session.
+pub fn summary(c: &Collected, status: Option<&Status>) -> String {
+    let mut out = String::new();
+    out.push_str(&format!("{}\n", live_view(c)));
+    out.push_str(&format!(
+        "device: {} estimates, {} update diagnostics, {} alarms, {} error reports; acks ok/dup/rejected {}/{}/{}, ack timeouts {}, bad frames {}\n",
+        c.estimates.len(), c.diagnostics.len(), c.alarms.len(), c.errors.len(),
+        c.acks[0], c.acks[1], c.acks[2], c.ack_timeouts, c.bad_frames
+    ));
+    for (t, a) in &c.alarms {
+        out.push_str(&format!(
+            "alarm at host t {t:.2} s: {:?} at stamp {} ns, statistic {:.1}\n",
+            a.kind, a.stamp_ns, a.statistic
+        ));
+    }
+    if let Some(s) = status {
+        out.push_str(&format!(
+            "status: configured {}, {} frames, {} IMU samples, {} anchors, {} updates, {} zero-velocity\n",
+            s.configured, s.frames_ok, s.imu_samples, s.anchors, s.updates, s.zero_velocity_updates
+        ));
+        let faults: Vec<String> = ErrorKind::ALL
+            .iter()
+            .filter(|k| s.errors[k.index()] > 0)
+            .map(|k| format!("{} {}", k.name(), s.errors[k.index()]))
+            .collect();
+        out.push_str(&format!(
+            "fault counters: {}\n",
+            if faults.is_empty() {
+                "none".to_string()
+            } else {
+                faults.join(", ")
+            }
+        ));
+    }
+    if !c.ack_latency_s.is_empty() {
+        out.push_str(&format!(
+            "ack round trip: median {:.2} ms, p95 {:.2} ms; estimate latency: median {:.2} ms, p95 {:.2} ms\n",
+            percentile(&c.ack_latency_s, 0.5) * 1e3,
+            percentile(&c.ack_latency_s, 0.95) * 1e3,
+            percentile(&c.estimate_latency_s, 0.5) * 1e3,
+            percentile(&c.estimate_latency_s, 0.95) * 1e3
+        ));
+    }
+    out
+}
+
+/// Re-opens a recording and summarises it.
+pub fn show(file: &Path) -> Result<String, LinkError> {
+    let lines = record::read(file)?;
+    let mut c = Collected::default();
+    let mut status = None;
+    let (mut tx, mut header) = (0usize, None);
+    for line in &lines {
+        match line {
+            Line::Header { header: h } => header = Some(h.clone()),
+            Line::Tx { .. } => tx += 1,
+            Line::Bad { .. } => c.bad_frames += 1,
+            Line::Rx { t, rx } => match rx.msg {
+                DeviceMsg::Hello(h) => c.hello = Some(h),
+                DeviceMsg::Ack(a) => c.acks[a.status as usize] += 1,
+                DeviceMsg::Estimate(e) => c.estimates.push((*t, e)),
+                DeviceMsg::UpdateDiagnostic(d) => c.diagnostics.push((*t, d)),
+                DeviceMsg::HealthAlarm(a) => c.alarms.push((*t, a)),
+                DeviceMsg::ErrorReport(e) => c.errors.push((*t, e)),
+                DeviceMsg::Status(s) => status = Some(s),
+            },
+        }
+    }
+    let mut out = match header {
+        Some(h) => format!(
+            "{}: `{}` session on {} (protocol v{}), {} lines, {} host frames recorded\n",
+            file.display(),
+            h.command,
+            h.port,
+            h.protocol_version,
+            lines.len(),
+            tx
+        ),
+        None => format!("{}: no header\n", file.display()),
+    };
+    out.push_str(&summary(&c, status.as_ref()));
+    Ok(out)
+}

@@ -1,0 +1,462 @@
+//! The messages. Field order is wire order (postcard: integers as varints, `i32` zig-zag,
+//! `f32` as 4 little-endian bytes, enums as a varint variant index). Units are in the field
+//! names; stamps are `u64` ns of the sender's clock (CONVENTIONS.md), poses follow
+//! `T_a_b` = pose of `b` in `a`, quaternions are Hamilton `[w, x, y, z]`.
+
+use postcard::experimental::max_size::MaxSize;
+use serde::{Deserialize, Serialize};
+
+use crate::batch::Bounded;
+
+/// IMU samples per [`ImuBatch`].
+pub const IMU_BATCH_MAX: usize = 16;
+
+/// Host to device.
+// No heap on the device: a batch is stored inline, so the enum is as large as one batch.
+#[allow(clippy::large_enum_variant)]
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq)]
+pub enum HostMsg {
+    /// Handshake; the device answers with its own [`Hello`].
+    Hello(Hello),
+    /// (Re)starts the filter with this configuration.
+    Config(Config),
+    /// IMU samples, in stamp order.
+    ImuBatch(ImuBatch),
+    /// Start of an odometry segment of the pose sensor.
+    Anchor(Anchor),
+    /// An odometry increment of the pose sensor.
+    RelativePose(RelativePose),
+    /// Asks for a [`Status`].
+    GetStatus,
+}
+
+/// Device to host.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq)]
+pub enum DeviceMsg {
+    /// Handshake answer (also sent once at boot).
+    Hello(Hello),
+    /// A host frame was received and handled.
+    Ack(Ack),
+    /// Extrinsic estimate, at the configured rate.
+    Estimate(Estimate),
+    /// One record per measurement update.
+    UpdateDiagnostic(UpdateDiagnostic),
+    /// The health monitor fired.
+    HealthAlarm(HealthAlarm),
+    /// Something was refused or lost; with the running count of its kind.
+    ErrorReport(ErrorReport),
+    /// Counters and state, on [`HostMsg::GetStatus`].
+    Status(Status),
+}
+
+/// Handshake: protocol version and frame limits of the sender.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Hello {
+    /// [`crate::VERSION`] of the sender.
+    pub version: u16,
+    /// Largest frame the sender accepts, bytes with delimiter.
+    pub max_frame: u16,
+    /// Receive buffer of the sender, bytes (the host keeps fewer unacknowledged bytes).
+    pub rx_buffer: u16,
+}
+
+/// A pose `T_a_b`.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq, Default)]
+pub struct Pose {
+    /// `q_a_b`, Hamilton `[w, x, y, z]`.
+    pub rotation_wxyz: [f32; 4],
+    /// `p_a_b`, m.
+    pub translation_m: [f32; 3],
+}
+
+/// IMU noise densities (Kalibr `imu.yaml`).
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq)]
+pub struct ImuNoise {
+    /// rad/s/sqrt(Hz).
+    pub gyro_noise_density: f32,
+    /// m/s^2/sqrt(Hz).
+    pub accel_noise_density: f32,
+    /// rad/s^2/sqrt(Hz).
+    pub gyro_random_walk: f32,
+    /// m/s^3/sqrt(Hz).
+    pub accel_random_walk: f32,
+}
+
+/// Confidence of a chi-square gate.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Gate {
+    /// 90 %.
+    P90,
+    /// 95 %.
+    P95,
+    /// 99 %.
+    P99,
+    /// 99.5 %.
+    P995,
+    /// 99.9 %.
+    P999,
+    /// 99.99 %.
+    P9999,
+    /// 99.999 %.
+    P99999,
+}
+
+/// Which filter layout to run.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SensorSet {
+    /// IMU + one pose sensor (odometry) with extrinsic and time offset.
+    PoseImu,
+}
+
+/// IMU prior at the first sample (from the host's standstill detection).
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq)]
+pub struct ImuPrior {
+    /// Mean specific force at rest, m/s^2 (gives gravity's direction).
+    pub accel_mean: [f32; 3],
+    /// Gyro bias, rad/s.
+    pub gyro_bias: [f32; 3],
+    /// 1-sigma of roll/pitch/yaw, rad (0: the estimator's default).
+    pub sigma_orientation_rad: f32,
+    /// 1-sigma of the velocity, m/s (0: the estimator's default).
+    pub sigma_velocity_m_s: f32,
+}
+
+/// Filter configuration; (re)starts the filter.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq)]
+pub struct Config {
+    /// Filter layout.
+    pub sensors: SensorSet,
+    /// IMU noise.
+    pub imu_noise: ImuNoise,
+    /// Gate of every update.
+    pub gate: Gate,
+    /// Largest IMU sample spacing, ns.
+    pub max_imu_gap_ns: u32,
+    /// IMU prior.
+    pub imu_prior: ImuPrior,
+    /// Initial `T_imu_sensor`.
+    pub extrinsic: Pose,
+    /// Its rotation 1-sigma, rad.
+    pub sigma_rotation_rad: f32,
+    /// Its translation 1-sigma, m.
+    pub sigma_translation_m: f32,
+    /// Initial time offset `t_d`, s.
+    pub time_offset_s: f32,
+    /// Its 1-sigma, s (0 keeps it fixed).
+    pub sigma_time_offset_s: f32,
+    /// Zero-velocity updates while IMU stamps are <= this (0: none), ns.
+    pub zero_velocity_until_ns: u64,
+    /// One zero-velocity update every this many IMU samples.
+    pub zero_velocity_every: u16,
+    /// An [`Estimate`] whenever filter time advanced by this much, ns (0: after each update).
+    pub estimate_period_ns: u32,
+}
+
+/// One IMU sample of a batch.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq, Default)]
+pub struct ImuSample {
+    /// Stamp minus the batch's base stamp, ns.
+    pub offset_ns: u32,
+    /// Angular rate of `I` in `I`, rad/s.
+    pub gyro: [f32; 3],
+    /// Specific force in `I`, m/s^2.
+    pub accel: [f32; 3],
+}
+
+/// Several IMU samples, stamped relative to a base.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq)]
+pub struct ImuBatch {
+    /// Base stamp, ns.
+    pub base_stamp_ns: u64,
+    /// The samples.
+    pub samples: Bounded<ImuSample, IMU_BATCH_MAX>,
+}
+
+/// Starts an odometry segment at a sensor stamp.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Anchor {
+    /// Sensor stamp, ns.
+    pub stamp_ns: u64,
+}
+
+/// Odometry increment `T_Sfrom_Sto` with a diagonal covariance.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq)]
+pub struct RelativePose {
+    /// Sensor stamp of the start, ns.
+    pub stamp_from_ns: u64,
+    /// Sensor stamp of the end, ns.
+    pub stamp_to_ns: u64,
+    /// `T_Sfrom_Sto`.
+    pub delta: Pose,
+    /// 1-sigma of the rotation (right perturbation), rad, per axis.
+    pub sigma_rotation_rad: [f32; 3],
+    /// 1-sigma of the translation, m, per axis.
+    pub sigma_translation_m: [f32; 3],
+}
+
+/// What happened to a host frame.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AckStatus {
+    /// Handled (its content may still have produced [`ErrorReport`]s).
+    Ok,
+    /// Sequence number already seen; ignored.
+    Duplicate,
+    /// Refused as a whole (see the [`ErrorReport`] sent before).
+    Rejected,
+}
+
+/// Acknowledges host frame `seq`.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Ack {
+    /// Sequence number of the host frame.
+    pub seq: u32,
+    /// Outcome.
+    pub status: AckStatus,
+}
+
+/// Windowed-NIS verdict of the health monitor.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NisState {
+    /// Window not full yet.
+    Filling,
+    /// Within the chi-square bounds.
+    Consistent,
+    /// Above: residuals larger than the model.
+    High,
+    /// Below: noise model too pessimistic.
+    Low,
+}
+
+/// Health summary.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum HealthState {
+    /// Not configured yet.
+    Idle,
+    /// Running, no alarm.
+    Nominal,
+    /// A [`HealthAlarm`] fired.
+    Alarm,
+}
+
+/// Extrinsic estimate with sigmas.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq)]
+pub struct Estimate {
+    /// Filter time (IMU clock), ns.
+    pub stamp_ns: u64,
+    /// `T_imu_sensor`.
+    pub extrinsic: Pose,
+    /// 1-sigma rotation per axis, rad.
+    pub sigma_rotation_rad: [f32; 3],
+    /// 1-sigma translation per axis, m.
+    pub sigma_translation_m: [f32; 3],
+    /// Time offset `t_d`, s.
+    pub time_offset_s: f32,
+    /// Its 1-sigma, s.
+    pub sigma_time_offset_s: f32,
+    /// Windowed NIS per degree of freedom.
+    pub nis_per_dof: f32,
+    /// Windowed-NIS verdict.
+    pub nis_state: NisState,
+    /// Health summary.
+    pub health: HealthState,
+    /// Alarms so far.
+    pub alarms: u16,
+    /// Updates accepted by the gate so far.
+    pub updates_accepted: u32,
+    /// Updates rejected by the gate so far.
+    pub updates_rejected: u32,
+    /// Sequence number of the last host frame applied before this estimate.
+    pub last_seq: u32,
+}
+
+/// Measurement model of an update.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum UpdateKind {
+    /// Odometry increment.
+    RelativePose,
+    /// Zero velocity.
+    ZeroVelocity,
+}
+
+/// Per-update record.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq)]
+pub struct UpdateDiagnostic {
+    /// Measurement stamp (IMU clock), ns.
+    pub stamp_ns: u64,
+    /// Model.
+    pub kind: UpdateKind,
+    /// Degrees of freedom.
+    pub dof: u8,
+    /// Normalised innovation squared.
+    pub nis: f32,
+    /// Gate threshold.
+    pub threshold: f32,
+    /// Passed the gate.
+    pub accepted: bool,
+}
+
+/// Which step the health monitor detected.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AlarmKind {
+    /// Extrinsic rotation changed.
+    RotationStep,
+    /// Extrinsic translation changed.
+    TranslationStep,
+}
+
+/// The health monitor flagged a change of the extrinsic.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq)]
+pub struct HealthAlarm {
+    /// Stamp of the triggering update (IMU clock), ns.
+    pub stamp_ns: u64,
+    /// Kind.
+    pub kind: AlarmKind,
+    /// GLR statistic (chi-square(3) under "no change").
+    pub statistic: f32,
+    /// Estimated step, rad or m.
+    pub step: [f32; 3],
+}
+
+/// Every fault the device counts. The discriminant is the index into [`Status::errors`].
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ErrorKind {
+    /// Malformed COBS, or a frame too short for a CRC.
+    Framing,
+    /// CRC mismatch.
+    Crc,
+    /// CRC fine but the postcard payload does not decode.
+    Decode,
+    /// Frame longer than the receive limit (dropped up to the next delimiter).
+    Oversize,
+    /// Receive ring full: bytes were lost.
+    RxOverrun,
+    /// Sequence numbers skipped (frames lost).
+    SequenceGap,
+    /// Sequence number seen before (frame ignored).
+    Duplicate,
+    /// Protocol version of a [`Hello`] differs.
+    VersionMismatch,
+    /// Measurement before a [`Config`].
+    NotConfigured,
+    /// Configuration refused by the filter.
+    InvalidConfig,
+    /// Too many pending pose messages.
+    QueueFull,
+    /// NaN or infinity in a measurement.
+    NonFinite,
+    /// Implausible value.
+    OutOfRange,
+    /// Stamp before the filter time.
+    TimeWentBackwards,
+    /// Gap in the IMU stream.
+    ImuGap,
+    /// Measurement before the first IMU sample.
+    NotInitialized,
+    /// Increment without a matching anchor (re-anchored).
+    NoAnchor,
+    /// Clone window full.
+    CloneWindowFull,
+    /// Innovation covariance not positive definite.
+    SingularInnovation,
+    /// Update diverged and was discarded.
+    DivergentUpdate,
+    /// Any other filter error.
+    Other,
+}
+
+impl ErrorKind {
+    /// Number of kinds (length of [`Status::errors`]).
+    pub const COUNT: usize = 21;
+    /// All kinds, in index order.
+    pub const ALL: [ErrorKind; Self::COUNT] = [
+        Self::Framing,
+        Self::Crc,
+        Self::Decode,
+        Self::Oversize,
+        Self::RxOverrun,
+        Self::SequenceGap,
+        Self::Duplicate,
+        Self::VersionMismatch,
+        Self::NotConfigured,
+        Self::InvalidConfig,
+        Self::QueueFull,
+        Self::NonFinite,
+        Self::OutOfRange,
+        Self::TimeWentBackwards,
+        Self::ImuGap,
+        Self::NotInitialized,
+        Self::NoAnchor,
+        Self::CloneWindowFull,
+        Self::SingularInnovation,
+        Self::DivergentUpdate,
+        Self::Other,
+    ];
+
+    /// Index into [`Status::errors`].
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    /// snake_case name (logs, recordings).
+    pub fn name(self) -> &'static str {
+        [
+            "framing",
+            "crc",
+            "decode",
+            "oversize",
+            "rx_overrun",
+            "sequence_gap",
+            "duplicate",
+            "version_mismatch",
+            "not_configured",
+            "invalid_config",
+            "queue_full",
+            "non_finite",
+            "out_of_range",
+            "time_went_backwards",
+            "imu_gap",
+            "not_initialized",
+            "no_anchor",
+            "clone_window_full",
+            "singular_innovation",
+            "divergent_update",
+            "other",
+        ][self.index()]
+    }
+}
+
+/// A typed fault report.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ErrorReport {
+    /// What.
+    pub kind: ErrorKind,
+    /// Running count of this kind, this one included.
+    pub count: u32,
+    /// Sequence number of the host frame concerned (0 when not known).
+    pub seq: u32,
+    /// Measurement stamp concerned (0 when none), ns.
+    pub stamp_ns: u64,
+}
+
+/// Device counters and state.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq)]
+pub struct Status {
+    /// Filter configured.
+    pub configured: bool,
+    /// Filter time, ns.
+    pub filter_time_ns: u64,
+    /// Frames decoded.
+    pub frames_ok: u32,
+    /// Last host sequence number applied.
+    pub last_seq: u32,
+    /// IMU samples propagated.
+    pub imu_samples: u32,
+    /// Anchors set.
+    pub anchors: u32,
+    /// Relative-pose updates (accepted or gated out).
+    pub updates: u32,
+    /// Zero-velocity updates.
+    pub zero_velocity_updates: u32,
+    /// Fault counters, indexed by [`ErrorKind::index`].
+    pub errors: [u32; ErrorKind::COUNT],
+}

@@ -1,0 +1,202 @@
+//! Exact bytes of the wire format (docs/protocol.md): any change here is a protocol change
+//! and needs a new `VERSION`.
+
+use msreg_protocol::{
+    cobs, crc, frame, Ack, AckStatus, Anchor, Bounded, Deframer, DeviceMsg, ErrorKind, ErrorReport,
+    FrameError, Hello, HostMsg, ImuBatch, ImuSample, Packet, Pushed, DEVICE_FRAME_MAX,
+    HOST_FRAME_MAX, IMU_BATCH_MAX,
+};
+
+fn host_frame(seq: u32, msg: &HostMsg) -> Vec<u8> {
+    let mut out = [0u8; HOST_FRAME_MAX];
+    let n = frame::encode(seq, msg, &mut out).expect("fits HOST_FRAME_MAX");
+    out[..n].to_vec()
+}
+
+fn device_frame(seq: u32, msg: &DeviceMsg) -> Vec<u8> {
+    let mut out = [0u8; DEVICE_FRAME_MAX];
+    let n = frame::encode(seq, msg, &mut out).expect("fits DEVICE_FRAME_MAX");
+    out[..n].to_vec()
+}
+
+fn decode_host(bytes: &[u8]) -> Result<Packet<HostMsg>, FrameError> {
+    let mut buf = bytes.to_vec();
+    let last = buf.pop();
+    assert_eq!(last, Some(0), "frame ends with the delimiter");
+    frame::decode::<HostMsg>(&mut buf)
+}
+
+#[test]
+fn crc16_matches_the_ccitt_false_check_value() {
+    assert_eq!(crc::crc16(b"123456789"), 0x29B1);
+    assert_eq!(crc::crc16(&[]), 0xFFFF);
+}
+
+#[test]
+fn anchor_frame_has_exact_bytes() {
+    // seq 7, variant 3 (Anchor), stamp 1, CRC 0x0c7e little-endian, COBS code 6, delimiter.
+    let bytes = host_frame(7, &HostMsg::Anchor(Anchor { stamp_ns: 1 }));
+    assert_eq!(bytes, [0x06, 0x07, 0x03, 0x01, 0x7e, 0x0c, 0x00]);
+    let packet = decode_host(&bytes).expect("decodes");
+    assert_eq!(packet.seq, 7);
+    assert_eq!(packet.msg, HostMsg::Anchor(Anchor { stamp_ns: 1 }));
+}
+
+#[test]
+fn hello_frame_has_exact_bytes() {
+    let hello = Hello {
+        version: 1,
+        max_frame: 512,
+        rx_buffer: 4096,
+    };
+    let bytes = host_frame(1, &HostMsg::Hello(hello));
+    // seq 1, variant 0 (a zero: COBS code 2 ends the first block), 1, 512 = 80 04,
+    // 4096 = 80 20, CRC.
+    assert_eq!(
+        bytes,
+        [0x02, 0x01, 0x08, 0x01, 0x80, 0x04, 0x80, 0x20, 0xfc, 0xdd, 0x00]
+    );
+    assert_eq!(
+        decode_host(&bytes).expect("decodes").msg,
+        HostMsg::Hello(hello)
+    );
+}
+
+#[test]
+fn imu_batch_frame_has_exact_bytes() {
+    let sample = |offset_ns| ImuSample {
+        offset_ns,
+        gyro: [0.0, 0.5, -1.0],
+        accel: [0.0, 0.0, 9.81],
+    };
+    let samples: Bounded<ImuSample, IMU_BATCH_MAX> =
+        [sample(0), sample(2_500_000)].into_iter().collect();
+    let msg = HostMsg::ImuBatch(ImuBatch {
+        base_stamp_ns: 1_700_000_000_000_000_000,
+        samples,
+    });
+    let bytes = host_frame(300, &msg);
+    #[rustfmt::skip]
+    let expected = [
+        0x0e, 0xac, 0x02, 0x02, 0x80, 0x80, 0xa8, 0xb1, 0xe3, 0x9f, 0xe7, 0xcb, 0x17, 0x02,
+        0x01, 0x01, 0x01, 0x01, 0x01, 0x01, 0x01, 0x02, 0x3f, 0x01, 0x03, 0x80, 0xbf, 0x01,
+        0x01, 0x01, 0x01, 0x01, 0x01, 0x01, 0x09, 0xc3, 0xf5, 0x1c, 0x41, 0xa0, 0xcb, 0x98,
+        0x01, 0x01, 0x01, 0x01, 0x01, 0x01, 0x01, 0x02, 0x3f, 0x01, 0x03, 0x80, 0xbf, 0x01,
+        0x01, 0x01, 0x01, 0x01, 0x01, 0x01, 0x07, 0xc3, 0xf5, 0x1c, 0x41, 0x8f, 0xa0, 0x00,
+    ];
+    assert_eq!(bytes, expected);
+    assert_eq!(decode_host(&bytes).expect("decodes").msg, msg);
+}
+
+#[test]
+fn device_frames_have_exact_bytes() {
+    let ack = DeviceMsg::Ack(Ack {
+        seq: 300,
+        status: AckStatus::Duplicate,
+    });
+    assert_eq!(
+        device_frame(9, &ack),
+        [0x08, 0x09, 0x01, 0xac, 0x02, 0x01, 0x7a, 0x71, 0x00]
+    );
+    let report = DeviceMsg::ErrorReport(ErrorReport {
+        kind: ErrorKind::Crc,
+        count: 3,
+        seq: 0,
+        stamp_ns: 0,
+    });
+    assert_eq!(
+        device_frame(10, &report),
+        [0x05, 0x0a, 0x05, 0x01, 0x03, 0x01, 0x03, 0xa1, 0x84, 0x00]
+    );
+}
+
+#[test]
+fn a_flipped_bit_is_a_crc_error() {
+    let mut bytes = host_frame(7, &HostMsg::Anchor(Anchor { stamp_ns: 1 }));
+    bytes[3] ^= 0x10;
+    assert_eq!(decode_host(&bytes), Err(FrameError::Crc));
+}
+
+#[test]
+fn a_truncated_frame_is_a_framing_error() {
+    let bytes = host_frame(7, &HostMsg::Anchor(Anchor { stamp_ns: 1 }));
+    let mut cut = bytes[..3].to_vec();
+    assert_eq!(frame::decode::<HostMsg>(&mut cut), Err(FrameError::Framing));
+}
+
+#[test]
+fn an_unknown_variant_is_a_decode_error() {
+    // seq 1, variant 99, valid CRC.
+    let body = [0x01u8, 99];
+    let mut raw = body.to_vec();
+    raw.extend_from_slice(&crc::crc16(&body).to_le_bytes());
+    let mut enc = [0u8; 16];
+    let n = cobs::encode(&raw, &mut enc).expect("fits");
+    assert_eq!(
+        frame::decode::<HostMsg>(&mut enc[..n]),
+        Err(FrameError::Decode)
+    );
+}
+
+#[test]
+fn a_batch_longer_than_its_bound_is_a_decode_error() {
+    // A sequence length of IMU_BATCH_MAX + 1 with no items behind it.
+    let body = [0x01u8, 0x02, 0x01, (IMU_BATCH_MAX + 1) as u8];
+    let mut raw = body.to_vec();
+    raw.extend_from_slice(&crc::crc16(&body).to_le_bytes());
+    let mut enc = [0u8; 16];
+    let n = cobs::encode(&raw, &mut enc).expect("fits");
+    assert_eq!(
+        frame::decode::<HostMsg>(&mut enc[..n]),
+        Err(FrameError::Decode)
+    );
+}
+
+#[test]
+fn deframer_splits_frames_and_drops_oversize_ones() {
+    let frame_a = host_frame(1, &HostMsg::GetStatus);
+    let mut stream = vec![0u8, 0u8]; // leading delimiters resynchronise
+    stream.extend_from_slice(&[0x55; 40]);
+    stream.push(0);
+    stream.extend_from_slice(&frame_a);
+    let mut deframer = Deframer::<16>::new();
+    let mut events = Vec::new();
+    for b in stream {
+        match deframer.push(b) {
+            Pushed::Pending => {}
+            Pushed::Oversize => events.push("oversize".to_string()),
+            Pushed::Frame(f) => events.push(format!("{:?}", frame::decode::<HostMsg>(f))),
+        }
+    }
+    assert_eq!(
+        events,
+        [
+            "oversize".to_string(),
+            format!(
+                "{:?}",
+                Ok::<_, FrameError>(Packet {
+                    seq: 1,
+                    msg: HostMsg::GetStatus
+                })
+            )
+        ]
+    );
+}
+
+#[test]
+fn cobs_handles_runs_of_254_and_more_nonzero_bytes() {
+    for len in [253usize, 254, 255, 508, 600] {
+        let input: Vec<u8> = (0..len).map(|i| (i % 255 + 1) as u8).collect();
+        let mut enc = vec![0u8; cobs::max_encoded_len(len)];
+        let n = cobs::encode(&input, &mut enc).expect("fits the bound");
+        assert!(!enc[..n].contains(&0));
+        let m = cobs::decode_in_place(&mut enc[..n]).expect("decodes");
+        assert_eq!(&enc[..m], &input[..], "len {len}");
+    }
+}
+
+// Buffer sizes come from MaxSize: one full IMU batch (tag, u64 base, length, 16 x (u32
+// offset + 6 f32)) fits, and the frames stay small enough for the device's buffers.
+const _: () = assert!(HOST_FRAME_MAX >= 2 + 10 + 1 + IMU_BATCH_MAX * 29);
+const _: () = assert!(HOST_FRAME_MAX <= 512);
+const _: () = assert!(DEVICE_FRAME_MAX <= 256);
