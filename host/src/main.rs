@@ -3,6 +3,8 @@
 //! Exit codes (CONVENTIONS.md): 0 success; 1 the calibration ran but did not converge or
 //! failed its checks (the result is still written, with the reason); 2 bad input.
 
+mod match_cmd;
+
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -61,6 +63,8 @@ enum Command {
         #[command(subcommand)]
         command: msreg_host::link::cli::LinkCommand,
     },
+    /// NDT scan matching of one pair: prints T_target_source, fitness, iterations, time.
+    Match(match_cmd::MatchArgs),
 }
 
 #[derive(Subcommand)]
@@ -153,6 +157,12 @@ fn run(command: Command) -> Result<(), Failure> {
         } => evaluate(&result, &dataset, json),
         Command::Demo { seed, keep } => demo(seed, keep),
         Command::Link { command } => Ok(msreg_host::link::cli::run(command)?),
+        Command::Match(args) => match match_cmd::run(&args)? {
+            match_cmd::MatchOutcome { ok: true } => Ok(()),
+            _ => Err(Failure::NotConverged(
+                "NDT did not converge or the geometry is degenerate".into(),
+            )),
+        },
     }
 }
 

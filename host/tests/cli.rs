@@ -197,3 +197,29 @@ fn demo_prints_the_table() {
         "{out}"
     );
 }
+
+#[test]
+fn truncated_pcd_is_exit_code_2_naming_the_file() {
+    use msreg_host::pointcloud::{encode_pcd, PcdEncoding, PcdWriteOptions, PointCloud};
+    let dir = tempfile::tempdir().expect("tempdir");
+    let cloud =
+        PointCloud::from_xyz((0..500).map(|i| nalgebra::Vector3::new(i as f64 * 0.01, 1.0, 2.0)));
+    let bytes = encode_pcd(
+        &cloud,
+        PcdWriteOptions {
+            encoding: PcdEncoding::Binary,
+            xyz_f64: false,
+        },
+    );
+    fs::write(dir.path().join("full.pcd"), &bytes).expect("write");
+    fs::write(dir.path().join("cut.pcd"), &bytes[..bytes.len() - 100]).expect("write");
+    let o = msreg(&["match", "full.pcd", "cut.pcd"], dir.path());
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("cut.pcd"), "{}", stderr(&o));
+    let o = msreg(
+        &["match", "full.pcd", "full.pcd", "--guess", "1,2"],
+        dir.path(),
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--guess"), "{}", stderr(&o));
+}
