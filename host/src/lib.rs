@@ -9,3 +9,4 @@ pub mod link;
 pub mod ndt;
 pub mod pointcloud;
 pub mod sim;
+pub mod vision;
