@@ -9,4 +9,3 @@ pub mod link;
 pub mod ndt;
 pub mod pointcloud;
 pub mod sim;
-pub mod vision;
