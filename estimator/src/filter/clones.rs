@@ -1,0 +1,122 @@
+//! Stochastic clones: the window of past IMU poses relative measurements tie together.
+
+use super::Ekf;
+use crate::scalar::Scalar;
+use crate::state::{imu, CloneState, Layout};
+use crate::Error;
+use nalgebra::Vector3;
+
+impl<T: Scalar, const S: usize, const C: usize, const N: usize> Ekf<T, S, C, N> {
+    /// IMU time of a measurement of sensor `s` stamped `stamp_ns`: `stamp + t_d`.
+    pub(super) fn imu_time(&self, s: usize, stamp_ns: u64) -> u64 {
+        // Offset rounded to ns and added in integer space: stamps near 1.7e18 ns have no
+        // sub-microsecond resolution as floats.
+        let td = libm::round(self.sensors[s].time_offset.to_f64() * 1e9) as i64;
+        if td >= 0 {
+            stamp_ns.saturating_add(td as u64)
+        } else {
+            stamp_ns.saturating_sub(td.unsigned_abs())
+        }
+    }
+
+    /// Chooses the slot for a new clone: a free one, else the oldest that no sensor anchors.
+    pub(super) fn free_slot(&self) -> Result<usize, Error> {
+        if let Some(i) = self.clones.iter().position(Option::is_none) {
+            return Ok(i);
+        }
+        (0..C)
+            .filter(|i| !self.anchors.contains(&Some(*i)))
+            .min_by_key(|i| self.clones[*i].map(|c| c.stamp_ns).unwrap_or(0))
+            .ok_or(Error::CloneWindowFull)
+    }
+
+    /// Removes clone `slot` from the state (marginalisation: its rows and columns go).
+    pub(super) fn drop_clone(&mut self, slot: usize) {
+        let b = Layout::<S, C>::clone_orientation(slot).idx;
+        for k in 0..6 {
+            self.cov.row_mut(b + k).fill(T::zero());
+            self.cov.column_mut(b + k).fill(T::zero());
+        }
+        self.clones[slot] = None;
+    }
+
+    /// Clones the current IMU pose into `slot` for sensor `s`'s measurement at `stamp_ns`.
+    ///
+    /// The clone is the pose at the measurement's true IMU time `stamp + t_d`, so its error is
+    /// `[dtheta + w dt_d; dp + v dt_d]`: the clone carries the time-offset correlation
+    /// through the angular and linear velocity (OpenVINS).
+    pub(super) fn clone_imu_pose(&mut self, s: usize, slot: usize, stamp_ns: u64) {
+        self.flush_transition();
+        self.drop_clone(slot);
+        let w = self
+            .last_imu
+            .map(|m| m.gyro - self.imu.gyro_bias)
+            .unwrap_or_else(Vector3::zeros);
+        let v = self.imu.velocity;
+        let td = Layout::<S, C>::time_offset(s).idx;
+        let c = Layout::<S, C>::clone_orientation(slot).idx;
+        let source = |k: usize| {
+            if k < 3 {
+                (imu::ORIENTATION.idx + k, w[k])
+            } else {
+                (imu::POSITION.idx + k - 3, v[k - 3])
+            }
+        };
+        for k in 0..6 {
+            let (src, coeff) = source(k);
+            for j in 0..N {
+                let value = self.cov[(src, j)] + self.cov[(td, j)] * coeff;
+                self.cov[(c + k, j)] = value;
+                self.cov[(j, c + k)] = value;
+            }
+        }
+        for k in 0..6 {
+            for l in 0..6 {
+                let (src, coeff) = source(l);
+                self.cov[(c + k, c + l)] = self.cov[(c + k, src)] + self.cov[(c + k, td)] * coeff;
+            }
+        }
+        self.clones[slot] = Some(CloneState {
+            pose: self.imu.pose(),
+            stamp_ns,
+            sensor: s,
+        });
+    }
+
+    /// Starts an odometry segment of sensor `s`: clones the IMU pose at `stamp_ns + t_d` as
+    /// the start of the next relative measurement.
+    pub fn anchor(&mut self, s: usize, stamp_ns: u64) -> Result<(), Error> {
+        if s >= S {
+            return Err(Error::UnknownSensor);
+        }
+        let mut draft = self.clone();
+        let slot = draft.prepare_clone(s, stamp_ns)?;
+        if let Some(old) = draft.anchors[s] {
+            draft.drop_clone(old);
+        }
+        draft.clone_imu_pose(s, slot, stamp_ns);
+        draft.anchors[s] = Some(slot);
+        *self = draft;
+        Ok(())
+    }
+
+    /// Propagates to the measurement time and picks a clone slot.
+    pub(super) fn prepare_clone(&mut self, s: usize, stamp_ns: u64) -> Result<usize, Error> {
+        let last = self.last_imu.ok_or(Error::NotInitialized)?;
+        let t = self.imu_time(s, stamp_ns);
+        if t < self.time_ns {
+            return Err(Error::TimeWentBackwards {
+                filter_ns: self.time_ns,
+                stamp_ns: t,
+            });
+        }
+        if t - last.stamp_ns > self.config.max_imu_gap_ns {
+            return Err(Error::ImuGap {
+                gap_ns: t - last.stamp_ns,
+            });
+        }
+        let slot = self.free_slot()?;
+        self.advance_to(t)?;
+        Ok(slot)
+    }
+}
