@@ -3,9 +3,11 @@
 //! core it drives lives in `msreg-estimator` (no_std, shared with the firmware).
 
 pub mod calibrate;
+pub mod camera_yaml;
 pub mod dataset;
 pub mod eval;
 pub mod link;
 pub mod ndt;
 pub mod pointcloud;
 pub mod sim;
+pub mod vision;

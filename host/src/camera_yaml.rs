@@ -1,0 +1,369 @@
+//! Readers of Kalibr's `camera.yaml` (one camchain entry, at top level or under a single
+//! `camN:` key) into a [`Camera`], and of Kalibr's `target.yaml` into a [`Target`]
+//! (CONVENTIONS.md, "Dataset directory"). Errors name the file and, where the YAML has one,
+//! the line.
+
+use std::path::{Path, PathBuf};
+
+use msreg_estimator::camera::{
+    equidistant::Equidistant, radtan::RadTan, Camera, Distortion, Intrinsics, Projection,
+};
+use serde_yaml::{Mapping, Value};
+
+/// Why a camera or target file could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum YamlError {
+    /// The file could not be read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// Not YAML.
+    #[error("{path}:{line}: malformed YAML: {message}")]
+    Syntax {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line (0 when unknown).
+        line: usize,
+        /// The parser's message.
+        message: String,
+    },
+    /// A key is missing or its value is wrong.
+    #[error("{path}:{line}: {message}")]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line of the key (0 when it is missing).
+        line: usize,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// A calibration target (Kalibr `target.yaml`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Target {
+    /// `target_type: 'checkerboard'`.
+    Checkerboard(CheckerboardTarget),
+    /// `target_type: 'board'`: a plain rectangle, origin at its centre.
+    Board {
+        /// Extent along x, metres.
+        width_m: f64,
+        /// Extent along y, metres.
+        height_m: f64,
+    },
+}
+
+/// A Kalibr checkerboard: corner id `r * cols + c` at `(r * row_spacing, c * col_spacing, 0)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CheckerboardTarget {
+    /// `targetRows`: inner corner rows.
+    pub rows: usize,
+    /// `targetCols`: inner corner columns.
+    pub cols: usize,
+    /// `rowSpacingMeters`.
+    pub row_spacing_m: f64,
+    /// `colSpacingMeters`.
+    pub col_spacing_m: f64,
+    /// Physical board size (for LiDAR), centred on the pattern, if given.
+    pub width_m: Option<f64>,
+    /// Physical board height, if given.
+    pub height_m: Option<f64>,
+}
+
+impl CheckerboardTarget {
+    /// Corner `id` in the target frame, metres.
+    pub fn corner_in_target(&self, id: usize) -> nalgebra::Vector3<f64> {
+        let (r, c) = (id / self.cols, id % self.cols);
+        nalgebra::Vector3::new(
+            r as f64 * self.row_spacing_m,
+            c as f64 * self.col_spacing_m,
+            0.0,
+        )
+    }
+}
+
+/// A parsed file: its text (for line numbers) and root mapping.
+struct Doc {
+    path: PathBuf,
+    text: String,
+    root: Mapping,
+}
+
+impl Doc {
+    fn read(path: &Path) -> Result<Self, YamlError> {
+        let text = std::fs::read_to_string(path).map_err(|source| YamlError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::parse(path, text)
+    }
+
+    fn parse(path: &Path, text: String) -> Result<Self, YamlError> {
+        let value: Value = serde_yaml::from_str(&text).map_err(|e| YamlError::Syntax {
+            path: path.to_path_buf(),
+            line: e.location().map_or(0, |l| l.line()),
+            message: e.to_string(),
+        })?;
+        let Value::Mapping(root) = value else {
+            return Err(YamlError::Invalid {
+                path: path.to_path_buf(),
+                line: 1,
+                message: "expected a mapping of keys".into(),
+            });
+        };
+        Ok(Self {
+            path: path.to_path_buf(),
+            text,
+            root,
+        })
+    }
+
+    /// 1-based line of `key:` in the text (first occurrence), 0 when absent.
+    fn line_of(&self, key: &str) -> usize {
+        self.text
+            .lines()
+            .position(|l| {
+                let t = l.trim_start().trim_start_matches(['"', '\'']);
+                t.starts_with(key)
+                    && t[key.len()..]
+                        .trim_start_matches(['"', '\''])
+                        .starts_with(':')
+            })
+            .map_or(0, |i| i + 1)
+    }
+
+    fn invalid(&self, key: &str, message: String) -> YamlError {
+        YamlError::Invalid {
+            path: self.path.clone(),
+            line: self.line_of(key),
+            message,
+        }
+    }
+
+    fn get<'a>(&self, map: &'a Mapping, key: &str) -> Result<&'a Value, YamlError> {
+        map.get(key)
+            .ok_or_else(|| self.invalid(key, format!("missing key `{key}`")))
+    }
+
+    fn string(&self, map: &Mapping, key: &str) -> Result<String, YamlError> {
+        match self.get(map, key)? {
+            Value::String(s) => Ok(s.trim().to_string()),
+            _ => Err(self.invalid(key, format!("`{key}` must be a string"))),
+        }
+    }
+
+    fn number(&self, map: &Mapping, key: &str) -> Result<f64, YamlError> {
+        self.get(map, key)?
+            .as_f64()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| self.invalid(key, format!("`{key}` must be a finite number")))
+    }
+
+    fn numbers(&self, map: &Mapping, key: &str) -> Result<Vec<f64>, YamlError> {
+        let Value::Sequence(seq) = self.get(map, key)? else {
+            return Err(self.invalid(key, format!("`{key}` must be a list of numbers")));
+        };
+        seq.iter()
+            .map(|v| v.as_f64().filter(|x| x.is_finite()))
+            .collect::<Option<Vec<f64>>>()
+            .ok_or_else(|| self.invalid(key, format!("`{key}` must be a list of finite numbers")))
+    }
+
+    fn count(&self, map: &Mapping, key: &str) -> Result<usize, YamlError> {
+        self.get(map, key)?
+            .as_u64()
+            .map(|x| x as usize)
+            .ok_or_else(|| self.invalid(key, format!("`{key}` must be a non-negative integer")))
+    }
+}
+
+/// Reads a Kalibr `camera.yaml` (see the module docs).
+pub fn read_camera_yaml(path: &Path) -> Result<Camera<f64>, YamlError> {
+    camera_from_doc(&Doc::read(path)?)
+}
+
+/// Parses the text of a Kalibr `camera.yaml`; `path` only names it in errors.
+pub fn parse_camera_yaml(path: &Path, text: &str) -> Result<Camera<f64>, YamlError> {
+    camera_from_doc(&Doc::parse(path, text.to_string())?)
+}
+
+fn camera_from_doc(doc: &Doc) -> Result<Camera<f64>, YamlError> {
+    // A single `camN:` wrapper is accepted.
+    let map = match doc.root.get("camera_model") {
+        Some(_) => &doc.root,
+        None => match (doc.root.len(), doc.root.iter().next()) {
+            (1, Some((_, Value::Mapping(inner)))) => inner,
+            _ => return Err(doc.invalid("camera_model", "missing key `camera_model`".into())),
+        },
+    };
+    let model = doc.string(map, "camera_model")?;
+    let intr = doc.numbers(map, "intrinsics")?;
+    let (projection, k) = match model.as_str() {
+        "pinhole" => (
+            Projection::Pinhole,
+            expect_len(doc, "intrinsics", &intr, 4)?,
+        ),
+        "omni" => {
+            let v = expect_len(doc, "intrinsics", &intr, 5)?;
+            (Projection::Omni { xi: v[0] }, &v[1..])
+        }
+        "ds" | "eucm" => {
+            return Err(doc.invalid(
+                "camera_model",
+                format!("camera_model `{model}` is unsupported (supported: pinhole, omni)"),
+            ))
+        }
+        other => {
+            return Err(doc.invalid(
+                "camera_model",
+                format!("unknown camera_model `{other}` (expected pinhole or omni)"),
+            ))
+        }
+    };
+    let intrinsics = Intrinsics {
+        fu: k[0],
+        fv: k[1],
+        cu: k[2],
+        cv: k[3],
+    };
+    let distortion = distortion(doc, map)?;
+    let res = doc.numbers(map, "resolution")?;
+    let res = expect_len(doc, "resolution", &res, 2)?;
+    if res
+        .iter()
+        .any(|&x| x < 1.0 || x.fract() != 0.0 || x > f64::from(u32::MAX))
+    {
+        return Err(doc.invalid(
+            "resolution",
+            "`resolution` must be two positive integers".into(),
+        ));
+    }
+    Camera::new(
+        projection,
+        intrinsics,
+        distortion,
+        (res[0] as u32, res[1] as u32),
+    )
+    .map_err(|e| {
+        doc.invalid(
+            "camera_model",
+            format!(
+                "invalid camera ({e:?}): focal lengths must be positive, omni takes radtan or none"
+            ),
+        )
+    })
+}
+
+fn distortion(doc: &Doc, map: &Mapping) -> Result<Distortion<f64>, YamlError> {
+    let model = match map.get("distortion_model") {
+        None => return Ok(Distortion::None),
+        Some(_) => doc.string(map, "distortion_model")?,
+    };
+    let coeffs = match map.get("distortion_coeffs") {
+        None | Some(Value::Null) => Vec::new(),
+        Some(_) => doc.numbers(map, "distortion_coeffs")?,
+    };
+    let key = "distortion_coeffs";
+    match model.as_str() {
+        "none" => Ok(Distortion::None),
+        "radtan" | "plumb_bob" => match coeffs.len() {
+            4 | 5 => Ok(Distortion::RadTan(RadTan {
+                k1: coeffs[0],
+                k2: coeffs[1],
+                p1: coeffs[2],
+                p2: coeffs[3],
+                k3: coeffs.get(4).copied().unwrap_or(0.0),
+            })),
+            n => Err(doc.invalid(key, format!("radtan takes 4 (or 5) coefficients, got {n}"))),
+        },
+        "equidistant" => {
+            let c = expect_len(doc, key, &coeffs, 4)?;
+            Ok(Distortion::Equidistant(Equidistant {
+                k1: c[0],
+                k2: c[1],
+                k3: c[2],
+                k4: c[3],
+            }))
+        }
+        other => Err(doc.invalid(
+            "distortion_model",
+            format!("unknown distortion_model `{other}` (expected radtan, equidistant or none)"),
+        )),
+    }
+}
+
+fn expect_len<'a>(doc: &Doc, key: &str, v: &'a [f64], n: usize) -> Result<&'a [f64], YamlError> {
+    if v.len() == n {
+        Ok(v)
+    } else {
+        Err(doc.invalid(key, format!("`{key}` needs {n} values, got {}", v.len())))
+    }
+}
+
+/// Reads a Kalibr `target.yaml` (checkerboard or plain board).
+pub fn read_target_yaml(path: &Path) -> Result<Target, YamlError> {
+    target_from_doc(&Doc::read(path)?)
+}
+
+/// Parses the text of a `target.yaml`; `path` only names it in errors.
+pub fn parse_target_yaml(path: &Path, text: &str) -> Result<Target, YamlError> {
+    target_from_doc(&Doc::parse(path, text.to_string())?)
+}
+
+fn target_from_doc(doc: &Doc) -> Result<Target, YamlError> {
+    let map = &doc.root;
+    let kind = match map.get("target_type") {
+        Some(_) => doc.string(map, "target_type")?,
+        None if map.contains_key("targetRows") => "checkerboard".to_string(),
+        None => return Err(doc.invalid("target_type", "missing key `target_type`".into())),
+    };
+    let positive = |key: &str| -> Result<f64, YamlError> {
+        let x = doc.number(map, key)?;
+        if x > 0.0 {
+            Ok(x)
+        } else {
+            Err(doc.invalid(key, format!("`{key}` must be positive")))
+        }
+    };
+    let optional = |key: &str| -> Result<Option<f64>, YamlError> {
+        if map.contains_key(key) {
+            positive(key).map(Some)
+        } else {
+            Ok(None)
+        }
+    };
+    match kind.as_str() {
+        "checkerboard" => {
+            let rows = doc.count(map, "targetRows")?;
+            let cols = doc.count(map, "targetCols")?;
+            for (key, n) in [("targetRows", rows), ("targetCols", cols)] {
+                if n < 3 {
+                    return Err(doc.invalid(
+                        key,
+                        format!("`{key}` is {n}: at least 3 inner corners are needed"),
+                    ));
+                }
+            }
+            Ok(Target::Checkerboard(CheckerboardTarget {
+                rows,
+                cols,
+                row_spacing_m: positive("rowSpacingMeters")?,
+                col_spacing_m: positive("colSpacingMeters")?,
+                width_m: optional("width_m")?,
+                height_m: optional("height_m")?,
+            }))
+        }
+        "board" => Ok(Target::Board {
+            width_m: positive("width_m")?,
+            height_m: positive("height_m")?,
+        }),
+        other => Err(doc.invalid(
+            "target_type",
+            format!("unsupported target_type `{other}` (expected checkerboard or board)"),
+        )),
+    }
+}

@@ -1,0 +1,17 @@
+//! Computer vision for camera calibration (chapter 4): grey images, checkerboard detection
+//! with sub-pixel corners in Kalibr order, PnP for the target pose (its covariance feeds the
+//! motion-based update, eq. 4.11-4.13), and a small renderer of checkerboards seen by a
+//! [`msreg_estimator::camera::Camera`] for tests and the image simulator. Method and
+//! measured accuracy: docs/checkerboard.md.
+
+pub mod checkerboard;
+pub mod gray;
+pub mod grid;
+pub mod pnp;
+pub mod render;
+pub mod saddle;
+pub mod subpix;
+
+pub use checkerboard::{detect_checkerboard, CheckerboardDetection, DetectorParams, NoDetection};
+pub use gray::{GrayImage, ImageLoadError};
+pub use pnp::{solve_pnp, PnpError, PnpSolution};
