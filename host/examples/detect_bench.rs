@@ -3,7 +3,7 @@
 //! rendered 1600x1200 images (6 x 9 board, pinhole with radtan, blur 1 px, noise 3 grey
 //! levels), single-threaded. Usage: `detect_bench [runs] [<shared-data-dir>]`.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
@@ -18,10 +18,9 @@ use rand_chacha::ChaCha8Rng;
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let runs: usize = args.first().map_or(Ok(5), |s| s.parse()).context("runs")?;
-    let data = args.get(1).map_or_else(
-        || Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data"),
-        PathBuf::from,
-    );
+    let data = args
+        .get(1)
+        .map_or_else(msreg_host::shared_data::root, PathBuf::from);
     let params = DetectorParams::default();
     let dir = data.join("checkerboard-opencv");
     if dir.is_dir() {

@@ -38,7 +38,7 @@ fn main() -> Result<()> {
 }
 
 fn default_data_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data")
+    msreg_host::shared_data::root()
 }
 
 fn numbers(m: &Matrix4<f64>) -> String {

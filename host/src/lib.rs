@@ -9,5 +9,6 @@ pub mod eval;
 pub mod link;
 pub mod ndt;
 pub mod pointcloud;
+pub mod shared_data;
 pub mod sim;
 pub mod vision;

@@ -21,18 +21,7 @@ use msreg_host::vision::{detect_checkerboard, DetectorParams, GrayImage};
 use nalgebra::Vector2;
 
 fn data_dir(set: &str) -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data")
-        .join(set);
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        println!(
-            "SKIP: {} is absent (fresh clone without ../shared)",
-            dir.display()
-        );
-        None
-    }
+    msreg_host::shared_data::dir_or_skip(set)
 }
 
 /// `image -> corners` from `reference_corners.csv` (`image,corner_index,u,v`).

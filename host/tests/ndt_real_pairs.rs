@@ -17,16 +17,7 @@ use nalgebra::{Isometry3, Matrix4, Translation3, UnitQuaternion, Vector3};
 const INPUT_VOXEL_M: f64 = 0.2;
 
 fn pairs_dir() -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/lidar-pairs");
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        println!(
-            "SKIP: {} is absent (fresh clone without ../shared)",
-            dir.display()
-        );
-        None
-    }
+    msreg_host::shared_data::dir_or_skip("lidar-pairs")
 }
 
 fn load(path: &Path) -> PointCloud {

@@ -25,16 +25,7 @@ fn sample_cloud() -> PointCloud {
 }
 
 fn shared_data() -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/lidar-pairs");
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        println!(
-            "SKIP: {} is absent (fresh clone without ../shared)",
-            dir.display()
-        );
-        None
-    }
+    crate::shared_data::dir_or_skip("lidar-pairs")
 }
 
 /// LZF-compresses `data` with literal runs only (valid LZF, no matches).
