@@ -3,4 +3,5 @@
 
 pub mod convert;
 pub mod init;
+pub mod lidar_imu;
 pub mod pose_imu;

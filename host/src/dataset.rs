@@ -13,6 +13,7 @@ mod error;
 mod groundtruth;
 mod imu;
 mod layout;
+mod lidar;
 mod meta;
 mod pose;
 mod result;
@@ -25,6 +26,7 @@ pub use layout::{
     Dataset, DATASET_YAML, GROUNDTRUTH_EXTRINSICS_YAML, GROUNDTRUTH_TRAJECTORY_CSV, IMU_CSV,
     IMU_YAML, POSE_CSV, POSE_SENSOR_YAML,
 };
+pub use lidar::{list_scans, LidarYaml, ScanFile, LIDAR_DIR, LIDAR_YAML};
 pub use meta::DatasetYaml;
 pub use pose::{read_pose_csv, write_pose_csv, PoseRecord, PoseSensorYaml};
 pub use result::{isometry_from_matrix, CalibrationResult, ExtrinsicEstimate};

@@ -6,6 +6,7 @@ pub mod calibrate;
 pub mod camera_yaml;
 pub mod dataset;
 pub mod eval;
+pub mod lidar;
 pub mod link;
 pub mod ndt;
 pub mod pointcloud;

@@ -3,6 +3,7 @@
 //! Exit codes (CONVENTIONS.md): 0 success; 1 the calibration ran but did not converge or
 //! failed its checks (the result is still written, with the reason); 2 bad input.
 
+mod detect_cmd;
 mod match_cmd;
 
 use std::path::{Path, PathBuf};
@@ -65,12 +66,25 @@ enum Command {
     },
     /// NDT scan matching of one pair: prints T_target_source, fitness, iterations, time.
     Match(match_cmd::MatchArgs),
+    /// Detect calibration targets in images.
+    Detect {
+        #[command(subcommand)]
+        target: DetectTarget,
+    },
+}
+
+#[derive(Subcommand)]
+enum DetectTarget {
+    /// Inner corners of a Kalibr checkerboard, as CSV `image,corner_id,u,v`.
+    Checkerboard(detect_cmd::DetectCheckerboardArgs),
 }
 
 #[derive(Subcommand)]
 enum Scenario {
     /// IMU + generic pose sensor (odometry) with drifting increments.
     PoseImu(SimulatePoseImu),
+    /// IMU + spinning LiDAR (Ouster OS1-like, motion-distorted scans) in a box-world room.
+    LidarImu(msreg_host::lidar::cli::SimulateLidarImu),
 }
 
 #[derive(Args)]
@@ -95,6 +109,8 @@ struct SimulatePoseImu {
 enum Task {
     /// Motion-based IMU to pose-sensor calibration (EKF over IMU + odometry).
     PoseImu(CalibratePoseImu),
+    /// LiDAR-IMU calibration: predict, deskew, NDT, relative-pose update (EKF).
+    LidarImu(msreg_host::lidar::cli::CalibrateLidarImu),
 }
 
 #[derive(Args)]
@@ -150,6 +166,15 @@ fn run(command: Command) -> Result<(), Failure> {
         Command::Calibrate {
             task: Task::PoseImu(args),
         } => calibrate_pose_imu(&args, true).map(|_| ()),
+        Command::Simulate {
+            scenario: Scenario::LidarImu(args),
+        } => Ok(msreg_host::lidar::cli::simulate(&args)?),
+        Command::Calibrate {
+            task: Task::LidarImu(args),
+        } => match msreg_host::lidar::cli::calibrate(&args)? {
+            msreg_host::lidar::cli::Outcome::Converged => Ok(()),
+            msreg_host::lidar::cli::Outcome::NotConverged(why) => Err(Failure::NotConverged(why)),
+        },
         Command::Eval {
             result,
             dataset,
@@ -157,6 +182,11 @@ fn run(command: Command) -> Result<(), Failure> {
         } => evaluate(&result, &dataset, json),
         Command::Demo { seed, keep } => demo(seed, keep),
         Command::Link { command } => Ok(msreg_host::link::cli::run(command)?),
+        Command::Detect {
+            target: DetectTarget::Checkerboard(args),
+        } => detect_cmd::run(&args)
+            .map(|_| ())
+            .map_err(Failure::BadInput),
         Command::Match(args) => match match_cmd::run(&args)? {
             match_cmd::MatchOutcome { ok: true } => Ok(()),
             _ => Err(Failure::NotConverged(

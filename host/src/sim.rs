@@ -24,6 +24,7 @@ mod clock;
 mod config;
 mod extrinsic;
 mod imu;
+pub mod lidar;
 mod odometry;
 mod output;
 mod signal;
@@ -39,6 +40,7 @@ pub use clock::Clock;
 pub use config::{ImuSimConfig, Knock, PoseSimConfig, SimConfig, SimError, DEFAULT_START_STAMP_NS};
 pub use extrinsic::{random_mounting, random_pose};
 pub use imu::{imu_noise_yaml, synthesize_imu, ImuSynthesis};
+pub use lidar::{simulate_lidar_imu, Environment, LidarImuSim, LidarImuSimConfig, LidarSimConfig};
 pub use odometry::{pose_sensor_yaml, synthesize_odometry};
 pub use output::SimDataset;
 pub use signal::{EnvelopedSignal, Jet, Sinusoid, SmoothStep};
@@ -51,6 +53,8 @@ enum Stream {
     Mounting = 2,
     Imu = 3,
     Odometry = 4,
+    LidarMounting = 5,
+    LidarNoise = 6,
 }
 
 fn rng_for(seed: u64, stream: Stream) -> ChaCha8Rng {

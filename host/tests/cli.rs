@@ -223,3 +223,56 @@ fn truncated_pcd_is_exit_code_2_naming_the_file() {
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("--guess"), "{}", stderr(&o));
 }
+
+#[test]
+fn detect_checkerboard_reports_bad_input_with_exit_code_2() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    fs::write(
+        d.join("target.yaml"),
+        "target_type: checkerboard\ntargetRows: 6\ntargetCols: 9\nrowSpacingMeters: 0.025\ncolSpacingMeters: 0.025\n",
+    )
+    .expect("write");
+    fs::write(
+        d.join("board.yaml"),
+        "target_type: board\nwidth_m: 1.0\nheight_m: 0.8\n",
+    )
+    .expect("write");
+    fs::write(d.join("corrupt.png"), b"not a png").expect("write");
+    let o = msreg(
+        &[
+            "detect",
+            "checkerboard",
+            "missing.png",
+            "--target",
+            "target.yaml",
+        ],
+        d,
+    );
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("missing.png"), "{}", stderr(&o));
+    let o = msreg(
+        &[
+            "detect",
+            "checkerboard",
+            "corrupt.png",
+            "--target",
+            "target.yaml",
+        ],
+        d,
+    );
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("corrupt.png"), "{}", stderr(&o));
+    let o = msreg(
+        &[
+            "detect",
+            "checkerboard",
+            "corrupt.png",
+            "--target",
+            "board.yaml",
+        ],
+        d,
+    );
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("board.yaml"), "{}", stderr(&o));
+}

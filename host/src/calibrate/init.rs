@@ -111,19 +111,42 @@ pub fn hand_eye_rotation(
     gyro_bias: &Vector3<f64>,
     max_interval_ns: u64,
 ) -> Result<RotationInit, HandEyeError<f64>> {
-    let mut he = HandEye::<f64>::default();
-    for pair in poses.windows(2) {
+    let increments = poses.windows(2).filter_map(|pair| {
         let (a, b) = (&pair[0], &pair[1]);
-        if b.stamp_ns - a.stamp_ns > max_interval_ns {
-            continue;
-        }
-        let Some(q_imu) = integrate_gyro(imu, a.stamp_ns, b.stamp_ns, gyro_bias) else {
-            continue;
-        };
-        let q_sensor = a.rotation.inverse() * b.rotation;
-        he.add(&lie::log(&q_imu), &lie::log(&q_sensor));
+        (b.stamp_ns - a.stamp_ns <= max_interval_ns)
+            .then(|| (a.stamp_ns, b.stamp_ns, a.rotation.inverse() * b.rotation))
+    });
+    hand_eye_from_pairs(rotation_pairs(imu, increments, gyro_bias), 10)
+}
+
+/// Pairs each sensor rotation increment `(from_ns, to_ns, R_Sfrom_Sto)` (stamps on the IMU
+/// clock) with the gyro-integrated IMU rotation over the same interval, as rotation vectors
+/// `(r_I, r_S)`; increments outside the IMU data are left out.
+pub fn rotation_pairs(
+    imu: &[ImuRecord],
+    increments: impl IntoIterator<Item = (u64, u64, UnitQuaternion<f64>)>,
+    gyro_bias: &Vector3<f64>,
+) -> Vec<(Vector3<f64>, Vector3<f64>)> {
+    increments
+        .into_iter()
+        .filter_map(|(from, to, q_sensor)| {
+            let q_imu = integrate_gyro(imu, from, to, gyro_bias)?;
+            Some((lie::log(&q_imu), lie::log(&q_sensor)))
+        })
+        .collect()
+}
+
+/// The closed-form hand-eye rotation (eq. 3.3-3.5) of rotation-vector pairs `(r_I, r_S)`,
+/// with its degeneracy check (fewer than `min_pairs` pairs or rotation about one axis only).
+pub fn hand_eye_from_pairs(
+    pairs: impl IntoIterator<Item = (Vector3<f64>, Vector3<f64>)>,
+    min_pairs: usize,
+) -> Result<RotationInit, HandEyeError<f64>> {
+    let mut he = HandEye::<f64>::default();
+    for (r_imu, r_sensor) in pairs {
+        he.add(&r_imu, &r_sensor);
     }
-    let rotation = he.solve(10)?;
+    let rotation = he.solve(min_pairs)?;
     Ok(RotationInit {
         rotation,
         pairs: he.pairs(),

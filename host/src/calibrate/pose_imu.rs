@@ -183,7 +183,7 @@ pub fn calibrate<T: Scalar>(
     progress: &mut dyn FnMut(f64),
 ) -> Result<PoseImuCalibration, PoseImuError> {
     let (imu, poses) = (input.imu, input.poses);
-    let (Some(first_imu), Some(last_imu)) = (imu.first(), imu.last()) else {
+    let (Some(first_imu), Some(_)) = (imu.first(), imu.last()) else {
         return Err(PoseImuError::BadInput(
             "imu0/data.csv: no IMU samples".into(),
         ));
@@ -199,69 +199,26 @@ pub fn calibrate<T: Scalar>(
     let gyro_bias = standstill.map_or_else(Vector3::zeros, |s| s.gyro_mean);
     let period_ns = nominal_period_ns(poses);
     let max_interval_ns = period_ns.saturating_mul(3) / 2;
-    // Without rotation about two axes the hand-eye rotation is undetermined: the filter still
-    // runs (from identity, wide open) so the result and report exist, but it cannot converge.
-    let (rotation_init, init_problem) =
-        match init::hand_eye_rotation(imu, poses, &gyro_bias, max_interval_ns) {
-            Ok(r) => (r, None),
-            Err(e) => (
-                init::RotationInit {
-                    rotation: nalgebra::UnitQuaternion::identity(),
-                    pairs: 0,
-                    axis_ratio: 0.0,
-                },
-                Some(format!(
-                    "hand-eye rotation initialisation failed ({e:?}): the recording needs \
-                     rotation about at least two axes"
-                )),
-            ),
-        };
-    let mut options = *options;
-    if init_problem.is_some() {
-        options.rotation_sigma_rad = 0.5;
-    }
-    let options = &options;
+    let rotation = init::hand_eye_rotation(imu, poses, &gyro_bias, max_interval_ns);
     let init_s = started.elapsed().as_secs_f64();
-
-    let initial = initial_state::<T>(imu, standstill.as_ref(), &rotation_init.rotation, options)?;
-    let config = FilterConfig::new(convert::imu_noise::<T>(input.imu_noise));
-    let mut ekf = PoseImuEkf::<T>::new(&config, &initial)
-        .map_err(|e| PoseImuError::BadInput(format!("imu0/imu.yaml: invalid noise ({e})")))?;
+    let FilterStart {
+        mut ekf,
+        rotation_init,
+        init_problem,
+    } = start_filter::<T>(imu, input.imu_noise, standstill.as_ref(), rotation, options)?;
 
     let started = Instant::now();
-    let mut run = Run::new(first_imu.stamp_ns, period_ns);
-    let sigma_r = input.pose_noise.rotation_noise_rad;
-    let sigma_t = input.pose_noise.translation_noise_m;
-    let total = (last_imu.stamp_ns - first_imu.stamp_ns).max(1) as f64;
-    let mut next_pose = 0;
-    for (i, rec) in imu.iter().enumerate() {
-        while let Some(pose) = poses.get(next_pose) {
-            let due = pose.stamp_ns as i128 + (ekf.time_offset(0).to_f64() * 1e9) as i128;
-            if due > rec.stamp_ns as i128 {
-                break;
-            }
-            if i == 0 {
-                run.skip(pose.stamp_ns, "before the first IMU sample");
-            } else {
-                run.fuse_pose(&mut ekf, pose, sigma_r, sigma_t);
-            }
-            next_pose += 1;
-        }
-        ekf.propagate(&convert::imu_sample::<T>(rec)).map_err(|e| {
-            PoseImuError::BadInput(format!(
-                "imu0/data.csv: {e}, ending at the sample stamped {} ns (sample {} of the file)",
-                rec.stamp_ns,
-                i + 1
-            ))
-        })?;
-        if standstill.is_some_and(|s| rec.stamp_ns <= s.until_ns) && i % 20 == 0 {
-            // Errors here only mean the gate rejected a ZUPT; nothing to report.
-            let _ = ekf.update_zero_velocity();
-        }
-        if i % 2000 == 0 {
-            progress((rec.stamp_ns - first_imu.stamp_ns) as f64 / total);
-        }
-    }
+    let mut feed = PoseFeed {
+        run: Run::new(first_imu.stamp_ns, period_ns),
+        poses,
+        next_pose: 0,
+        sigma_r: input.pose_noise.rotation_noise_rad,
+        sigma_t: input.pose_noise.translation_noise_m,
+    };
+    drive_imu(&mut ekf, imu, standstill.as_ref(), progress, &mut feed)?;
+    let PoseFeed {
+        mut run, next_pose, ..
+    } = feed;
     for pose in &poses[next_pose..] {
         run.skip(pose.stamp_ns, "after the last IMU sample");
     }
@@ -285,8 +242,136 @@ pub fn calibrate<T: Scalar>(
     Ok(calibration)
 }
 
+/// The pose-IMU pipeline's measurement feed: fuses every pose whose IMU time has come.
+struct PoseFeed<'a> {
+    run: Run,
+    poses: &'a [PoseRecord],
+    next_pose: usize,
+    sigma_r: f64,
+    sigma_t: f64,
+}
+
+impl<T: Scalar> ImuHooks<T> for PoseFeed<'_> {
+    fn before_sample(
+        &mut self,
+        ekf: &mut PoseImuEkf<T>,
+        index: usize,
+        rec: &ImuRecord,
+    ) -> Result<(), PoseImuError> {
+        while let Some(pose) = self.poses.get(self.next_pose) {
+            let due = pose.stamp_ns as i128 + (ekf.time_offset(0).to_f64() * 1e9) as i128;
+            if due > rec.stamp_ns as i128 {
+                break;
+            }
+            if index == 0 {
+                self.run.skip(pose.stamp_ns, "before the first IMU sample");
+            } else {
+                self.run.fuse_pose(ekf, pose, self.sigma_r, self.sigma_t);
+            }
+            self.next_pose += 1;
+        }
+        Ok(())
+    }
+}
+
+/// What a pipeline does around each IMU sample of [`drive_imu`].
+pub(crate) trait ImuHooks<T: Scalar> {
+    /// Before sample `index` is propagated: fuse every measurement due by `rec.stamp_ns`
+    /// (the filter is still at the previous sample, holding it).
+    fn before_sample(
+        &mut self,
+        ekf: &mut PoseImuEkf<T>,
+        index: usize,
+        rec: &ImuRecord,
+    ) -> Result<(), PoseImuError>;
+
+    /// After sample `rec` was propagated (and a standstill ZUPT applied).
+    fn after_sample(&mut self, _ekf: &PoseImuEkf<T>, _rec: &ImuRecord) {}
+}
+
+/// Runs the filter over the IMU record: measurements via `hooks`, propagation, zero-velocity
+/// updates during the initial standstill, progress.
+pub(crate) fn drive_imu<T: Scalar>(
+    ekf: &mut PoseImuEkf<T>,
+    imu: &[ImuRecord],
+    standstill: Option<&Standstill>,
+    progress: &mut dyn FnMut(f64),
+    hooks: &mut dyn ImuHooks<T>,
+) -> Result<(), PoseImuError> {
+    let (Some(first_imu), Some(last_imu)) = (imu.first(), imu.last()) else {
+        return Ok(());
+    };
+    let total = (last_imu.stamp_ns - first_imu.stamp_ns).max(1) as f64;
+    for (i, rec) in imu.iter().enumerate() {
+        hooks.before_sample(ekf, i, rec)?;
+        ekf.propagate(&convert::imu_sample::<T>(rec)).map_err(|e| {
+            PoseImuError::BadInput(format!(
+                "imu0/data.csv: {e}, ending at the sample stamped {} ns (sample {} of the file)",
+                rec.stamp_ns,
+                i + 1
+            ))
+        })?;
+        if standstill.is_some_and(|s| rec.stamp_ns <= s.until_ns) && i % 20 == 0 {
+            // Errors here only mean the gate rejected a ZUPT; nothing to report.
+            let _ = ekf.update_zero_velocity();
+        }
+        hooks.after_sample(ekf, rec);
+        if i % 2000 == 0 {
+            progress((rec.stamp_ns - first_imu.stamp_ns) as f64 / total);
+        }
+    }
+    Ok(())
+}
+
+/// A filter ready to run, with how its extrinsic rotation was initialised.
+pub(crate) struct FilterStart<T: Scalar> {
+    pub(crate) ekf: PoseImuEkf<T>,
+    pub(crate) rotation_init: init::RotationInit,
+    /// Why the hand-eye initialisation failed, when it did.
+    pub(crate) init_problem: Option<String>,
+}
+
+/// Builds the filter from the standstill and the hand-eye result. Without rotation about two
+/// axes the hand-eye rotation is undetermined: the filter still runs (from identity, wide
+/// open) so the result and report exist, but it cannot converge.
+pub(crate) fn start_filter<T: Scalar>(
+    imu: &[ImuRecord],
+    imu_noise: &ImuNoiseYaml,
+    standstill: Option<&Standstill>,
+    rotation: Result<init::RotationInit, msreg_estimator::HandEyeError<f64>>,
+    options: &PoseImuOptions,
+) -> Result<FilterStart<T>, PoseImuError> {
+    let (rotation_init, init_problem) = match rotation {
+        Ok(r) => (r, None),
+        Err(e) => (
+            init::RotationInit {
+                rotation: nalgebra::UnitQuaternion::identity(),
+                pairs: 0,
+                axis_ratio: 0.0,
+            },
+            Some(format!(
+                "hand-eye rotation initialisation failed ({e:?}): the recording needs \
+                 rotation about at least two axes"
+            )),
+        ),
+    };
+    let mut options = *options;
+    if init_problem.is_some() {
+        options.rotation_sigma_rad = 0.5;
+    }
+    let initial = initial_state::<T>(imu, standstill, &rotation_init.rotation, &options)?;
+    let config = FilterConfig::new(convert::imu_noise::<T>(imu_noise));
+    let ekf = PoseImuEkf::<T>::new(&config, &initial)
+        .map_err(|e| PoseImuError::BadInput(format!("imu0/imu.yaml: invalid noise ({e})")))?;
+    Ok(FilterStart {
+        ekf,
+        rotation_init,
+        init_problem,
+    })
+}
+
 /// Median spacing of the odometry, ns.
-fn nominal_period_ns(poses: &[PoseRecord]) -> u64 {
+pub(crate) fn nominal_period_ns(poses: &[PoseRecord]) -> u64 {
     let mut d: Vec<u64> = poses
         .windows(2)
         .map(|w| w[1].stamp_ns - w[0].stamp_ns)
@@ -345,14 +430,15 @@ fn initial_state<T: Scalar>(
 }
 
 /// Bookkeeping of one run over the recording.
-struct Run {
+pub(crate) struct Run {
     start_ns: u64,
     max_interval_ns: u64,
     period_ns: u64,
     previous: Option<PoseRecord>,
     history: Vec<HistoryPoint>,
     events: Vec<EventRecord>,
-    skipped: Vec<String>,
+    /// Measurements skipped, with reasons (report).
+    pub(crate) skipped: Vec<String>,
     accepted: usize,
     rejected: usize,
     nis_sum: f64,
@@ -360,7 +446,7 @@ struct Run {
 }
 
 impl Run {
-    fn new(start_ns: u64, period_ns: u64) -> Self {
+    pub(crate) fn new(start_ns: u64, period_ns: u64) -> Self {
         Self {
             start_ns,
             max_interval_ns: period_ns.saturating_mul(10),
@@ -376,7 +462,7 @@ impl Run {
         }
     }
 
-    fn seconds(&self, stamp_ns: u64) -> f64 {
+    pub(crate) fn seconds(&self, stamp_ns: u64) -> f64 {
         stamp_ns.saturating_sub(self.start_ns) as f64 * 1e-9
     }
 
@@ -419,22 +505,7 @@ impl Run {
         match ekf.update_relative_pose(0, &meas) {
             Ok(report) => {
                 self.previous = Some(*pose);
-                if report.accepted {
-                    self.accepted += 1;
-                } else {
-                    self.rejected += 1;
-                }
-                self.nis_sum += report.nis.to_f64();
-                self.nis_dof += report.dof;
-                if let Some(event) = report.event {
-                    self.events.push(self.event_record(&event));
-                }
-                self.history.push(history_point(
-                    ekf,
-                    self.seconds(pose.stamp_ns),
-                    report.nis.to_f64(),
-                    report.accepted,
-                ));
+                self.record_update(ekf, pose.stamp_ns, &report);
             }
             Err(FilterError::NoAnchor | FilterError::OlderThanWindow) => {
                 self.previous = None;
@@ -442,6 +513,32 @@ impl Run {
             }
             Err(e) => self.skip(pose.stamp_ns, &format!("{e}")),
         }
+    }
+
+    /// Books a relative-pose update of the measurement stamped `stamp_ns`: counts, NIS,
+    /// health events and a history point.
+    pub(crate) fn record_update<T: Scalar>(
+        &mut self,
+        ekf: &PoseImuEkf<T>,
+        stamp_ns: u64,
+        report: &msreg_estimator::UpdateReport<T>,
+    ) {
+        if report.accepted {
+            self.accepted += 1;
+        } else {
+            self.rejected += 1;
+        }
+        self.nis_sum += report.nis.to_f64();
+        self.nis_dof += report.dof;
+        if let Some(event) = report.event {
+            self.events.push(self.event_record(&event));
+        }
+        self.history.push(history_point(
+            ekf,
+            self.seconds(stamp_ns),
+            report.nis.to_f64(),
+            report.accepted,
+        ));
     }
 
     fn event_record<T: Scalar>(&self, event: &HealthEvent<T>) -> EventRecord {
@@ -499,7 +596,7 @@ const CONVERGED_SIGMA_ROT_DEG: f64 = 0.5;
 /// Largest final 1-sigma translation (m) of a converged calibration.
 const CONVERGED_SIGMA_TRANS_M: f64 = 0.02;
 
-fn finish<T: Scalar>(
+pub(crate) fn finish<T: Scalar>(
     ekf: &PoseImuEkf<T>,
     run: Run,
     standstill: Option<&Standstill>,

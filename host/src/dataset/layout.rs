@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use super::error::DatasetError;
 use super::groundtruth::{read_groundtruth_csv, GroundTruthRecord};
 use super::imu::{read_imu_csv, ImuNoiseYaml, ImuRecord};
+use super::lidar::{list_scans, LidarYaml, ScanFile, LIDAR_DIR, LIDAR_YAML};
 use super::meta::DatasetYaml;
 use super::pose::{read_pose_csv, PoseRecord, PoseSensorYaml};
 use super::result::CalibrationResult;
@@ -115,6 +116,17 @@ impl Dataset {
             self.groundtruth_extrinsics.as_ref(),
             GROUNDTRUTH_EXTRINSICS_YAML,
         )
+    }
+
+    /// The LiDAR scans `lidar0/<stamp_ns>.pcd` sorted by stamp (listed, not read), or an
+    /// error naming `lidar0/`.
+    pub fn lidar0_scans(&self) -> Result<Vec<ScanFile>, DatasetError> {
+        list_scans(&self.path(LIDAR_DIR))
+    }
+
+    /// `lidar0/lidar.yaml` if present (informative).
+    pub fn lidar0_yaml(&self) -> Result<Option<LidarYaml>, DatasetError> {
+        optional(self.path(LIDAR_YAML), LidarYaml::read)
     }
 
     fn require<'a, T: ?Sized>(

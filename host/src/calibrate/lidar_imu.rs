@@ -1,0 +1,783 @@
+//! LiDAR-IMU calibration (dissertation ch. 3.5, Fig. 3.5b): the pose-IMU filter with a
+//! LiDAR front-end.
+//!
+//! 1. **Rotation init** (eq. 3.2-3.5): NDT of consecutive raw (not deskewed) scans over the
+//!    first `init_duration_s` gives LiDAR rotation increments; paired with the gyro
+//!    integrated over the same sweeps (bias from the standstill) they give the hand-eye
+//!    rotation in closed form. Pairs whose residual `|r_I - R r_L|` is an outlier (a wrong
+//!    NDT match) are dropped and the rotation re-solved once.
+//! 2. **Filter cycle**, per scan `k`, when the IMU stream passes the scan's reference time
+//!    `t_ref = stamp + max t_i` (its last firing) `+ t_d`:
+//!    predict (the filter holds the last IMU sample up to `t_ref`) -> **deskew** every point to
+//!    `t_ref` with the buffered filter poses and the current extrinsic (eq. 3.18) ->
+//!    voxel filter -> **NDT** against the previous deskewed scan from the IMU-predicted
+//!    relative motion -> **update** with `T_L(k-1)_L(k)` as a relative pose between the two
+//!    reference stamps (eq. 3.19-3.21). Deskewing to the *last* firing means the measurement
+//!    time is one the IMU stream has just reached, so the filter clones its current pose
+//!    (it cannot clone in the past).
+//! 3. **Measurement noise**: NDT's inverse-Hessian covariance reads the score as a
+//!    likelihood of independent points and is optimistic. The filter uses
+//!    `R = covariance_scale * Sigma_NDT + diag(floor^2)`; see `docs/lidar_imu.md` for the
+//!    values and the NIS measurements that chose them.
+//!    Early on the extrinsic is far from the truth (rotation from the hand-eye init, zero
+//!    translation) and a tight `R` lets the first updates jump along a wrong linearisation,
+//!    after which the gate rejects everything. The floor therefore starts at
+//!    `initial_*_floor` (0.2 deg / 10 mm, the pose-IMU odometry's level) and decays
+//!    exponentially to the final floor over `anneal_updates` updates: a larger `R` only
+//!    makes the filter more conservative, never inconsistent.
+//! 4. Degenerate, non-converged or low-fitness matches are skipped (reported) and the
+//!    odometry chain restarts at that scan; a scan with zero points is skipped; a malformed
+//!    scan file stops the run with an error naming it.
+
+use std::time::Instant;
+
+use msreg_estimator::{propagate, Error as FilterError, PoseImuEkf, RelativePose, Scalar};
+use nalgebra::{Isometry3, Matrix6, Vector3};
+use serde::Serialize;
+
+use super::convert;
+use super::init::{self, RotationInit};
+use super::pose_imu::{
+    drive_imu, finish, start_filter, FilterStart, ImuHooks, PoseImuError, PoseImuOptions,
+    PoseImuReport, Run, Timing,
+};
+use crate::dataset::{ExtrinsicEstimate, ImuNoiseYaml, ImuRecord};
+use crate::lidar::deskew::imu_time;
+use crate::lidar::{deskew_scan, PoseBuffer, ScanLoadError, ScanSource};
+use crate::ndt::{align, NdtParams, NdtTarget};
+use crate::pointcloud::{voxel_downsample, PointCloud};
+
+/// What the pipeline reads.
+#[derive(Clone, Copy)]
+pub struct LidarImuInput<'a> {
+    /// IMU samples, strictly increasing stamps.
+    pub imu: &'a [ImuRecord],
+    /// IMU noise densities.
+    pub imu_noise: &'a ImuNoiseYaml,
+    /// The LiDAR sweeps.
+    pub scans: &'a dyn ScanSource,
+}
+
+/// Tuning of the pipeline.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LidarImuOptions {
+    /// Priors, time offset and standstill options shared with the pose-IMU pipeline.
+    pub filter: PoseImuOptions,
+    /// Deskew scans (eq. 3.18); `false` matches raw scans stamped at mid-sweep (Fig. 3.11).
+    pub deskew: bool,
+    /// Voxel-filter leaf after deskewing, m.
+    pub voxel_m: f64,
+    /// NDT options.
+    pub ndt: NdtParams,
+    /// Scans from the first this many seconds feed the hand-eye rotation init.
+    pub init_duration_s: f64,
+    /// Factor on NDT's covariance.
+    pub covariance_scale: f64,
+    /// Per-axis 1-sigma rotation added to every increment, rad.
+    pub rotation_floor_rad: f64,
+    /// Per-axis 1-sigma translation added to every increment, m.
+    pub translation_floor_m: f64,
+    /// Per-axis 1-sigma rotation floor of the first update, rad; the floor decays from it to
+    /// `rotation_floor_rad` with time constant `anneal_updates` (see the module docs).
+    pub initial_rotation_floor_rad: f64,
+    /// Per-axis 1-sigma translation floor of the first update, m.
+    pub initial_translation_floor_m: f64,
+    /// Decay constant of the floor, in updates.
+    pub anneal_updates: f64,
+    /// Matches with a lower NDT fitness are skipped.
+    pub min_fitness: f64,
+    /// Scans with fewer points after voxel filtering are skipped.
+    pub min_points: usize,
+}
+
+impl Default for LidarImuOptions {
+    fn default() -> Self {
+        Self {
+            filter: PoseImuOptions {
+                rotation_sigma_rad: 3f64.to_radians(),
+                ..PoseImuOptions::default()
+            },
+            deskew: true,
+            voxel_m: 0.15,
+            ndt: NdtParams {
+                resolutions: vec![2.0, 1.0, 0.5],
+                ..NdtParams::default()
+            },
+            init_duration_s: 15.0,
+            covariance_scale: 0.3,
+            rotation_floor_rad: 0.005f64.to_radians(),
+            translation_floor_m: 0.0005,
+            initial_rotation_floor_rad: 0.2f64.to_radians(),
+            initial_translation_floor_m: 0.01,
+            anneal_updates: 100.0,
+            min_fitness: 0.05,
+            min_points: 200,
+        }
+    }
+}
+
+/// One scan's fate, for the report.
+#[derive(Debug, Clone, Serialize)]
+pub struct ScanRecord {
+    /// Scan stamp (LiDAR clock), ns.
+    pub stamp_ns: u64,
+    /// Reference (measurement) stamp, LiDAR clock, ns.
+    pub reference_stamp_ns: u64,
+    /// Seconds since the first IMU sample.
+    pub t_s: f64,
+    /// Points read.
+    pub points: usize,
+    /// Points after the voxel filter.
+    pub points_filtered: usize,
+    /// `matched`, `anchor` (first of a chain) or why it was skipped.
+    pub status: String,
+    /// NDT fitness (mean normalised score per point), when matched.
+    pub fitness: Option<f64>,
+    /// NDT iterations.
+    pub iterations: Option<usize>,
+    /// NIS of the update.
+    pub nis: Option<f64>,
+    /// Measured `T_L(k-1)_L(k)`: rotation vector, rad.
+    pub delta_rotation: Option<[f64; 3]>,
+    /// Measured `T_L(k-1)_L(k)`: translation, m.
+    pub delta_translation: Option<[f64; 3]>,
+    /// Measurement 1-sigma (after inflation) [rot x, y, z (rad); trans x, y, z (m)].
+    pub sigma: Option<[f64; 6]>,
+}
+
+/// Wall time per stage, s.
+#[derive(Debug, Clone, Copy, Serialize, Default)]
+pub struct StageTiming {
+    /// Standstill detection, raw NDT and hand-eye rotation.
+    pub rotation_init: f64,
+    /// Reading scans (filter pass).
+    pub load: f64,
+    /// Deskewing.
+    pub deskew: f64,
+    /// Voxel filter and NDT target build.
+    pub voxel_and_target: f64,
+    /// NDT registration.
+    pub ndt: f64,
+    /// Filter (propagation and updates), the rest of the filter pass.
+    pub filter: f64,
+    /// The whole filter pass.
+    pub total_filter_pass: f64,
+}
+
+/// The JSON report of a LiDAR-IMU calibration.
+#[derive(Debug, Clone, Serialize)]
+pub struct LidarImuReport {
+    /// The filter's report (convergence checks, hand-eye init, history of 6 DoF + sigmas).
+    #[serde(flatten)]
+    pub filter: PoseImuReport,
+    /// Whether scans were deskewed.
+    pub deskew: bool,
+    /// Scans in the recording.
+    pub scans_total: usize,
+    /// Scans fused as relative poses.
+    pub scans_matched: usize,
+    /// Scans skipped, with reasons.
+    pub scans_skipped: Vec<String>,
+    /// Mean NIS per DoF of the updates after the floor's annealing settled (from update
+    /// `3 * anneal_updates` on; 1 when the final noise model is consistent; NaN if none).
+    pub settled_nis_per_dof: f64,
+    /// Pairs the rotation init dropped as outliers.
+    pub hand_eye_outliers: usize,
+    /// The measurement noise model: `[covariance_scale, rotation floor (deg), translation
+    /// floor (m)]`.
+    pub measurement_noise: [f64; 3],
+    /// Wall time per stage.
+    pub stage_timing_s: StageTiming,
+    /// Per scan: points, NDT fitness, NIS.
+    pub scans: Vec<ScanRecord>,
+}
+
+/// The outcome.
+#[derive(Debug, Clone)]
+pub struct LidarImuCalibration {
+    /// `T_imu_lidar`.
+    pub t_imu_lidar: Isometry3<f64>,
+    /// Time offset `t_d`, s.
+    pub time_offset_s: f64,
+    /// 1-sigma of the time offset, s.
+    pub time_offset_sigma_s: f64,
+    /// Covariance of the extrinsic error `[dtheta (right perturbation); dp]`.
+    pub covariance: Matrix6<f64>,
+    /// The report.
+    pub report: LidarImuReport,
+}
+
+impl LidarImuCalibration {
+    /// The `lidar0` section of the result file.
+    pub fn estimate(&self) -> ExtrinsicEstimate {
+        let sd = |i: usize| self.covariance[(i, i)].max(0.0).sqrt();
+        ExtrinsicEstimate {
+            transform: self.t_imu_lidar,
+            timeshift_s: self.time_offset_s,
+            sigma_rot_deg: Vector3::new(sd(0), sd(1), sd(2)).map(f64::to_degrees),
+            sigma_trans_m: Vector3::new(sd(3), sd(4), sd(5)),
+        }
+    }
+}
+
+/// Runs the calibration with the filter in scalar type `T`.
+pub fn calibrate<T: Scalar>(
+    input: &LidarImuInput<'_>,
+    options: &LidarImuOptions,
+    progress: &mut dyn FnMut(f64),
+) -> Result<LidarImuCalibration, PoseImuError> {
+    let imu = input.imu;
+    let Some(first_imu) = imu.first() else {
+        return Err(PoseImuError::BadInput(
+            "imu0/data.csv: no IMU samples".into(),
+        ));
+    };
+    if input.scans.len() < 3 {
+        return Err(PoseImuError::BadInput(format!(
+            "lidar0/: {} scans; at least 3 are needed",
+            input.scans.len()
+        )));
+    }
+    options
+        .ndt
+        .validate()
+        .map_err(|e| PoseImuError::BadInput(e.to_string()))?;
+    let started = Instant::now();
+    let standstill = init::detect_standstill(imu, options.filter.min_standstill_s);
+    let gyro_bias = standstill.map_or_else(Vector3::zeros, |s| s.gyro_mean);
+    let (rotation, outliers) = rotation_init(imu, input.scans, &gyro_bias, options)?;
+    let init_s = started.elapsed().as_secs_f64();
+    let FilterStart {
+        mut ekf,
+        rotation_init,
+        init_problem,
+    } = start_filter::<T>(
+        imu,
+        input.imu_noise,
+        standstill.as_ref(),
+        rotation,
+        &options.filter,
+    )?;
+
+    let started = Instant::now();
+    let mut feed = LidarFeed::new(input.scans, options, first_imu.stamp_ns);
+    drive_imu(&mut ekf, imu, standstill.as_ref(), progress, &mut feed)?;
+    if let Some(p) = feed.pending.take() {
+        feed.skip(p.index, p.stamp_ns, "after the last IMU sample");
+    }
+    for k in feed.next..input.scans.len() {
+        feed.skip(k, input.scans.stamp_ns(k), "after the last IMU sample");
+    }
+    progress(1.0);
+    let filter_s = started.elapsed().as_secs_f64();
+    let mut timing = feed.timing;
+    timing.rotation_init = init_s;
+    timing.total_filter_pass = filter_s;
+    timing.filter = filter_s - timing.load - timing.deskew - timing.voxel_and_target - timing.ndt;
+
+    let LidarFeed {
+        mut run, records, ..
+    } = feed;
+    let scans_skipped = std::mem::take(&mut run.skipped);
+    let pose = finish(
+        &ekf,
+        run,
+        standstill.as_ref(),
+        &rotation_init,
+        Timing {
+            init: init_s,
+            filter: filter_s,
+        },
+    );
+    let mut report = LidarImuReport {
+        filter: pose.report,
+        deskew: options.deskew,
+        scans_total: input.scans.len(),
+        scans_matched: records.iter().filter(|r| r.status == "matched").count(),
+        scans_skipped,
+        settled_nis_per_dof: settled_nis(&records, options),
+        hand_eye_outliers: outliers,
+        measurement_noise: [
+            options.covariance_scale,
+            options.rotation_floor_rad.to_degrees(),
+            options.translation_floor_m,
+        ],
+        stage_timing_s: timing,
+        scans: records,
+    };
+    if let Some(problem) = init_problem {
+        report.filter.reasons.insert(0, problem);
+        report.filter.converged = false;
+    }
+    Ok(LidarImuCalibration {
+        t_imu_lidar: pose.t_imu_pose,
+        time_offset_s: pose.time_offset_s,
+        time_offset_sigma_s: pose.time_offset_sigma_s,
+        covariance: pose.covariance,
+        report,
+    })
+}
+
+/// Mean NIS/dof of the matched scans after `3 * anneal_updates` updates.
+fn settled_nis(records: &[ScanRecord], options: &LidarImuOptions) -> f64 {
+    let skip = (3.0 * options.anneal_updates).ceil() as usize;
+    let nis: Vec<f64> = records.iter().filter_map(|r| r.nis).skip(skip).collect();
+    nis.iter().sum::<f64>() / (6 * nis.len()) as f64
+}
+
+/// Loads scan `k`: `Ok(None)` for a documented skip (zero points), an error for bad input.
+fn load(scans: &dyn ScanSource, k: usize) -> Result<Option<PointCloud>, PoseImuError> {
+    match scans.load(k) {
+        Ok(c) if c.is_empty() => Ok(None),
+        Ok(c) => Ok(Some(c)),
+        Err(ScanLoadError::Empty(_)) => Ok(None),
+        Err(ScanLoadError::Bad(m)) => Err(PoseImuError::BadInput(m)),
+    }
+}
+
+/// Last firing offset of a scan, ns.
+fn last_firing_ns(cloud: &PointCloud) -> u64 {
+    cloud
+        .points
+        .iter()
+        .map(|p| u64::from(p.t_ns))
+        .max()
+        .unwrap_or(0)
+}
+
+/// Largest residual `|r_I - R r_L|` kept, rad, however small the median.
+const MIN_OUTLIER_THRESHOLD_RAD: f64 = 0.01;
+
+/// Hand-eye rotation from raw-scan NDT rotations over the first `init_duration_s`.
+/// Returns the rotation (or why not) and the number of pairs dropped as outliers.
+fn rotation_init(
+    imu: &[ImuRecord],
+    scans: &dyn ScanSource,
+    gyro_bias: &Vector3<f64>,
+    options: &LidarImuOptions,
+) -> Result<
+    (
+        Result<RotationInit, msreg_estimator::HandEyeError<f64>>,
+        usize,
+    ),
+    PoseImuError,
+> {
+    let first = imu.first().map_or(0, |r| r.stamp_ns);
+    let until = first.saturating_add((options.init_duration_s * 1e9) as u64);
+    let mut increments = Vec::new();
+    let mut previous: Option<(u64, NdtTarget)> = None;
+    for k in 0..scans.len() {
+        let stamp = scans.stamp_ns(k);
+        if stamp > until {
+            break;
+        }
+        let Some(cloud) = load(scans, k)? else {
+            previous = None;
+            continue;
+        };
+        let mid = stamp.saturating_add(last_firing_ns(&cloud) / 2);
+        let points = voxel_downsample(&cloud, options.voxel_m).positions();
+        if points.len() < options.min_points {
+            previous = None;
+            continue;
+        }
+        if let Some((prev_mid, target)) = &previous {
+            if mid > *prev_mid {
+                if let Ok(r) = align(target, &points, &Isometry3::identity(), &options.ndt) {
+                    if r.converged && r.fitness >= options.min_fitness {
+                        increments.push((*prev_mid, mid, r.t_target_source.rotation));
+                    }
+                }
+            }
+        }
+        previous = NdtTarget::build(&points, &options.ndt)
+            .ok()
+            .map(|t| (mid, t));
+    }
+    let pairs = init::rotation_pairs(imu, increments, gyro_bias);
+    let first_pass = init::hand_eye_from_pairs(pairs.iter().copied(), 10);
+    let Ok(first_solution) = first_pass else {
+        return Ok((first_pass, 0));
+    };
+    let r = first_solution.rotation;
+    let residuals: Vec<f64> = pairs.iter().map(|(ri, rl)| (ri - r * rl).norm()).collect();
+    let mut sorted = residuals.clone();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
+    let threshold = (5.0 * median).max(MIN_OUTLIER_THRESHOLD_RAD);
+    let kept: Vec<_> = pairs
+        .iter()
+        .zip(&residuals)
+        .filter(|(_, e)| **e <= threshold)
+        .map(|(p, _)| *p)
+        .collect();
+    let outliers = pairs.len() - kept.len();
+    Ok((init::hand_eye_from_pairs(kept, 10), outliers))
+}
+
+/// A scan read and waiting for the IMU to reach its reference time.
+struct Pending {
+    index: usize,
+    stamp_ns: u64,
+    ref_offset_ns: u64,
+    cloud: PointCloud,
+}
+
+/// The last deskewed scan: the target of the next match.
+struct Previous {
+    /// Reference stamp, LiDAR clock (the filter's anchor stamp).
+    ref_stamp_ns: u64,
+    /// Its IMU time when it was processed.
+    imu_time_ns: u64,
+    target: NdtTarget,
+}
+
+/// The LiDAR front-end of the filter loop.
+struct LidarFeed<'a> {
+    run: Run,
+    scans: &'a dyn ScanSource,
+    options: &'a LidarImuOptions,
+    next: usize,
+    pending: Option<Pending>,
+    previous: Option<Previous>,
+    last_end_ns: Option<u64>,
+    held: Option<ImuRecord>,
+    buffer: PoseBuffer,
+    records: Vec<ScanRecord>,
+    timing: StageTiming,
+    first_imu_ns: u64,
+    /// Relative poses formed so far (drives the floor's annealing).
+    updates: usize,
+}
+
+impl<T: Scalar> ImuHooks<T> for LidarFeed<'_> {
+    fn before_sample(
+        &mut self,
+        ekf: &mut PoseImuEkf<T>,
+        index: usize,
+        rec: &ImuRecord,
+    ) -> Result<(), PoseImuError> {
+        let td_ns = (ekf.time_offset(0).to_f64() * 1e9).round() as i64;
+        loop {
+            if self.pending.is_none() {
+                if self.next >= self.scans.len() {
+                    return Ok(());
+                }
+                let k = self.next;
+                let stamp = self.scans.stamp_ns(k);
+                if imu_time(stamp, 0, td_ns) > rec.stamp_ns {
+                    return Ok(());
+                }
+                self.next += 1;
+                let started = Instant::now();
+                let cloud = load(self.scans, k);
+                self.timing.load += started.elapsed().as_secs_f64();
+                let Some(cloud) = cloud? else {
+                    self.skip(k, stamp, "zero points");
+                    continue;
+                };
+                let last = last_firing_ns(&cloud);
+                let ref_offset_ns = if self.options.deskew { last } else { last / 2 };
+                let ref_stamp = stamp.saturating_add(ref_offset_ns);
+                if self.last_end_ns.is_some_and(|e| ref_stamp <= e) {
+                    self.skip(
+                        k,
+                        stamp,
+                        "stamp not after the previous scan's (out of order)",
+                    );
+                    continue;
+                }
+                self.pending = Some(Pending {
+                    index: k,
+                    stamp_ns: stamp,
+                    ref_offset_ns,
+                    cloud,
+                });
+            }
+            let Some(p) = self.pending.as_ref() else {
+                return Ok(());
+            };
+            if imu_time(p.stamp_ns, p.ref_offset_ns, td_ns) > rec.stamp_ns {
+                return Ok(());
+            }
+            let Some(p) = self.pending.take() else {
+                return Ok(());
+            };
+            match self.held {
+                Some(held) if index > 0 => self.process(ekf, p, &held),
+                _ => self.skip(p.index, p.stamp_ns, "before the first IMU sample"),
+            }
+        }
+    }
+
+    fn after_sample(&mut self, ekf: &PoseImuEkf<T>, rec: &ImuRecord) {
+        self.held = Some(*rec);
+        self.buffer
+            .push(ekf.time_ns(), convert::isometry(&ekf.imu().pose()));
+    }
+}
+
+impl<'a> LidarFeed<'a> {
+    fn new(scans: &'a dyn ScanSource, options: &'a LidarImuOptions, first_imu_ns: u64) -> Self {
+        Self {
+            run: Run::new(first_imu_ns, 100_000_000),
+            scans,
+            options,
+            next: 0,
+            pending: None,
+            previous: None,
+            last_end_ns: None,
+            held: None,
+            buffer: PoseBuffer::new(2_000_000_000),
+            records: Vec::new(),
+            timing: StageTiming::default(),
+            first_imu_ns,
+            updates: 0,
+        }
+    }
+
+    fn skip(&mut self, index: usize, stamp_ns: u64, why: &str) {
+        self.run.skipped.push(format!(
+            "lidar0 scan {} ({}): {why}",
+            stamp_ns,
+            self.scans.name(index)
+        ));
+        self.records.push(ScanRecord {
+            stamp_ns,
+            reference_stamp_ns: stamp_ns,
+            t_s: stamp_ns.saturating_sub(self.first_imu_ns) as f64 * 1e-9,
+            points: 0,
+            points_filtered: 0,
+            status: why.to_string(),
+            fitness: None,
+            iterations: None,
+            nis: None,
+            delta_rotation: None,
+            delta_translation: None,
+            sigma: None,
+        });
+    }
+
+    /// Predict -> deskew -> NDT -> update for one scan whose reference time has come.
+    #[allow(clippy::too_many_lines)]
+    fn process<T: Scalar>(&mut self, ekf: &mut PoseImuEkf<T>, p: Pending, held: &ImuRecord) {
+        let td_ns = (ekf.time_offset(0).to_f64() * 1e9).round() as i64;
+        let ref_stamp = p.stamp_ns.saturating_add(p.ref_offset_ns);
+        let due = imu_time(p.stamp_ns, p.ref_offset_ns, td_ns);
+        // Predict: the filter's pose at `due`, holding the last sample as the filter will.
+        let predicted = if due > ekf.time_ns() {
+            let dt = T::lit((due - ekf.time_ns()) as f64 * 1e-9);
+            let s = propagate::step(
+                ekf.imu(),
+                &convert::vec3::<T>(&held.gyro),
+                &convert::vec3::<T>(&held.accel),
+                dt,
+                &ekf.config().imu_noise,
+            );
+            convert::isometry(&s.state.pose())
+        } else {
+            convert::isometry(&ekf.imu().pose())
+        };
+        self.buffer.push(due, predicted);
+        let t_i_l = convert::isometry(&ekf.extrinsic(0));
+
+        let mut record = ScanRecord {
+            stamp_ns: p.stamp_ns,
+            reference_stamp_ns: ref_stamp,
+            t_s: due.saturating_sub(self.first_imu_ns) as f64 * 1e-9,
+            points: p.cloud.len(),
+            points_filtered: 0,
+            status: String::new(),
+            fitness: None,
+            iterations: None,
+            nis: None,
+            delta_rotation: None,
+            delta_translation: None,
+            sigma: None,
+        };
+        let started = Instant::now();
+        let deskewed = if self.options.deskew {
+            deskew_scan(
+                &p.cloud,
+                p.stamp_ns,
+                p.ref_offset_ns,
+                td_ns,
+                &t_i_l,
+                &self.buffer,
+            )
+        } else {
+            Some(p.cloud)
+        };
+        self.timing.deskew += started.elapsed().as_secs_f64();
+        let Some(deskewed) = deskewed else {
+            self.reject(ekf, record, ref_stamp, "no IMU poses to deskew with");
+            return;
+        };
+        let started = Instant::now();
+        let points = voxel_downsample(&deskewed, self.options.voxel_m).positions();
+        record.points_filtered = points.len();
+        let target = NdtTarget::build(&points, &self.options.ndt);
+        self.timing.voxel_and_target += started.elapsed().as_secs_f64();
+        if points.len() < self.options.min_points {
+            self.reject(
+                ekf,
+                record,
+                ref_stamp,
+                "too few points after voxel filtering",
+            );
+            return;
+        }
+        let target = match target {
+            Ok(t) => t,
+            Err(e) => {
+                self.reject(ekf, record, ref_stamp, &format!("no NDT target: {e}"));
+                return;
+            }
+        };
+        let this = Previous {
+            ref_stamp_ns: ref_stamp,
+            imu_time_ns: due,
+            target,
+        };
+        let Some(prev) = self.previous.take() else {
+            self.start_chain(ekf, record, this, "anchor");
+            return;
+        };
+        let guess = match self.buffer.at(prev.imu_time_ns) {
+            Some(t_g_prev) => t_i_l.inverse() * t_g_prev.inverse() * predicted * t_i_l,
+            None => Isometry3::identity(),
+        };
+        let started = Instant::now();
+        let matched = align(&prev.target, &points, &guess, &self.options.ndt);
+        self.timing.ndt += started.elapsed().as_secs_f64();
+        let result = match matched {
+            Ok(r) if r.converged && r.fitness >= self.options.min_fitness => r,
+            Ok(r) => {
+                record.fitness = Some(r.fitness);
+                record.iterations = Some(r.iterations);
+                let why = if let Some(d) = &r.degenerate {
+                    format!("degenerate NDT match ({d:?})")
+                } else if !r.converged {
+                    "NDT did not converge".to_string()
+                } else {
+                    format!(
+                        "NDT fitness {:.3} below {}",
+                        r.fitness, self.options.min_fitness
+                    )
+                };
+                self.start_chain(ekf, record, this, &why);
+                return;
+            }
+            Err(e) => {
+                self.start_chain(ekf, record, this, &format!("NDT failed: {e}"));
+                return;
+            }
+        };
+        record.fitness = Some(result.fitness);
+        record.iterations = Some(result.iterations);
+        let covariance = self.measurement_covariance(&result.covariance);
+        self.updates += 1;
+        let delta = result.t_target_source;
+        let rv = delta.rotation.scaled_axis();
+        record.delta_rotation = Some([rv.x, rv.y, rv.z]);
+        record.delta_translation = Some(delta.translation.vector.into());
+        record.sigma = Some(std::array::from_fn(|i| covariance[(i, i)].sqrt()));
+        let meas = RelativePose {
+            stamp_from_ns: prev.ref_stamp_ns,
+            stamp_to_ns: ref_stamp,
+            delta: convert::pose::<T>(&delta),
+            covariance: Matrix6::from_fn(|r, c| T::lit(covariance[(r, c)])),
+        };
+        match ekf.update_relative_pose(0, &meas) {
+            Ok(report) => {
+                // The update moved the current pose: keep the buffer continuous.
+                let after = convert::isometry(&ekf.imu().pose());
+                self.buffer.reanchor(&(after * predicted.inverse()));
+                self.buffer.push(ekf.time_ns(), after);
+                self.run.record_update(ekf, ref_stamp, &report);
+                record.nis = Some(report.nis.to_f64());
+                record.status = if report.accepted {
+                    "matched".into()
+                } else {
+                    "rejected by the gate".into()
+                };
+                self.last_end_ns = Some(ref_stamp);
+                self.previous = Some(this);
+                self.records.push(record);
+            }
+            Err(FilterError::NoAnchor | FilterError::OlderThanWindow) => {
+                self.start_chain(ekf, record, this, "filter lost the anchor; restarted");
+            }
+            Err(e) => {
+                self.reject(ekf, record, ref_stamp, &format!("update failed: {e}"));
+            }
+        }
+    }
+
+    /// `R = scale * Sigma_NDT + floor`, reordered from NDT's `[t; theta]` to the filter's
+    /// `[theta; t]` (both: rotation a right perturbation, translation additive in the
+    /// target = `from` frame).
+    fn measurement_covariance(&self, ndt: &Matrix6<f64>) -> Matrix6<f64> {
+        let o = self.options;
+        let decay = if o.anneal_updates > 0.0 {
+            (-(self.updates as f64) / o.anneal_updates).exp()
+        } else {
+            0.0
+        };
+        let floor = |initial: f64, last: f64| last + (initial - last).max(0.0) * decay;
+        let floor_r = floor(o.initial_rotation_floor_rad, o.rotation_floor_rad);
+        let floor_t = floor(o.initial_translation_floor_m, o.translation_floor_m);
+        let mut c =
+            Matrix6::from_fn(|r, col| ndt[((r + 3) % 6, (col + 3) % 6)]) * o.covariance_scale;
+        for i in 0..3 {
+            c[(i, i)] += floor_r.powi(2);
+            c[(i + 3, i + 3)] += floor_t.powi(2);
+        }
+        (c + c.transpose()) * 0.5
+    }
+
+    /// Starts a new odometry chain at this scan (first scan, or after a failed match).
+    fn start_chain<T: Scalar>(
+        &mut self,
+        ekf: &mut PoseImuEkf<T>,
+        mut record: ScanRecord,
+        this: Previous,
+        why: &str,
+    ) {
+        match ekf.anchor(0, this.ref_stamp_ns) {
+            Ok(()) => {
+                if why != "anchor" {
+                    self.run.skipped.push(format!(
+                        "lidar0 scan {}: {why}; odometry restarted here",
+                        record.stamp_ns
+                    ));
+                }
+                record.status = why.to_string();
+                self.last_end_ns = Some(this.ref_stamp_ns);
+                self.previous = Some(this);
+                self.records.push(record);
+            }
+            Err(e) => {
+                let stamp = this.ref_stamp_ns;
+                self.reject(ekf, record, stamp, &format!("cannot anchor: {e}"));
+            }
+        }
+    }
+
+    /// Skips a processed scan and breaks the odometry chain.
+    fn reject<T: Scalar>(
+        &mut self,
+        _ekf: &mut PoseImuEkf<T>,
+        mut record: ScanRecord,
+        ref_stamp: u64,
+        why: &str,
+    ) {
+        self.run
+            .skipped
+            .push(format!("lidar0 scan {}: {why}", record.stamp_ns));
+        record.status = why.to_string();
+        self.previous = None;
+        self.last_end_ns = Some(ref_stamp);
+        self.records.push(record);
+    }
+}

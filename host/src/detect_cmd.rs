@@ -1,0 +1,72 @@
+//! `msreg detect checkerboard`: Kalibr-target corners of images as CSV
+//! (`image,corner_id,u,v`), one line per corner; images without a full board are reported
+//! on stderr with the reason and produce no lines.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use anyhow::{bail, ensure, Context};
+use clap::Args;
+use msreg_host::camera_yaml::{read_camera_yaml, read_target_yaml, Target};
+use msreg_host::vision::{detect_checkerboard, DetectorParams, GrayImage};
+
+/// Arguments of `msreg detect checkerboard`.
+#[derive(Args)]
+pub struct DetectCheckerboardArgs {
+    /// Images (PNG or JPEG, grey or colour).
+    #[arg(required = true)]
+    images: Vec<PathBuf>,
+    /// Kalibr target.yaml (target_type checkerboard).
+    #[arg(long)]
+    target: PathBuf,
+    /// Kalibr camera.yaml: checks the image size (the detector works on the raw image).
+    #[arg(long)]
+    camera: Option<PathBuf>,
+    /// Write the CSV here instead of stdout.
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+}
+
+/// Runs the detector; returns how many images had a full board. Errors are bad input.
+pub fn run(args: &DetectCheckerboardArgs) -> anyhow::Result<usize> {
+    let Target::Checkerboard(target) = read_target_yaml(&args.target)? else {
+        bail!(
+            "{}: target_type must be checkerboard",
+            args.target.display()
+        );
+    };
+    let camera = args.camera.as_deref().map(read_camera_yaml).transpose()?;
+    let mut csv = String::from("image,corner_id,u,v\n");
+    let mut detected = 0;
+    for path in &args.images {
+        let image = GrayImage::load(path)?;
+        if let Some(camera) = &camera {
+            let size = (image.width() as u32, image.height() as u32);
+            ensure!(
+                camera.resolution == size,
+                "{}: {}x{} image, but the camera.yaml resolution is {}x{}",
+                path.display(),
+                size.0,
+                size.1,
+                camera.resolution.0,
+                camera.resolution.1
+            );
+        }
+        match detect_checkerboard(&image, target.rows, target.cols, &DetectorParams::default()) {
+            Ok(detection) => {
+                detected += 1;
+                for (id, p) in detection.corners.iter().enumerate() {
+                    writeln!(csv, "{},{id},{:.4},{:.4}", path.display(), p.x, p.y)?;
+                }
+            }
+            Err(reason) => eprintln!("{}: no full board: {reason}", path.display()),
+        }
+    }
+    match &args.output {
+        Some(out) => {
+            std::fs::write(out, csv).with_context(|| format!("{}: cannot write", out.display()))?
+        }
+        None => print!("{csv}"),
+    }
+    Ok(detected)
+}

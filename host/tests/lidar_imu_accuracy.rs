@@ -1,0 +1,218 @@
+//! Accuracy and consistency of the LiDAR-IMU calibration on simulated hand-held recordings
+//! in the indoor box world (VN-300-class IMU at 400 Hz, 10 Hz spinning LiDAR, 2 cm range
+//! noise, random mounting, unknown time offset estimated).
+//!
+//! The CI test runs 25 s recordings of a 32 x 512 LiDAR on 2 seeds; the issue's 60 s
+//! Ouster-128 acceptance run over 5 seeds is `#[ignore]`d (minutes of CPU):
+//! `cargo test --release -p msreg --test lidar_imu_accuracy -- --ignored --nocapture`.
+
+use msreg_host::calibrate::lidar_imu::{self, LidarImuCalibration, LidarImuInput, LidarImuOptions};
+use msreg_host::sim::{simulate_lidar_imu, LidarImuSim, LidarImuSimConfig, LidarSimConfig};
+use nalgebra::{Isometry3, Vector6};
+
+struct Outcome {
+    seed: u64,
+    rot_deg: f64,
+    trans_mm: f64,
+    td_err_ms: f64,
+    sigma_rot_deg: f64,
+    sigma_trans_mm: f64,
+    inside: bool,
+    nees: f64,
+    nis: f64,
+    ndt_rot_err_deg: f64,
+    ndt_trans_err_mm: f64,
+    matched: usize,
+    seconds: f64,
+    converged: bool,
+}
+
+fn config(seed: u64, duration_s: f64, rings: usize, columns: usize) -> LidarImuSimConfig {
+    LidarImuSimConfig {
+        seed,
+        duration_s,
+        lidar: LidarSimConfig {
+            rings,
+            columns,
+            time_offset_s: ((seed * 7919) % 21) as f64 * 1e-3 - 0.010,
+            ..LidarSimConfig::default()
+        },
+        ..LidarImuSimConfig::default()
+    }
+}
+
+fn error(estimate: &Isometry3<f64>, truth: &Isometry3<f64>) -> Vector6<f64> {
+    let r = (estimate.rotation.inverse() * truth.rotation).scaled_axis();
+    let p = truth.translation.vector - estimate.translation.vector;
+    Vector6::new(r.x, r.y, r.z, p.x, p.y, p.z)
+}
+
+/// RMS per-axis error of the fused NDT increments against the true LiDAR motion.
+fn ndt_errors(sim: &LidarImuSim, c: &LidarImuCalibration) -> (f64, f64) {
+    let td = sim.config.lidar.time_offset_s;
+    let mut previous: Option<u64> = None;
+    let (mut sr, mut st, mut n) = (0.0, 0.0, 0usize);
+    for s in &c.report.scans {
+        if let (Some(prev), Some(rv), Some(t)) = (previous, s.delta_rotation, s.delta_translation) {
+            let a = sim.t_g_l(sim.seconds(prev) + td);
+            let b = sim.t_g_l(sim.seconds(s.reference_stamp_ns) + td);
+            let truth = a.inverse() * b;
+            let meas = Isometry3::from_parts(
+                nalgebra::Translation3::from(nalgebra::Vector3::from(t)),
+                nalgebra::UnitQuaternion::from_scaled_axis(nalgebra::Vector3::from(rv)),
+            );
+            let e = error(&meas, &truth);
+            sr += e.fixed_rows::<3>(0).norm_squared();
+            st += e.fixed_rows::<3>(3).norm_squared();
+            n += 3;
+        }
+        previous = (s.status == "matched"
+            || s.status == "anchor"
+            || s.status.starts_with("rejected")
+            || s.status.starts_with("NDT")
+            || s.status.starts_with("degenerate"))
+        .then_some(s.reference_stamp_ns);
+    }
+    let n = n.max(1) as f64;
+    if std::env::var("MSREG_SIGMAS").is_ok() {
+        let mut r: Vec<f64> = c
+            .report
+            .scans
+            .iter()
+            .filter_map(|s| s.sigma)
+            .map(|s| s[0].max(s[1]).max(s[2]))
+            .collect();
+        let mut t: Vec<f64> = c
+            .report
+            .scans
+            .iter()
+            .filter_map(|s| s.sigma)
+            .map(|s| s[3].max(s[4]).max(s[5]))
+            .collect();
+        r.sort_by(f64::total_cmp);
+        t.sort_by(f64::total_cmp);
+        println!(
+            "median max-axis sigma: {:.4} deg, {:.2} mm",
+            r[r.len() / 2].to_degrees(),
+            t[t.len() / 2] * 1e3
+        );
+    }
+    ((sr / n).sqrt().to_degrees(), (st / n).sqrt() * 1e3)
+}
+
+fn run(sim_config: &LidarImuSimConfig, options: &LidarImuOptions) -> Outcome {
+    let sim = simulate_lidar_imu(sim_config).expect("valid simulation");
+    let input = LidarImuInput {
+        imu: &sim.imu,
+        imu_noise: &sim.imu_noise,
+        scans: &sim,
+    };
+    let started = std::time::Instant::now();
+    let c = lidar_imu::calibrate::<f64>(&input, options, &mut |_| {}).expect("calibration runs");
+    let seconds = started.elapsed().as_secs_f64();
+    let e = error(&c.t_imu_lidar, &sim.t_imu_lidar);
+    let sd = |i: usize| c.covariance[(i, i)].sqrt();
+    let inside = (0..6).all(|i| e[i].abs() <= 3.0 * sd(i));
+    let nees = c
+        .covariance
+        .try_inverse()
+        .map_or(f64::NAN, |info| e.dot(&(info * e)));
+    let (ndt_rot_err_deg, ndt_trans_err_mm) = ndt_errors(&sim, &c);
+    Outcome {
+        seed: sim_config.seed,
+        rot_deg: c
+            .t_imu_lidar
+            .rotation
+            .angle_to(&sim.t_imu_lidar.rotation)
+            .to_degrees(),
+        trans_mm: (c.t_imu_lidar.translation.vector - sim.t_imu_lidar.translation.vector).norm()
+            * 1e3,
+        td_err_ms: (c.time_offset_s - sim.config.lidar.time_offset_s) * 1e3,
+        sigma_rot_deg: (0..3).map(sd).fold(0.0, f64::max).to_degrees(),
+        sigma_trans_mm: (3..6).map(sd).fold(0.0, f64::max) * 1e3,
+        inside,
+        nees,
+        nis: c.report.settled_nis_per_dof,
+        ndt_rot_err_deg,
+        ndt_trans_err_mm,
+        matched: c.report.scans_matched,
+        seconds,
+        converged: c.report.filter.converged,
+    }
+}
+
+fn print(o: &Outcome) {
+    println!(
+        "seed {:3}: rot {:.4} deg (3sd {:.4})  trans {:.2} mm (3sd {:.2})  td err {:+.3} ms  \
+         inside 3 sigma {}  NEES {:.2}  settled NIS/dof {:.2}  NDT rms err {:.4} deg / {:.2} mm  \
+         matched {}  {:.1} s  converged {}",
+        o.seed,
+        o.rot_deg,
+        3.0 * o.sigma_rot_deg,
+        o.trans_mm,
+        3.0 * o.sigma_trans_mm,
+        o.td_err_ms,
+        o.inside,
+        o.nees,
+        o.nis,
+        o.ndt_rot_err_deg,
+        o.ndt_trans_err_mm,
+        o.matched,
+        o.seconds,
+        o.converged
+    );
+}
+
+#[test]
+fn short_recordings_are_accurate_and_inside_three_sigma() {
+    for seed in [1, 2] {
+        // 25 s is ~240 updates: anneal faster so 100 of them are past the settling point.
+        let mut options = LidarImuOptions {
+            anneal_updates: 45.0,
+            ..LidarImuOptions::default()
+        };
+        if let Ok(v) = std::env::var("MSREG_NOISE") {
+            let v: Vec<f64> = v.split(',').filter_map(|x| x.parse().ok()).collect();
+            options.covariance_scale = v[0];
+            options.rotation_floor_rad = v[1].to_radians();
+            options.translation_floor_m = v[2];
+            if let Some(a) = v.get(3) {
+                options.anneal_updates = *a;
+            }
+        }
+        let o = run(&config(seed, 25.0, 32, 512), &options);
+        print(&o);
+        assert!(o.inside, "seed {seed}: error outside 3 sigma");
+        assert!(o.rot_deg < 0.3 && o.trans_mm < 15.0, "seed {seed}");
+        assert!(o.nis > 0.3 && o.nis < 3.0, "seed {seed}: NIS/dof {}", o.nis);
+    }
+}
+
+fn env_or(name: &str, default: usize) -> usize {
+    std::env::var(name)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
+/// The issue's acceptance run: 60 s, Ouster-128 x 1024 (MSREG_RINGS / MSREG_COLUMNS /
+/// MSREG_SEEDS / MSREG_DURATION / MSREG_NO_DESKEW=1 override).
+#[test]
+#[ignore = "minutes of CPU: the 60 s Ouster-128 acceptance measurement"]
+fn sixty_second_ouster_128_five_seeds() {
+    let rings = env_or("MSREG_RINGS", 128);
+    let columns = env_or("MSREG_COLUMNS", 1024);
+    let seeds = env_or("MSREG_SEEDS", 5) as u64;
+    let duration = env_or("MSREG_DURATION", 60) as f64;
+    let options = LidarImuOptions {
+        deskew: std::env::var("MSREG_NO_DESKEW").is_err(),
+        ..LidarImuOptions::default()
+    };
+    let mut all_ok = true;
+    for seed in 1..=seeds {
+        let o = run(&config(seed, duration, rings, columns), &options);
+        print(&o);
+        all_ok &= o.inside && o.rot_deg < 0.1 && o.trans_mm < 5.0;
+    }
+    println!("all seeds < 0.1 deg, < 5 mm and inside 3 sigma: {all_ok}");
+}
