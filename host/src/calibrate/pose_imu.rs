@@ -165,13 +165,7 @@ pub struct PoseImuCalibration {
 impl PoseImuCalibration {
     /// The `pose0` section of the result file.
     pub fn estimate(&self) -> ExtrinsicEstimate {
-        let sd = |i: usize| self.covariance[(i, i)].max(0.0).sqrt();
-        ExtrinsicEstimate {
-            transform: self.t_imu_pose,
-            timeshift_s: self.time_offset_s,
-            sigma_rot_deg: Vector3::new(sd(0), sd(1), sd(2)).map(f64::to_degrees),
-            sigma_trans_m: Vector3::new(sd(3), sd(4), sd(5)),
-        }
+        ExtrinsicEstimate::from_covariance(self.t_imu_pose, self.time_offset_s, &self.covariance)
     }
 }
 

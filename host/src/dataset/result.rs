@@ -8,7 +8,9 @@
 
 use std::path::Path;
 
-use nalgebra::{Isometry3, Matrix3, Matrix4, Rotation3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{
+    Isometry3, Matrix3, Matrix4, Matrix6, Rotation3, Translation3, UnitQuaternion, Vector3,
+};
 use serde::Deserialize;
 
 use super::error::DatasetError;
@@ -43,6 +45,22 @@ impl ExtrinsicEstimate {
             timeshift_s,
             sigma_rot_deg: Vector3::zeros(),
             sigma_trans_m: Vector3::zeros(),
+        }
+    }
+
+    /// An estimate with the sigmas of a 6x6 covariance ordered `[rotation (rad, right
+    /// perturbation); translation (m)]`, as the filters report it.
+    pub fn from_covariance(
+        transform: Isometry3<f64>,
+        timeshift_s: f64,
+        covariance: &Matrix6<f64>,
+    ) -> Self {
+        let sd = |i: usize| covariance[(i, i)].max(0.0).sqrt();
+        Self {
+            transform,
+            timeshift_s,
+            sigma_rot_deg: Vector3::new(sd(0), sd(1), sd(2)).map(f64::to_degrees),
+            sigma_trans_m: Vector3::new(sd(3), sd(4), sd(5)),
         }
     }
 
