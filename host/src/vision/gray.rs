@@ -11,7 +11,7 @@ use rayon::prelude::*;
 #[derive(Debug, thiserror::Error)]
 pub enum ImageLoadError {
     /// The file could not be opened or read.
-    #[error("{path}: cannot read image: {source}")]
+    #[error("{path}: cannot read image")]
     Io {
         /// The file.
         path: PathBuf,
@@ -19,7 +19,7 @@ pub enum ImageLoadError {
         source: std::io::Error,
     },
     /// The file is not a decodable PNG/JPEG.
-    #[error("{path}: cannot decode image: {source}")]
+    #[error("{path}: cannot decode image")]
     Decode {
         /// The file.
         path: PathBuf,
