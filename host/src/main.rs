@@ -330,7 +330,27 @@ fn demo(seed: u64, keep: Option<PathBuf>) -> Result<(), Failure> {
     };
     let estimate = CalibrationResult::read(&args.output)?;
     let truth = Dataset::open(&data_dir)?;
-    let errors = eval::evaluate(&estimate, truth.require_groundtruth_extrinsics()?);
+    let truth_extrinsics = truth.require_groundtruth_extrinsics()?;
+    let errors = eval::evaluate(&estimate, truth_extrinsics);
+    for (name, section) in [
+        ("truth", &truth_extrinsics.pose0),
+        ("estimate", &estimate.pose0),
+    ] {
+        if let Some(x) = section {
+            let (r, p, y) = x.transform.rotation.euler_angles();
+            let t = x.transform.translation.vector;
+            println!(
+                "{name:<9} T_imu_pose: roll {:9.4} pitch {:8.4} yaw {:9.4} deg, xyz {:8.4} {:8.4} {:8.4} m",
+                r.to_degrees(),
+                p.to_degrees(),
+                y.to_degrees(),
+                t.x,
+                t.y,
+                t.z
+            );
+        }
+    }
+    println!();
     print!("{}", eval::table(&errors));
     if let Some(c) = calibration {
         println!(
