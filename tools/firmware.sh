@@ -165,9 +165,9 @@ cmd_bench() {
       $1 == "STACK" { stack[$2] = $3 }
       $1 == "RATE" { rate = $2 }
       END {
-        printf "| %s | %d | %d (max %d) | %d (max %d) | %.1f | %d / %d |", opt, flash,
-          mean["propagate"], max["propagate"], mean["update"], max["update"], rate / 1e6,
-          stack["propagate"], stack["update"]
+        printf "| %s | %d | %d (max %d) | %d (max %d) | %d | %.1f | %d / %d |", opt, flash,
+          mean["propagate"], max["propagate"], mean["update"], max["update"],
+          mean["zero_velocity"], rate / 1e6, stack["propagate"], stack["update"]
       }' "$log")")
     echo "bench: opt-level=$opt done ($log)" >&2
   done
@@ -175,8 +175,8 @@ cmd_bench() {
   echo "Instructions on the emulated Cortex-M4F (QEMU mps2-an386, SysTick under -icount shift=0,"
   echo "40 instructions per tick; per call, mean over the embedded 3 s sequence):"
   echo
-  echo "| opt-level | flash (B) | instr / IMU propagation | instr / relative-pose update | M instr / s of data (400 Hz IMU + 10 Hz poses) | stack propagate / update (B) |"
-  echo "|---|---|---|---|---|---|"
+  echo "| opt-level | flash (B) | instr / IMU propagation | instr / relative-pose update | instr / zero-velocity update | M instr / s of data (400 Hz IMU + 10 Hz poses) | stack propagate / update (B) |"
+  echo "|---|---|---|---|---|---|---|"
   printf '%s\n' "${rows[@]}"
 }
 

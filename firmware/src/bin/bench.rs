@@ -111,9 +111,28 @@ fn bench(clock: InstructionClock) -> bool {
         counts.record(&event, &outcome);
     }
 
+    // Zero-velocity updates (9-dof) on a second filter at rest at the first sample, so the
+    // gate accepts them and the full update (correction, Joseph form) is what is counted.
+    let mut zero_velocity = Tally::default();
+    let Ok(mut at_rest) = selftest::new_filter(&config, &first) else {
+        return false;
+    };
+    if selftest::feed(&mut at_rest, &config.spec, &Event::Imu(first)).is_err() {
+        return false;
+    }
+    for _ in 0..20 {
+        let (outcome, ticks) = clock.measure(|| at_rest.update_zero_velocity());
+        if !outcome.is_ok_and(|r| r.accepted) {
+            hprintln!("bench: zero-velocity update not accepted at rest");
+            return false;
+        }
+        zero_velocity.add(ticks);
+    }
+
     propagate.print("propagate");
     update.print("update");
     anchor.print("anchor");
+    zero_velocity.print("zero_velocity");
     hprintln!("STACK propagate {}", stack_propagate);
     hprintln!("STACK update {}", stack_update);
     let total = (propagate.ticks + update.ticks + anchor.ticks) * INSTRUCTIONS_PER_TICK;
