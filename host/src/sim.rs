@@ -63,26 +63,41 @@ fn rng_for(seed: u64, stream: Stream) -> ChaCha8Rng {
     rng
 }
 
+/// The motion every scenario shares: the clock, the seeded trajectory and the IMU along it.
+fn simulate_motion(
+    seed: u64,
+    start_stamp_ns: u64,
+    trajectory: &TrajectoryConfig,
+    imu: &ImuSimConfig,
+    duration_s: f64,
+) -> (Clock, Trajectory, ImuSynthesis) {
+    let clock = Clock {
+        start_ns: start_stamp_ns,
+    };
+    let trajectory = Trajectory::random(trajectory, &mut rng_for(seed, Stream::Trajectory));
+    let imu = synthesize_imu(
+        &trajectory,
+        imu,
+        clock,
+        duration_s,
+        &mut rng_for(seed, Stream::Imu),
+    );
+    (clock, trajectory, imu)
+}
+
 /// Simulates the pose-IMU dataset described by `config`.
 pub fn simulate_pose_imu(config: &SimConfig) -> Result<SimDataset, SimError> {
     config.validate()?;
-    let clock = Clock {
-        start_ns: config.start_stamp_ns,
-    };
-    let trajectory = Trajectory::random(
+    let (clock, trajectory, imu) = simulate_motion(
+        config.seed,
+        config.start_stamp_ns,
         &config.trajectory,
-        &mut rng_for(config.seed, Stream::Trajectory),
+        &config.imu,
+        config.duration_s,
     );
     let t_imu_pose = config
         .t_imu_pose
         .unwrap_or_else(|| random_mounting(&mut rng_for(config.seed, Stream::Mounting)));
-    let imu = synthesize_imu(
-        &trajectory,
-        &config.imu,
-        clock,
-        config.duration_s,
-        &mut rng_for(config.seed, Stream::Imu),
-    );
     let pose = synthesize_odometry(
         &trajectory,
         &t_imu_pose,

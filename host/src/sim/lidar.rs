@@ -30,9 +30,9 @@ use rayon::prelude::*;
 
 use super::clock::Clock;
 use super::config::{ImuSimConfig, SimError, DEFAULT_START_STAMP_NS};
-use super::imu::{imu_noise_yaml, synthesize_imu};
+use super::imu::imu_noise_yaml;
 use super::trajectory::{Trajectory, TrajectoryConfig};
-use super::{rng_for, Stream};
+use super::{rng_for, simulate_motion, Stream};
 use crate::dataset::{
     write_groundtruth_csv, write_imu_csv, CalibrationResult, DatasetError, DatasetYaml,
     ExtrinsicEstimate, GroundTruthRecord, ImuNoiseYaml, ImuRecord, LidarYaml, DATASET_YAML,
@@ -262,23 +262,16 @@ pub struct LidarImuSim {
 /// Simulates the LiDAR-IMU recording described by `config` (IMU now, scans on demand).
 pub fn simulate_lidar_imu(config: &LidarImuSimConfig) -> Result<LidarImuSim, SimError> {
     config.validate()?;
-    let clock = Clock {
-        start_ns: config.start_stamp_ns,
-    };
-    let trajectory = Trajectory::random(
+    let (_, trajectory, imu) = simulate_motion(
+        config.seed,
+        config.start_stamp_ns,
         &config.trajectory,
-        &mut rng_for(config.seed, Stream::Trajectory),
+        &config.imu,
+        config.duration_s,
     );
     let t_imu_lidar = config
         .t_imu_lidar
         .unwrap_or_else(|| random_lidar_mounting(&mut rng_for(config.seed, Stream::LidarMounting)));
-    let imu = synthesize_imu(
-        &trajectory,
-        &config.imu,
-        clock,
-        config.duration_s,
-        &mut rng_for(config.seed, Stream::Imu),
-    );
     let lidar = &config.lidar;
     let period_ns = (1e9 / lidar.scan_rate_hz).round() as u64;
     let td_ns = (lidar.time_offset_s * 1e9).round() as i64;
