@@ -145,6 +145,32 @@ pub struct ScanRecord {
     pub sigma: Option<[f64; 6]>,
 }
 
+impl ScanRecord {
+    /// A scan that has not (or not yet) been matched: no NDT or filter results.
+    fn unmatched(
+        stamp_ns: u64,
+        reference_stamp_ns: u64,
+        t_s: f64,
+        points: usize,
+        status: String,
+    ) -> Self {
+        Self {
+            stamp_ns,
+            reference_stamp_ns,
+            t_s,
+            points,
+            points_filtered: 0,
+            status,
+            fitness: None,
+            iterations: None,
+            nis: None,
+            delta_rotation: None,
+            delta_translation: None,
+            sigma: None,
+        }
+    }
+}
+
 /// Wall time per stage, s.
 #[derive(Debug, Clone, Copy, Serialize, Default)]
 pub struct StageTiming {
@@ -536,20 +562,14 @@ impl<'a> LidarFeed<'a> {
             stamp_ns,
             self.scans.name(index)
         ));
-        self.records.push(ScanRecord {
+        let t_s = stamp_ns.saturating_sub(self.first_imu_ns) as f64 * 1e-9;
+        self.records.push(ScanRecord::unmatched(
             stamp_ns,
-            reference_stamp_ns: stamp_ns,
-            t_s: stamp_ns.saturating_sub(self.first_imu_ns) as f64 * 1e-9,
-            points: 0,
-            points_filtered: 0,
-            status: why.to_string(),
-            fitness: None,
-            iterations: None,
-            nis: None,
-            delta_rotation: None,
-            delta_translation: None,
-            sigma: None,
-        });
+            stamp_ns,
+            t_s,
+            0,
+            why.to_string(),
+        ));
     }
 
     /// Predict -> deskew -> NDT -> update for one scan whose reference time has come.
@@ -575,20 +595,9 @@ impl<'a> LidarFeed<'a> {
         self.buffer.push(due, predicted);
         let t_i_l = convert::isometry(&ekf.extrinsic(0));
 
-        let mut record = ScanRecord {
-            stamp_ns: p.stamp_ns,
-            reference_stamp_ns: ref_stamp,
-            t_s: due.saturating_sub(self.first_imu_ns) as f64 * 1e-9,
-            points: p.cloud.len(),
-            points_filtered: 0,
-            status: String::new(),
-            fitness: None,
-            iterations: None,
-            nis: None,
-            delta_rotation: None,
-            delta_translation: None,
-            sigma: None,
-        };
+        let t_s = due.saturating_sub(self.first_imu_ns) as f64 * 1e-9;
+        let mut record =
+            ScanRecord::unmatched(p.stamp_ns, ref_stamp, t_s, p.cloud.len(), String::new());
         let started = Instant::now();
         let deskewed = if self.options.deskew {
             deskew_scan(
