@@ -38,6 +38,15 @@ pub enum Error {
     DivergentUpdate,
     /// A configuration or prior value is invalid (non-positive sigma, ...).
     InvalidConfig,
+    /// The static-frame index is not part of this filter's layout.
+    UnknownFrame,
+    /// The measurement refers to a static frame that has not been initialised.
+    FrameNotInitialized,
+    /// A target point could not be projected into the camera at the current estimate
+    /// (behind it or outside the model's domain).
+    NotProjectable,
+    /// The measurement holds no observations.
+    EmptyMeasurement,
 }
 
 impl fmt::Display for Error {
@@ -61,6 +70,10 @@ impl fmt::Display for Error {
             Error::SingularInnovation => write!(f, "innovation covariance not positive definite"),
             Error::DivergentUpdate => write!(f, "update produced a non-finite correction"),
             Error::InvalidConfig => write!(f, "invalid configuration or prior"),
+            Error::UnknownFrame => write!(f, "static frame index not in the filter layout"),
+            Error::FrameNotInitialized => write!(f, "static frame not initialised"),
+            Error::NotProjectable => write!(f, "target point not projectable at the estimate"),
+            Error::EmptyMeasurement => write!(f, "measurement without observations"),
         }
     }
 }

@@ -1,5 +1,6 @@
 //! The error-state EKF: IMU propagation, stochastic cloning and measurement updates over a
-//! compile-time layout of `S` sensors and `C` clones (`N = 15 + 7 S + 6 C`).
+//! compile-time layout of `S` sensors, `C` clones and `F` static frames
+//! (`N = 15 + 7 S + 6 C + 6 F`).
 //!
 //! Every public method either succeeds or returns an [`Error`] with the filter unchanged:
 //! updates run on a draft copy that is committed only when everything (gate, finiteness)
@@ -18,6 +19,9 @@ use nalgebra::{SMatrix, Vector3};
 pub type PoseImuEkf<T> = Ekf<T, 1, 2, 34>;
 /// Filter for two sensors (e.g. LiDAR and camera) and an IMU, with four clones.
 pub type JointEkf<T> = Ekf<T, 2, 4, 53>;
+/// Filter for a camera and an IMU observing one static target (RepErrCal): the target pose
+/// is a state, no clones are needed.
+pub type CameraImuEkf<T> = Ekf<T, 1, 0, 28, 1>;
 
 /// Filter tuning.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -47,9 +51,10 @@ impl<T: Scalar> FilterConfig<T> {
     }
 }
 
-/// The error-state EKF.
+/// The error-state EKF with `S` sensors, `C` clone slots and `F` static frames (targets whose
+/// pose in G is estimated; none by default).
 #[derive(Clone, Debug)]
-pub struct Ekf<T: Scalar, const S: usize, const C: usize, const N: usize> {
+pub struct Ekf<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize = 0> {
     config: FilterConfig<T>,
     time_ns: u64,
     last_imu: Option<ImuSample<T>>,
@@ -58,6 +63,8 @@ pub struct Ekf<T: Scalar, const S: usize, const C: usize, const N: usize> {
     prior_sigma: [[T; 7]; S],
     clones: [Option<CloneState<T>>; C],
     anchors: [Option<usize>; S],
+    /// `T_G_F` of each static frame, once initialised (see [`Ekf::init_frame`]).
+    frames: [Option<Pose<T>>; F],
     /// Covariance; its IMU-to-rest block `P_IX` lags by `pending_transition`.
     cov: SMatrix<T, N, N>,
     /// Product of the IMU transitions since `P_IX` was last brought up to date: static
@@ -66,8 +73,11 @@ pub struct Ekf<T: Scalar, const S: usize, const C: usize, const N: usize> {
     health: HealthMonitor<T, S>,
 }
 
-impl<T: Scalar, const S: usize, const C: usize, const N: usize> Ekf<T, S, C, N> {
-    const LAYOUT_OK: () = assert!(N == Layout::<S, C>::DIM, "N must be 15 + 7 S + 6 C");
+impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> Ekf<T, S, C, N, F> {
+    const LAYOUT_OK: () = assert!(
+        N == Layout::<S, C>::dim_with_frames(F),
+        "N must be 15 + 7 S + 6 C + 6 F"
+    );
 
     /// A filter at the prior `init`; time starts at the first IMU sample.
     pub fn new(config: &FilterConfig<T>, init: &InitialState<T, S>) -> Result<Self, Error> {
@@ -107,6 +117,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize> Ekf<T, S, C, N> 
             prior_sigma,
             clones: [None; C],
             anchors: [None; S],
+            frames: [None; F],
             cov,
             pending_transition: SMatrix::identity(),
             health: HealthMonitor::new(config.health),
@@ -297,6 +308,8 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize> Ekf<T, S, C, N> 
 }
 
 mod clones;
+mod frames;
 mod fuse;
+mod reprojection;
 #[cfg(test)]
 mod tests;

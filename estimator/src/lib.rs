@@ -29,7 +29,7 @@ pub mod state;
 pub mod update;
 
 pub use error::Error;
-pub use filter::{Ekf, FilterConfig, PoseImuEkf};
+pub use filter::{CameraImuEkf, Ekf, FilterConfig, PoseImuEkf};
 pub use hand_eye::{HandEye, HandEyeError};
 pub use health::{HealthConfig, HealthEvent, HealthMonitor, SensorHealth};
 pub use lie::Pose;
@@ -37,6 +37,7 @@ pub use propagate::{ImuNoise, ImuSample};
 pub use scalar::Scalar;
 pub use state::{Block, ImuState, InitialState, Layout, SensorState};
 pub use update::relative_pose::RelativePose;
+pub use update::reprojection::{CornerObservation, CornerSet};
 pub use update::{UpdateKind, UpdateReport};
 
 #[cfg(test)]

@@ -1,15 +1,17 @@
 //! The filter state: nominal values and the layout of the error state.
 //!
 //! Error-state order (fixed at compile time by [`Layout`]):
-//! `[IMU (15) | sensor 0 (7) | ... | sensor S-1 (7) | clone 0 (6) | ... | clone C-1 (6)]`
-//! with IMU = `[dtheta, dp, dv, dbg, dba]`, sensor = `[dtheta_I_S, dp_I_S, dt_d]` and
-//! clone = `[dtheta, dp]` of a past IMU pose.
+//! `[IMU (15) | sensor 0 (7) | ... | sensor S-1 (7) | clone 0 (6) | ... | clone C-1 (6) |
+//! frame 0 (6) | ... | frame F-1 (6)]`
+//! with IMU = `[dtheta, dp, dv, dbg, dba]`, sensor = `[dtheta_I_S, dp_I_S, dt_d]`,
+//! clone = `[dtheta, dp]` of a past IMU pose and frame = `[dtheta_G_F, dp_G_F]` of a static
+//! frame such as a calibration target.
 
 mod initial;
 mod layout;
 
 pub use initial::InitialState;
-pub use layout::{imu, Block, Layout, CLONE_DIM, SENSOR_DIM};
+pub use layout::{imu, Block, Layout, CLONE_DIM, FRAME_DIM, SENSOR_DIM};
 
 use crate::lie::Pose;
 use crate::scalar::Scalar;

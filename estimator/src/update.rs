@@ -19,6 +19,8 @@ pub enum UpdateKind {
     RelativePose,
     /// Zero-velocity update at standstill.
     ZeroVelocity,
+    /// Known target corners reprojected into a camera (eq. 4.2, 4.15; RepErrCal).
+    Reprojection,
 }
 
 /// The per-update diagnostic record read by the health monitor, reports, the firmware link
@@ -80,6 +82,16 @@ pub fn kalman_step<T: Scalar, const M: usize, const N: usize>(
     lin: &Linearization<T, M, N>,
     gate: Confidence,
 ) -> Result<KalmanStep<T, M, N>, Error> {
+    kalman_step_gated_at(cov, lin, chi2::quantile::<T>(M, gate))
+}
+
+/// [`kalman_step`] with an explicit NIS threshold; an infinite one never rejects (used for
+/// the parts of a sequentially processed measurement that is gated as a whole).
+pub fn kalman_step_gated_at<T: Scalar, const M: usize, const N: usize>(
+    cov: &SMatrix<T, N, N>,
+    lin: &Linearization<T, M, N>,
+    threshold: T,
+) -> Result<KalmanStep<T, M, N>, Error> {
     let finite = lin.residual.iter().all(|x| x.is_finite())
         && lin.jacobian.iter().all(|x| x.is_finite())
         && lin.noise.iter().all(|x| x.is_finite());
@@ -93,7 +105,6 @@ pub fn kalman_step<T: Scalar, const M: usize, const N: usize>(
     let s_inv = chol.inverse();
     let weighted_residual = s_inv * lin.residual;
     let nis = lin.residual.dot(&weighted_residual);
-    let threshold = chi2::quantile::<T>(M, gate);
     if !nis.is_finite() {
         return Err(Error::DivergentUpdate);
     }

@@ -6,7 +6,7 @@ use crate::state::{imu, CloneState, Layout};
 use crate::Error;
 use nalgebra::Vector3;
 
-impl<T: Scalar, const S: usize, const C: usize, const N: usize> Ekf<T, S, C, N> {
+impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> Ekf<T, S, C, N, F> {
     /// IMU time of a measurement of sensor `s` stamped `stamp_ns`: `stamp + t_d`.
     pub(super) fn imu_time(&self, s: usize, stamp_ns: u64) -> u64 {
         // Offset rounded to ns and added in integer space: stamps near 1.7e18 ns have no

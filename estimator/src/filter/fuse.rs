@@ -3,6 +3,7 @@
 
 use super::Ekf;
 use crate::health::{ExtrinsicInnovation, HealthEvent};
+use crate::lie::Pose;
 use crate::propagate;
 use crate::scalar::Scalar;
 use crate::state::{Block, Layout};
@@ -10,7 +11,7 @@ use crate::update::{self, relative_pose, zero_velocity, Linearization, UpdateKin
 use crate::Error;
 use nalgebra::{SMatrix, SVector, Vector3};
 
-impl<T: Scalar, const S: usize, const C: usize, const N: usize> Ekf<T, S, C, N> {
+impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> Ekf<T, S, C, N, F> {
     /// Fuses a relative pose of sensor `s` (eq. 3.19-3.21). Its start must be the sensor's
     /// anchor (see [`Ekf::anchor`]); its end becomes the new anchor, even when the gate
     /// rejects the measurement, so the odometry chain continues.
@@ -117,31 +118,45 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize> Ekf<T, S, C, N> 
             self.cov = step.covariance;
         }
         let innovation = extrinsic_jacobian.map(|h_e| {
-            let info = h_e.transpose() * step.innovation_inverse * h_e;
-            let score = h_e.transpose() * step.weighted_residual;
-            ExtrinsicInnovation {
-                rotation_info: info.fixed_view::<3, 3>(0, 0).clone_owned(),
-                rotation_score: score.fixed_rows::<3>(0).clone_owned(),
-                translation_info: info.fixed_view::<3, 3>(3, 3).clone_owned(),
-                translation_score: score.fixed_rows::<3>(3).clone_owned(),
-            }
+            extrinsic_innovation(h_e, &step.innovation_inverse, &step.weighted_residual)
         });
-        let event =
-            self.health
-                .record(s, stamp_ns, step.nis, M, step.accepted, innovation.as_ref());
+        Ok(self.record_update(
+            kind,
+            s,
+            stamp_ns,
+            (step.nis, M, step.threshold),
+            step.accepted,
+            innovation.as_ref(),
+        ))
+    }
+
+    /// Records an update's NIS `(nis, dof, threshold)` with the health monitor, reacts to
+    /// what it detects, and builds the report.
+    pub(super) fn record_update(
+        &mut self,
+        kind: UpdateKind,
+        s: usize,
+        stamp_ns: u64,
+        (nis, dof, threshold): (T, usize, T),
+        accepted: bool,
+        innovation: Option<&ExtrinsicInnovation<T>>,
+    ) -> UpdateReport<T> {
+        let event = self
+            .health
+            .record(s, stamp_ns, nis, dof, accepted, innovation);
         if let Some(event) = event {
             self.react_to(&event);
         }
-        Ok(UpdateReport {
+        UpdateReport {
             kind,
             sensor: s,
             stamp_ns,
-            dof: M,
-            nis: step.nis,
-            threshold: step.threshold,
-            accepted: step.accepted,
+            dof,
+            nis,
+            threshold,
+            accepted,
             event,
-        })
+        }
     }
 
     /// A detected step: move the extrinsic by the detector's maximum-likelihood estimate of
@@ -236,17 +251,45 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize> Ekf<T, S, C, N> 
                 );
             }
         }
+        let mut frames = self.frames;
+        for (f, slot) in frames.iter_mut().enumerate() {
+            if let Some(pose) = slot {
+                *pose = pose.boxplus(
+                    &v3(Layout::<S, C>::frame_orientation(f)),
+                    &v3(Layout::<S, C>::frame_position(f)),
+                );
+            }
+        }
         let finite = imu_state.is_finite()
             && sensors
                 .iter()
                 .all(|x| x.extrinsic.is_finite() && x.time_offset.is_finite())
-            && clones.iter().flatten().all(|c| c.pose.is_finite());
+            && clones.iter().flatten().all(|c| c.pose.is_finite())
+            && frames.iter().flatten().all(Pose::is_finite);
         if !finite {
             return Err(Error::DivergentUpdate);
         }
         self.imu = imu_state;
         self.sensors = sensors;
         self.clones = clones;
+        self.frames = frames;
         Ok(())
+    }
+}
+
+/// The innovation of one update projected on a sensor's extrinsic (for the step detector):
+/// `H_e^T S^-1 H_e` and `H_e^T S^-1 r`, split into rotation and translation.
+pub(super) fn extrinsic_innovation<T: Scalar, const M: usize>(
+    h_e: &SMatrix<T, M, 6>,
+    innovation_inverse: &SMatrix<T, M, M>,
+    weighted_residual: &SVector<T, M>,
+) -> ExtrinsicInnovation<T> {
+    let info = h_e.transpose() * innovation_inverse * h_e;
+    let score = h_e.transpose() * weighted_residual;
+    ExtrinsicInnovation {
+        rotation_info: info.fixed_view::<3, 3>(0, 0).clone_owned(),
+        rotation_score: score.fixed_rows::<3>(0).clone_owned(),
+        translation_info: info.fixed_view::<3, 3>(3, 3).clone_owned(),
+        translation_score: score.fixed_rows::<3>(3).clone_owned(),
     }
 }

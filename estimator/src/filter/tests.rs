@@ -95,3 +95,262 @@ fn covariance_stays_symmetric_and_positive_through_updates() {
         eig.max()
     );
 }
+
+// ----- reprojection update ---------------------------------------------------------------
+
+mod reprojection {
+    use super::*;
+    use crate::camera::{radtan::RadTan, Camera, Distortion, Intrinsics, Projection};
+    use crate::filter::CameraImuEkf;
+    use crate::update::reprojection::{CornerObservation, CornerSet};
+    use crate::update::UpdateKind;
+    use crate::Error;
+    use nalgebra::Vector2;
+
+    /// The image stamp the tests use: between two IMU samples, after the last fed one.
+    const STAMP: u64 = T0 + 240_000_000 + 1_234_567;
+
+    fn camera() -> Camera<f64> {
+        Camera::new(
+            Projection::Pinhole,
+            Intrinsics {
+                fu: 460.0,
+                fv: 458.0,
+                cu: 367.0,
+                cv: 248.0,
+            },
+            Distortion::RadTan(RadTan {
+                k1: -0.28,
+                k2: 0.07,
+                p1: 2e-4,
+                p2: 2e-5,
+                k3: 0.0,
+            }),
+            (752, 480),
+        )
+        .expect("camera")
+    }
+
+    fn extrinsic() -> Pose<f64> {
+        Pose::new(
+            UnitQuaternion::from_euler_angles(-1.5, 0.03, -1.6),
+            Vector3::new(0.06, -0.02, 0.01),
+        )
+    }
+
+    /// A 6 x 5 board of 5 cm squares.
+    fn board() -> impl Iterator<Item = Vector3<f64>> {
+        (0..30).map(|k| Vector3::new(f64::from(k % 6) * 0.05, f64::from(k / 6) * 0.05, 0.0))
+    }
+
+    /// The moving IMU of `moving_filter` as a camera-IMU filter, with the target placed
+    /// 0.8 m in front of the camera at the image's IMU time.
+    fn camera_filter(time_offset: f64) -> CameraImuEkf<f64> {
+        let mut init = InitialState::<f64, 1>::at_rest(Vector3::new(0.0, 0.0, 9.81))
+            .expect("gravity")
+            .with_extrinsic(0, extrinsic(), 0.02, 0.02)
+            .with_time_offset(0, time_offset, 0.01);
+        init.imu.velocity = Vector3::new(0.7, -0.3, 0.2);
+        init.imu.rotation = UnitQuaternion::from_euler_angles(0.3, -0.2, 1.0);
+        let mut ekf =
+            CameraImuEkf::new(&FilterConfig::new(ImuNoise::vn300()), &init).expect("prior");
+        for k in 0..=96u64 {
+            ekf.propagate(&ImuSample {
+                stamp_ns: T0 + k * 2_500_000,
+                gyro: Vector3::new(1.2, -0.8, 0.5),
+                accel: Vector3::new(0.5, 1.0, 9.0),
+            })
+            .expect("sample");
+        }
+        // The target is placed from the pose 4 ms after the stamp whatever `time_offset` is,
+        // so that different offsets see the same static target.
+        let mut at_image = ekf.clone();
+        at_image.advance_to(STAMP + 4_000_000).expect("advance");
+        let target_in_camera = Pose::new(
+            UnitQuaternion::from_euler_angles(0.2, -0.3, 0.1),
+            Vector3::new(-0.12, -0.1, 0.8),
+        );
+        let target = at_image
+            .imu()
+            .pose()
+            .compose(&extrinsic())
+            .compose(&target_in_camera);
+        ekf.init_frame(0, target, 0.05, 0.05).expect("frame");
+        ekf
+    }
+
+    /// Where the filter predicts the corner `p` at the image's IMU time.
+    fn predicted(ekf: &CameraImuEkf<f64>, p: &Vector3<f64>) -> Vector2<f64> {
+        let mut at_image = ekf.clone();
+        // After an update the filter already stands at the image's (then) IMU time.
+        let t = at_image.imu_time(0, STAMP).max(at_image.time_ns());
+        at_image.advance_to(t).expect("advance");
+        let p_c = crate::update::reprojection::point_in_camera(
+            &at_image.imu().pose(),
+            &at_image.extrinsic(0),
+            &at_image.frame(0).expect("frame"),
+            p,
+        );
+        camera().project(&p_c).expect("in view").pixel
+    }
+
+    fn observations(ekf: &CameraImuEkf<f64>, offset_px: f64) -> [CornerObservation<f64>; 30] {
+        let mut out = [CornerObservation {
+            point_in_target: Vector3::zeros(),
+            pixel: Vector2::zeros(),
+        }; 30];
+        for (o, p) in out.iter_mut().zip(board()) {
+            *o = CornerObservation {
+                point_in_target: p,
+                pixel: predicted(ekf, &p) + Vector2::new(offset_px, -0.5 * offset_px),
+            };
+        }
+        out
+    }
+
+    #[test]
+    fn jacobian_matches_central_differences_over_the_whole_state() {
+        // Given a moving filter with a target in view, standing at the image's IMU time
+        let td = 0.004;
+        let corner = Vector3::new(0.15, 0.05, 0.0);
+        let mut at_image = camera_filter(td);
+        at_image
+            .advance_to(at_image.imu_time(0, STAMP))
+            .expect("advance");
+        // When every error-state direction is perturbed there
+        let h = 1e-6;
+        let mut numeric = SMatrix::<f64, 2, 28>::zeros();
+        for i in 0..28 {
+            let shifted = |sign: f64| {
+                let mut e = at_image.clone();
+                let mut dx = SVector::<f64, 28>::zeros();
+                dx[i] = sign * h;
+                e.apply_correction(&dx).expect("finite");
+                predicted(&e, &corner)
+            };
+            numeric.set_column(i, &((shifted(1.0) - shifted(-1.0)) / (2.0 * h)));
+        }
+        // and the time offset through the propagation to a later or earlier IMU time
+        let h_td = 1e-5;
+        let td_column = (predicted(&camera_filter(td + h_td), &corner)
+            - predicted(&camera_filter(td - h_td), &corner))
+            / (2.0 * h_td);
+        numeric.set_column(Layout::<1, 0>::time_offset(0).idx, &td_column);
+        // Then the analytic Jacobian the update uses agrees
+        let lin = crate::update::reprojection::linearize(
+            &camera(),
+            &at_image.imu().pose(),
+            &at_image.extrinsic(0),
+            &at_image.frame(0).expect("frame"),
+            &corner,
+            &Vector2::zeros(),
+        )
+        .expect("in view");
+        let gyro = at_image.last_imu.expect("imu").gyro;
+        let analytic = at_image.reprojection_jacobian(0, 0, &lin, &gyro);
+        // Pixels per unit error are O(500); the time-offset column carries the midpoint
+        // integrator's O(|w| |a| dt^2) velocity inconsistency, as in the clone test.
+        assert_mat_close(&(analytic / 1000.0), &(numeric / 1000.0), 2e-4);
+    }
+
+    #[test]
+    fn consistent_corners_are_fused_and_shrink_the_extrinsic() {
+        let mut ekf = camera_filter(0.0);
+        let obs = observations(&ekf, 0.3);
+        let before = ekf.extrinsic_sigma(0);
+        let meas = CornerSet {
+            stamp_ns: STAMP,
+            corners: &obs,
+            pixel_sigma: 0.5,
+        };
+        let report = ekf
+            .update_reprojection(0, 0, &camera(), &meas)
+            .expect("update");
+        assert_eq!(report.kind, UpdateKind::Reprojection);
+        assert_eq!(report.dof, 60);
+        assert!(report.accepted, "nis {} > {}", report.nis, report.threshold);
+        let after = ekf.extrinsic_sigma(0);
+        assert!(after.0.norm() < before.0.norm() && after.1.norm() < before.1.norm());
+        // The corners now reproject closer to where they were seen.
+        let residual: f64 = obs
+            .iter()
+            .map(|o| (o.pixel - predicted(&ekf, &o.point_in_target)).norm())
+            .sum::<f64>()
+            / 30.0;
+        assert!(residual < 0.2, "mean residual {residual} px");
+    }
+
+    #[test]
+    fn outlying_image_is_gated_and_leaves_the_estimate() {
+        let mut ekf = camera_filter(0.0);
+        let obs = observations(&ekf, 40.0);
+        let before = ekf.clone();
+        let meas = CornerSet {
+            stamp_ns: STAMP,
+            corners: &obs,
+            pixel_sigma: 0.5,
+        };
+        let report = ekf
+            .update_reprojection(0, 0, &camera(), &meas)
+            .expect("update");
+        assert!(!report.accepted);
+        assert_eq!(ekf.imu(), before.imu());
+        assert_eq!(ekf.extrinsic(0), before.extrinsic(0));
+        assert_eq!(ekf.frame(0), before.frame(0));
+        assert_eq!(ekf.covariance(), before.covariance());
+    }
+
+    #[test]
+    fn bad_corner_sets_are_typed_errors_with_the_state_untouched() {
+        let ekf = camera_filter(0.0);
+        let obs = observations(&ekf, 0.0);
+        let mut nan = obs;
+        nan[3].pixel.x = f64::NAN;
+        /// Sensor, frame, corners, pixel sigma, stamp, expected error.
+        type Case<'a> = (usize, usize, &'a [CornerObservation<f64>], f64, u64, Error);
+        let cases: [Case; 6] = [
+            (1, 0, &obs, 0.5, STAMP, Error::UnknownSensor),
+            (0, 1, &obs, 0.5, STAMP, Error::UnknownFrame),
+            (0, 0, &[], 0.5, STAMP, Error::EmptyMeasurement),
+            (0, 0, &nan, 0.5, STAMP, Error::NonFinite),
+            (0, 0, &obs, 0.0, STAMP, Error::InvalidConfig),
+            (
+                0,
+                0,
+                &obs,
+                0.5,
+                T0,
+                Error::TimeWentBackwards {
+                    filter_ns: T0 + 240_000_000,
+                    stamp_ns: T0,
+                },
+            ),
+        ];
+        for (s, f, corners, sigma, stamp, expected) in cases {
+            let mut e = ekf.clone();
+            let meas = CornerSet {
+                stamp_ns: stamp,
+                corners,
+                pixel_sigma: sigma,
+            };
+            assert_eq!(e.update_reprojection(s, f, &camera(), &meas), Err(expected));
+            assert_eq!(e.covariance(), ekf.covariance());
+            assert_eq!(e.imu(), ekf.imu());
+        }
+        // A target not yet initialised.
+        let mut fresh = CameraImuEkf::new(
+            &FilterConfig::new(ImuNoise::vn300()),
+            &InitialState::at_rest(Vector3::new(0.0, 0.0, 9.81)).expect("gravity"),
+        )
+        .expect("prior");
+        let meas = CornerSet {
+            stamp_ns: STAMP,
+            corners: &obs,
+            pixel_sigma: 0.5,
+        };
+        assert_eq!(
+            fresh.update_reprojection(0, 0, &camera(), &meas),
+            Err(Error::FrameNotInitialized)
+        );
+    }
+}

@@ -42,14 +42,23 @@ pub mod imu {
 pub const SENSOR_DIM: usize = 7;
 /// Error dimension of one clone: orientation (3), position (3).
 pub const CLONE_DIM: usize = 6;
+/// Error dimension of one static frame (e.g. a calibration target): orientation (3),
+/// position (3).
+pub const FRAME_DIM: usize = 6;
 
-/// The layout of a filter with `S` sensors and `C` clones.
+/// The layout of a filter with `S` sensors and `C` clones; static frames, when a filter has
+/// them, follow at [`Layout::DIM`] (see [`Layout::frame_orientation`]).
 #[derive(Clone, Copy, Debug)]
 pub struct Layout<const S: usize, const C: usize>;
 
 impl<const S: usize, const C: usize> Layout<S, C> {
-    /// Dimension of the whole error state.
+    /// Dimension of the error state without static frames.
     pub const DIM: usize = imu::DIM + SENSOR_DIM * S + CLONE_DIM * C;
+
+    /// Dimension of the error state with `frames` static frames.
+    pub const fn dim_with_frames(frames: usize) -> usize {
+        Self::DIM + FRAME_DIM * frames
+    }
 
     const fn sensor_base(s: usize) -> usize {
         imu::DIM + SENSOR_DIM * s
@@ -102,6 +111,22 @@ impl<const S: usize, const C: usize> Layout<S, C> {
             dof: 3,
         }
     }
+
+    /// Orientation error `dtheta` of static frame `f` (right perturbation of `R_G_F`).
+    pub const fn frame_orientation(f: usize) -> Block {
+        Block {
+            idx: Self::DIM + FRAME_DIM * f,
+            dof: 3,
+        }
+    }
+
+    /// Position error of static frame `f` in G.
+    pub const fn frame_position(f: usize) -> Block {
+        Block {
+            idx: Self::DIM + FRAME_DIM * f + 3,
+            dof: 3,
+        }
+    }
 }
 
 #[cfg(test)]
@@ -123,5 +148,11 @@ mod tests {
             next = L::clone_position(c).end();
         }
         assert_eq!(next, L::DIM);
+        for f in 0..2 {
+            assert_eq!(L::frame_orientation(f).idx, next);
+            assert_eq!(L::frame_position(f).idx, next + 3);
+            next = L::frame_position(f).end();
+        }
+        assert_eq!(next, L::dim_with_frames(2));
     }
 }

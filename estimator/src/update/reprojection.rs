@@ -13,7 +13,47 @@
 use crate::camera::Camera;
 use crate::lie::{skew, Pose};
 use crate::scalar::Scalar;
+use crate::Error;
 use nalgebra::{Matrix2x3, Vector2, Vector3};
+
+/// One target corner found in an image.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CornerObservation<T: Scalar> {
+    /// The corner in the target frame T, m (e.g. `(col * spacing, row * spacing, 0)`).
+    pub point_in_target: Vector3<T>,
+    /// Where the detector found it, pixels.
+    pub pixel: Vector2<T>,
+}
+
+/// The corners of one image: the measurement of a reprojection update.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CornerSet<'a, T: Scalar> {
+    /// Image stamp, ns (camera clock).
+    pub stamp_ns: u64,
+    /// The corners; all of them are gated together.
+    pub corners: &'a [CornerObservation<T>],
+    /// 1-sigma of the detector, pixels, per axis.
+    pub pixel_sigma: T,
+}
+
+impl<T: Scalar> CornerSet<'_, T> {
+    /// Checks that there is something to fuse and that every value is usable.
+    pub fn validate(&self) -> Result<(), Error> {
+        if self.corners.is_empty() {
+            return Err(Error::EmptyMeasurement);
+        }
+        let finite = self.corners.iter().all(|c| {
+            c.point_in_target.iter().all(|x| x.is_finite()) && c.pixel.iter().all(|x| x.is_finite())
+        });
+        if !finite || !self.pixel_sigma.is_finite() {
+            return Err(Error::NonFinite);
+        }
+        if self.pixel_sigma <= T::zero() {
+            return Err(Error::InvalidConfig);
+        }
+        Ok(())
+    }
+}
 
 /// Residual and Jacobian blocks of one corner observation.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -1,0 +1,152 @@
+//! The reprojection update (RepErrCal, eq. 4.2 and 4.15): the corners of a static target
+//! seen in one image, through the IMU pose at the image's IMU time, the camera extrinsic
+//! and the camera model.
+//!
+//! The corners are fused one at a time (2 rows each), relinearised after every corner, and
+//! gated together: for a linear model the sum of the sequential NIS equals the NIS of the
+//! stacked measurement, so the gate is the same `chi2(2 K)` test a batch update would make,
+//! while no `2K x N` matrix is ever formed (K is unbounded, the stack is not).
+
+use super::fuse::extrinsic_innovation;
+use super::Ekf;
+use crate::camera::Camera;
+use crate::chi2;
+use crate::health::ExtrinsicInnovation;
+use crate::scalar::Scalar;
+use crate::state::{imu, Layout};
+use crate::update::reprojection::{self, CornerSet};
+use crate::update::{kalman_step_gated_at, Linearization, UpdateKind, UpdateReport};
+use crate::Error;
+use nalgebra::{Matrix2, Matrix2x3, Matrix3, SMatrix, Vector3};
+
+impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> Ekf<T, S, C, N, F> {
+    /// Fuses the corners of target frame `f` seen by camera sensor `s` (whose extrinsic is
+    /// `T_I_C`) in the image stamped `meas.stamp_ns`. The filter is propagated to the image's
+    /// IMU time `stamp + t_d` with the held IMU sample, so feed IMU samples up to that time
+    /// first. Rejected by the gate: only the health monitor records it.
+    pub fn update_reprojection(
+        &mut self,
+        s: usize,
+        f: usize,
+        camera: &Camera<T>,
+        meas: &CornerSet<'_, T>,
+    ) -> Result<UpdateReport<T>, Error> {
+        if s >= S {
+            return Err(Error::UnknownSensor);
+        }
+        if f >= F {
+            return Err(Error::UnknownFrame);
+        }
+        if self.frames[f].is_none() {
+            return Err(Error::FrameNotInitialized);
+        }
+        meas.validate()?;
+        let last = self.last_imu.ok_or(Error::NotInitialized)?;
+        let t = self.imu_time(s, meas.stamp_ns);
+        if t < self.time_ns {
+            return Err(Error::TimeWentBackwards {
+                filter_ns: self.time_ns,
+                stamp_ns: t,
+            });
+        }
+        if t - last.stamp_ns > self.config.max_imu_gap_ns {
+            return Err(Error::ImuGap {
+                gap_ns: t - last.stamp_ns,
+            });
+        }
+        let mut draft = self.clone();
+        draft.advance_to(t)?;
+        draft.flush_transition();
+        let noise = Matrix2::identity() * (meas.pixel_sigma * meas.pixel_sigma);
+        let mut nis = T::zero();
+        let mut innovation = ExtrinsicInnovation {
+            rotation_info: Matrix3::zeros(),
+            rotation_score: Vector3::zeros(),
+            translation_info: Matrix3::zeros(),
+            translation_score: Vector3::zeros(),
+        };
+        for corner in meas.corners {
+            let target = draft.frames[f].ok_or(Error::FrameNotInitialized)?;
+            let lin = reprojection::linearize(
+                camera,
+                &draft.imu.pose(),
+                &draft.sensors[s].extrinsic,
+                &target,
+                &corner.point_in_target,
+                &corner.pixel,
+            )
+            .ok_or(Error::NotProjectable)?;
+            let h = draft.reprojection_jacobian(s, f, &lin, &last.gyro);
+            let linearization = Linearization {
+                residual: lin.residual,
+                jacobian: h,
+                noise,
+            };
+            let step = kalman_step_gated_at(&draft.cov, &linearization, T::lit(f64::INFINITY))?;
+            draft.apply_correction(&step.correction)?;
+            draft.cov = step.covariance;
+            nis += step.nis;
+            let mut h_e = SMatrix::<T, 2, 6>::zeros();
+            h_e.fixed_view_mut::<2, 3>(0, 0)
+                .copy_from(&lin.extrinsic_rotation);
+            h_e.fixed_view_mut::<2, 3>(0, 3)
+                .copy_from(&lin.extrinsic_translation);
+            let part =
+                extrinsic_innovation(&h_e, &step.innovation_inverse, &step.weighted_residual);
+            innovation.rotation_info += part.rotation_info;
+            innovation.rotation_score += part.rotation_score;
+            innovation.translation_info += part.translation_info;
+            innovation.translation_score += part.translation_score;
+        }
+        let dof = 2 * meas.corners.len();
+        let threshold = chi2::quantile::<T>(dof, self.config.gate);
+        let accepted = nis <= threshold;
+        if accepted {
+            *self = draft;
+        }
+        Ok(self.record_update(
+            UpdateKind::Reprojection,
+            s,
+            meas.stamp_ns,
+            (nis, dof, threshold),
+            accepted,
+            Some(&innovation),
+        ))
+    }
+
+    /// The 2 x N Jacobian of one corner. The time offset enters through the IMU pose at the
+    /// image's true IMU time: `d/dt_d = H_theta w + H_p v` (as the clones carry it).
+    pub(super) fn reprojection_jacobian(
+        &self,
+        s: usize,
+        f: usize,
+        lin: &reprojection::ReprojectionJacobians<T>,
+        held_gyro: &Vector3<T>,
+    ) -> SMatrix<T, 2, N> {
+        let w = held_gyro - self.imu.gyro_bias;
+        let v = self.imu.velocity;
+        let mut h = SMatrix::<T, 2, N>::zeros();
+        let mut put = |idx: usize, block: &Matrix2x3<T>| {
+            h.fixed_view_mut::<2, 3>(0, idx).copy_from(block);
+        };
+        put(imu::ORIENTATION.idx, &lin.imu_rotation);
+        put(imu::POSITION.idx, &lin.imu_position);
+        put(
+            Layout::<S, C>::extrinsic_rotation(s).idx,
+            &lin.extrinsic_rotation,
+        );
+        put(
+            Layout::<S, C>::extrinsic_translation(s).idx,
+            &lin.extrinsic_translation,
+        );
+        put(
+            Layout::<S, C>::frame_orientation(f).idx,
+            &lin.target_rotation,
+        );
+        put(Layout::<S, C>::frame_position(f).idx, &lin.target_position);
+        let td = lin.imu_rotation * w + lin.imu_position * v;
+        h.fixed_view_mut::<2, 1>(0, Layout::<S, C>::time_offset(s).idx)
+            .copy_from(&td);
+        h
+    }
+}
