@@ -79,6 +79,42 @@ pub struct Camera<T: Scalar> {
 }
 
 impl<T: Scalar> Camera<T> {
+    /// The same camera in scalar type `U` (e.g. the f64 calibration as the f32 model the
+    /// firmware runs).
+    pub fn cast<U: Scalar>(&self) -> Camera<U> {
+        let c = |x: T| U::lit(x.to_f64());
+        let i = &self.intrinsics;
+        Camera {
+            projection: match self.projection {
+                Projection::Pinhole => Projection::Pinhole,
+                Projection::Omni { xi } => Projection::Omni { xi: c(xi) },
+            },
+            intrinsics: Intrinsics {
+                fu: c(i.fu),
+                fv: c(i.fv),
+                cu: c(i.cu),
+                cv: c(i.cv),
+            },
+            distortion: match self.distortion {
+                Distortion::None => Distortion::None,
+                Distortion::RadTan(d) => Distortion::RadTan(radtan::RadTan {
+                    k1: c(d.k1),
+                    k2: c(d.k2),
+                    p1: c(d.p1),
+                    p2: c(d.p2),
+                    k3: c(d.k3),
+                }),
+                Distortion::Equidistant(d) => Distortion::Equidistant(equidistant::Equidistant {
+                    k1: c(d.k1),
+                    k2: c(d.k2),
+                    k3: c(d.k3),
+                    k4: c(d.k4),
+                }),
+            },
+            resolution: self.resolution,
+        }
+    }
+
     /// A camera from its parts, validated.
     pub fn new(
         projection: Projection<T>,

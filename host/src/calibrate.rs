@@ -1,6 +1,7 @@
 //! Calibration pipelines: one function from a dataset to a result plus a report per task.
 //! The CLI is a thin layer over them.
 
+pub mod camera_imu;
 pub mod convert;
 pub mod init;
 pub mod lidar_imu;

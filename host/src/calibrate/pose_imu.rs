@@ -9,8 +9,8 @@
 use std::time::Instant;
 
 use msreg_estimator::{
-    health::HealthEvent, Error as FilterError, FilterConfig, InitialState, PoseImuEkf,
-    RelativePose, Scalar,
+    health::HealthEvent, Ekf, Error as FilterError, FilterConfig, ImuSample, InitialState,
+    PoseImuEkf, RelativePose, Scalar, UpdateReport,
 };
 use nalgebra::{Isometry3, Matrix6, Vector3};
 use serde::Serialize;
@@ -268,29 +268,45 @@ impl<T: Scalar> ImuHooks<T> for PoseFeed<'_> {
     }
 }
 
-/// What a pipeline does around each IMU sample of [`drive_imu`].
-pub(crate) trait ImuHooks<T: Scalar> {
+/// What a pipeline does around each IMU sample of [`drive_imu`], for a filter `E`.
+pub(crate) trait ImuHooks<T: Scalar, E = PoseImuEkf<T>> {
     /// Before sample `index` is propagated: fuse every measurement due by `rec.stamp_ns`
     /// (the filter is still at the previous sample, holding it).
-    fn before_sample(
-        &mut self,
-        ekf: &mut PoseImuEkf<T>,
-        index: usize,
-        rec: &ImuRecord,
-    ) -> Result<(), PoseImuError>;
+    fn before_sample(&mut self, ekf: &mut E, index: usize, rec: &ImuRecord)
+        -> Result<(), PoseImuError>;
 
     /// After sample `rec` was propagated (and a standstill ZUPT applied).
-    fn after_sample(&mut self, _ekf: &PoseImuEkf<T>, _rec: &ImuRecord) {}
+    fn after_sample(&mut self, _ekf: &E, _rec: &ImuRecord) {}
+}
+
+/// What [`drive_imu`] needs of a filter, whatever its layout.
+pub(crate) trait ImuFilter<T: Scalar> {
+    /// Feeds one IMU sample.
+    fn propagate(&mut self, sample: &ImuSample<T>) -> Result<(), FilterError>;
+    /// Zero-velocity update with the latest sample.
+    fn update_zero_velocity(&mut self) -> Result<UpdateReport<T>, FilterError>;
+}
+
+impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> ImuFilter<T>
+    for Ekf<T, S, C, N, F>
+{
+    fn propagate(&mut self, sample: &ImuSample<T>) -> Result<(), FilterError> {
+        Ekf::propagate(self, sample)
+    }
+
+    fn update_zero_velocity(&mut self) -> Result<UpdateReport<T>, FilterError> {
+        Ekf::update_zero_velocity(self)
+    }
 }
 
 /// Runs the filter over the IMU record: measurements via `hooks`, propagation, zero-velocity
 /// updates during the initial standstill, progress.
-pub(crate) fn drive_imu<T: Scalar>(
-    ekf: &mut PoseImuEkf<T>,
+pub(crate) fn drive_imu<T: Scalar, E: ImuFilter<T>>(
+    ekf: &mut E,
     imu: &[ImuRecord],
     standstill: Option<&Standstill>,
     progress: &mut dyn FnMut(f64),
-    hooks: &mut dyn ImuHooks<T>,
+    hooks: &mut dyn ImuHooks<T, E>,
 ) -> Result<(), PoseImuError> {
     let (Some(first_imu), Some(last_imu)) = (imu.first(), imu.last()) else {
         return Ok(());
@@ -375,7 +391,7 @@ pub(crate) fn nominal_period_ns(poses: &[PoseRecord]) -> u64 {
 }
 
 /// The filter prior: at rest if the recording starts still, else level with large sigmas.
-fn initial_state<T: Scalar>(
+pub(crate) fn initial_state<T: Scalar>(
     imu: &[ImuRecord],
     standstill: Option<&Standstill>,
     rotation: &nalgebra::UnitQuaternion<f64>,
@@ -461,7 +477,12 @@ impl Run {
     }
 
     fn skip(&mut self, stamp_ns: u64, why: &str) {
-        self.skipped.push(format!("pose0 stamp {stamp_ns}: {why}"));
+        self.skip_measurement("pose0", stamp_ns, why);
+    }
+
+    /// Books a measurement of `sensor` that was not fused, with the reason.
+    pub(crate) fn skip_measurement(&mut self, sensor: &str, stamp_ns: u64, why: &str) {
+        self.skipped.push(format!("{sensor} stamp {stamp_ns}: {why}"));
     }
 
     /// Anchors a new odometry segment or fuses the increment from the previous pose.
@@ -511,9 +532,15 @@ impl Run {
 
     /// Books a relative-pose update of the measurement stamped `stamp_ns`: counts, NIS,
     /// health events and a history point.
-    pub(crate) fn record_update<T: Scalar>(
+    pub(crate) fn record_update<
+        T: Scalar,
+        const S: usize,
+        const C: usize,
+        const N: usize,
+        const F: usize,
+    >(
         &mut self,
-        ekf: &PoseImuEkf<T>,
+        ekf: &Ekf<T, S, C, N, F>,
         stamp_ns: u64,
         report: &msreg_estimator::UpdateReport<T>,
     ) {
@@ -563,8 +590,8 @@ impl Run {
     }
 }
 
-fn history_point<T: Scalar>(
-    ekf: &PoseImuEkf<T>,
+fn history_point<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize>(
+    ekf: &Ekf<T, S, C, N, F>,
     t_s: f64,
     nis: f64,
     accepted: bool,
@@ -590,8 +617,8 @@ const CONVERGED_SIGMA_ROT_DEG: f64 = 0.5;
 /// Largest final 1-sigma translation (m) of a converged calibration.
 const CONVERGED_SIGMA_TRANS_M: f64 = 0.02;
 
-pub(crate) fn finish<T: Scalar>(
-    ekf: &PoseImuEkf<T>,
+pub(crate) fn finish<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize>(
+    ekf: &Ekf<T, S, C, N, F>,
     run: Run,
     standstill: Option<&Standstill>,
     rotation_init: &init::RotationInit,

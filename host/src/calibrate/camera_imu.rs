@@ -1,0 +1,543 @@
+//! Camera-IMU calibration (dissertation ch. 4) from checkerboard corners, two ways:
+//!
+//! - **RepErrCal** (reprojection, eq. 4.2 and 4.15): the EKF fuses every image's corners
+//!   through the IMU pose, the extrinsic `T_I_C`, the camera model and the pose of the
+//!   static target `T_G_T`, which is a state of the filter. Gravity comes from the IMU at
+//!   the stationary start (roll and pitch; yaw is a gauge the target pose absorbs), so no
+//!   camera frame has to be taken as exact, unlike the dissertation's gauge at frame 0.
+//! - **MoCal** (motion based, eq. 4.11-4.13): each image's PnP pose becomes odometry of the
+//!   camera in the target frame, and the pose-IMU pipeline fuses its relative poses.
+//!
+//! Both start from the hand-eye rotation of PnP rotation increments against the integrated
+//! gyro (eq. 4.5) and a zero translation (no tape measure).
+
+use std::time::Instant;
+
+use msreg_estimator::camera::Camera;
+use msreg_estimator::{
+    CameraImuEkf, CornerObservation, CornerSet, Error as FilterError, FilterConfig, Scalar,
+};
+use nalgebra::{Isometry3, Matrix6, Vector2, Vector3};
+use serde::Serialize;
+
+use super::convert;
+use super::init;
+use super::pose_imu::{
+    self, drive_imu, finish, initial_state, nominal_period_ns, ImuHooks, PoseImuError,
+    PoseImuOptions, PoseImuReport, Run, Timing,
+};
+use crate::dataset::{ExtrinsicEstimate, ImuNoiseYaml, ImuRecord, PoseRecord, PoseSensorYaml};
+use crate::vision::pnp::{solve_pnp, PnpSolution};
+
+/// The target corners found in one image.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CornerFrame {
+    /// Image stamp, ns (camera clock).
+    pub stamp_ns: u64,
+    /// Corners: position in the target frame (m) and pixel.
+    pub corners: Vec<CornerObservation<f64>>,
+}
+
+/// What the pipeline reads.
+#[derive(Debug, Clone, Copy)]
+pub struct CameraImuInput<'a> {
+    /// IMU samples, strictly increasing stamps.
+    pub imu: &'a [ImuRecord],
+    /// IMU noise densities.
+    pub imu_noise: &'a ImuNoiseYaml,
+    /// The camera model (intrinsics known, e.g. from Kalibr).
+    pub camera: &'a Camera<f64>,
+    /// Detected corners per image, increasing stamps.
+    pub frames: &'a [CornerFrame],
+}
+
+/// Which measurement the filter fuses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum CameraUpdate {
+    /// Corner reprojection (RepErrCal).
+    Reprojection,
+    /// Relative poses of PnP (MoCal).
+    Motion,
+}
+
+/// Tuning of the pipeline.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CameraImuOptions {
+    /// Measurement model.
+    pub update: CameraUpdate,
+    /// Corner noise, 1-sigma per axis, pixels; `None` estimates it from the PnP residuals.
+    pub pixel_sigma: Option<f64>,
+    /// Extrinsic and time-offset priors, standstill detection (shared with pose-IMU).
+    pub prior: PoseImuOptions,
+}
+
+impl Default for CameraImuOptions {
+    fn default() -> Self {
+        Self {
+            update: CameraUpdate::Reprojection,
+            pixel_sigma: None,
+            prior: PoseImuOptions {
+                translation_sigma_m: 0.2,
+                ..PoseImuOptions::default()
+            },
+        }
+    }
+}
+
+/// Smallest corner noise assumed, pixels: below it detector biases dominate.
+const MIN_PIXEL_SIGMA: f64 = 0.05;
+/// Fewest corners an image needs for PnP and the update.
+const MIN_CORNERS: usize = 6;
+
+/// Reprojection statistics of one image, after its update.
+#[derive(Debug, Clone, Serialize)]
+pub struct FrameReprojection {
+    /// Seconds since the first IMU sample.
+    pub t_s: f64,
+    /// Corners fused.
+    pub corners: usize,
+    /// Mean reprojection error before the update (the innovation), pixels.
+    pub mean_error_before_px: f64,
+    /// Mean reprojection error after it, pixels.
+    pub mean_error_px: f64,
+    /// Whether the gate accepted the image.
+    pub accepted: bool,
+}
+
+/// The JSON report of a camera-IMU calibration.
+#[derive(Debug, Clone, Serialize)]
+pub struct CameraImuReport {
+    /// Measurement model used.
+    pub update: CameraUpdate,
+    /// Corner noise used, pixels (1-sigma per axis).
+    pub pixel_sigma: f64,
+    /// Images with a PnP pose (of those given).
+    pub frames_with_pose: usize,
+    /// Mean reprojection error over the accepted images, after their update, pixels.
+    pub mean_reprojection_error_px: f64,
+    /// Per image (RepErrCal only).
+    pub frames: Vec<FrameReprojection>,
+    /// Filter report: convergence, NIS, excitation, health events, history.
+    #[serde(flatten)]
+    pub filter: PoseImuReport,
+}
+
+/// The outcome: `T_I_C` with its covariance, the time offset, and the report.
+#[derive(Debug, Clone)]
+pub struct CameraImuCalibration {
+    /// `T_imu_cam` (the filter's state; the result file stores its inverse `T_cam_imu`).
+    pub t_imu_cam: Isometry3<f64>,
+    /// Time offset `t_d` (= Kalibr's `timeshift_cam_imu`), s.
+    pub time_offset_s: f64,
+    /// 1-sigma of the time offset, s.
+    pub time_offset_sigma_s: f64,
+    /// Covariance of the `T_imu_cam` error `[dtheta (right perturbation); dp]`.
+    pub covariance: Matrix6<f64>,
+    /// The report.
+    pub report: CameraImuReport,
+}
+
+impl CameraImuCalibration {
+    /// The `cam0` section of the result file: `T_cam_imu` with its sigmas.
+    pub fn estimate(&self) -> ExtrinsicEstimate {
+        let (t_cam_imu, covariance) = invert_with_covariance(&self.t_imu_cam, &self.covariance);
+        ExtrinsicEstimate::from_covariance(t_cam_imu, self.time_offset_s, &covariance)
+    }
+}
+
+/// `T^-1` and the covariance of its right-perturbation error, given those of `T`:
+/// `(R Exp(d))^T = R^T Exp(-R d)` and `-(R Exp(d))^T (p + dp) = p' - R^T dp - [R^T p]x d`.
+pub fn invert_with_covariance(
+    t: &Isometry3<f64>,
+    covariance: &Matrix6<f64>,
+) -> (Isometry3<f64>, Matrix6<f64>) {
+    let r = t.rotation.to_rotation_matrix().into_inner();
+    let rt_p = r.transpose() * t.translation.vector;
+    let mut j = Matrix6::zeros();
+    j.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-r));
+    j.fixed_view_mut::<3, 3>(3, 0)
+        .copy_from(&(-msreg_estimator::lie::skew(&rt_p)));
+    j.fixed_view_mut::<3, 3>(3, 3).copy_from(&(-r.transpose()));
+    (t.inverse(), j * covariance * j.transpose())
+}
+
+/// A PnP pose of one image.
+struct FramePose {
+    stamp_ns: u64,
+    /// Corners the PnP used.
+    points: usize,
+    pnp: PnpSolution,
+}
+
+/// Runs the calibration with the filter in scalar type `T`; `progress` gets the fraction
+/// of the recording processed.
+pub fn calibrate<T: Scalar>(
+    input: &CameraImuInput<'_>,
+    options: &CameraImuOptions,
+    progress: &mut dyn FnMut(f64),
+) -> Result<CameraImuCalibration, PoseImuError> {
+    let started = Instant::now();
+    let poses = frame_poses(input.camera, input.frames);
+    if poses.len() < 3 {
+        return Err(PoseImuError::BadInput(format!(
+            "cam0: {} of {} images have a target pose; at least 3 are needed",
+            poses.len(),
+            input.frames.len()
+        )));
+    }
+    let pixel_sigma = options
+        .pixel_sigma
+        .unwrap_or_else(|| pixel_sigma_from_pnp(&poses));
+    let odometry: Vec<PoseRecord> = poses.iter().map(camera_in_target).collect();
+    match options.update {
+        CameraUpdate::Motion => {
+            let noise = increment_noise(&poses);
+            let calibration = pose_imu::calibrate::<T>(
+                &pose_imu::PoseImuInput {
+                    imu: input.imu,
+                    imu_noise: input.imu_noise,
+                    poses: &odometry,
+                    pose_noise: &noise,
+                },
+                &options.prior,
+                progress,
+            )?;
+            Ok(CameraImuCalibration {
+                t_imu_cam: calibration.t_imu_pose,
+                time_offset_s: calibration.time_offset_s,
+                time_offset_sigma_s: calibration.time_offset_sigma_s,
+                covariance: calibration.covariance,
+                report: CameraImuReport {
+                    update: CameraUpdate::Motion,
+                    pixel_sigma,
+                    frames_with_pose: poses.len(),
+                    mean_reprojection_error_px: f64::NAN,
+                    frames: Vec::new(),
+                    filter: calibration.report,
+                },
+            })
+        }
+        CameraUpdate::Reprojection => reprojection_calibration::<T>(
+            input,
+            options,
+            &odometry,
+            pixel_sigma,
+            started,
+            progress,
+        ),
+    }
+}
+
+fn reprojection_calibration<T: Scalar>(
+    input: &CameraImuInput<'_>,
+    options: &CameraImuOptions,
+    odometry: &[PoseRecord],
+    pixel_sigma: f64,
+    started: Instant,
+    progress: &mut dyn FnMut(f64),
+) -> Result<CameraImuCalibration, PoseImuError> {
+    let imu = input.imu;
+    let Some(first_imu) = imu.first() else {
+        return Err(PoseImuError::BadInput(
+            "imu0/data.csv: no IMU samples".into(),
+        ));
+    };
+    let standstill = init::detect_standstill(imu, options.prior.min_standstill_s);
+    let gyro_bias = standstill.map_or_else(Vector3::zeros, |s| s.gyro_mean);
+    let period_ns = nominal_period_ns(odometry);
+    let rotation = init::hand_eye_rotation(imu, odometry, &gyro_bias, period_ns * 3 / 2);
+    let (rotation_init, init_problem) = match rotation {
+        Ok(r) => (r, None),
+        Err(e) => (
+            init::RotationInit {
+                rotation: nalgebra::UnitQuaternion::identity(),
+                pairs: 0,
+                axis_ratio: 0.0,
+            },
+            Some(format!(
+                "hand-eye rotation initialisation failed ({e:?}): the recording needs \
+                 rotation about at least two axes"
+            )),
+        ),
+    };
+    let mut prior = options.prior;
+    if init_problem.is_some() {
+        prior.rotation_sigma_rad = 0.5;
+    }
+    let initial = initial_state::<T>(imu, standstill.as_ref(), &rotation_init.rotation, &prior)?;
+    let config = FilterConfig::new(convert::imu_noise::<T>(input.imu_noise));
+    let mut ekf = CameraImuEkf::<T>::new(&config, &initial)
+        .map_err(|e| PoseImuError::BadInput(format!("imu0/imu.yaml: invalid noise ({e})")))?;
+    let init_s = started.elapsed().as_secs_f64();
+
+    let started = Instant::now();
+    let camera = input.camera.cast::<T>();
+    let mut feed = CornerFeed {
+        run: Run::new(first_imu.stamp_ns, period_ns),
+        frames: input.frames,
+        next: 0,
+        camera,
+        pixel_sigma: T::lit(pixel_sigma),
+        prior,
+        reprojection: Vec::new(),
+        buffer: Vec::new(),
+    };
+    drive_imu(&mut ekf, imu, standstill.as_ref(), progress, &mut feed)?;
+    let CornerFeed {
+        mut run,
+        next,
+        reprojection,
+        ..
+    } = feed;
+    for frame in &input.frames[next..] {
+        run.skip_measurement("cam0", frame.stamp_ns, "after the last IMU sample");
+    }
+    progress(1.0);
+    let filter_s = started.elapsed().as_secs_f64();
+    let mut calibration = finish(
+        &ekf,
+        run,
+        standstill.as_ref(),
+        &rotation_init,
+        Timing {
+            init: init_s,
+            filter: filter_s,
+        },
+    );
+    if let Some(problem) = init_problem {
+        calibration.report.reasons.insert(0, problem);
+        calibration.report.converged = false;
+    }
+    let accepted: Vec<f64> = reprojection
+        .iter()
+        .filter(|f| f.accepted)
+        .map(|f| f.mean_error_px)
+        .collect();
+    Ok(CameraImuCalibration {
+        t_imu_cam: calibration.t_imu_pose,
+        time_offset_s: calibration.time_offset_s,
+        time_offset_sigma_s: calibration.time_offset_sigma_s,
+        covariance: calibration.covariance,
+        report: CameraImuReport {
+            update: CameraUpdate::Reprojection,
+            pixel_sigma,
+            frames_with_pose: odometry.len(),
+            mean_reprojection_error_px: accepted.iter().sum::<f64>()
+                / accepted.len().max(1) as f64,
+            frames: reprojection,
+            filter: calibration.report,
+        },
+    })
+}
+
+/// The RepErrCal measurement feed: fuses every image whose IMU time has come, initialising
+/// the target pose from the first image's PnP.
+struct CornerFeed<'a, T: Scalar> {
+    run: Run,
+    frames: &'a [CornerFrame],
+    next: usize,
+    camera: Camera<T>,
+    pixel_sigma: T,
+    prior: PoseImuOptions,
+    reprojection: Vec<FrameReprojection>,
+    buffer: Vec<CornerObservation<T>>,
+}
+
+impl<T: Scalar> ImuHooks<T, CameraImuEkf<T>> for CornerFeed<'_, T> {
+    fn before_sample(
+        &mut self,
+        ekf: &mut CameraImuEkf<T>,
+        index: usize,
+        rec: &ImuRecord,
+    ) -> Result<(), PoseImuError> {
+        while let Some(frame) = self.frames.get(self.next) {
+            let due = frame.stamp_ns as i128 + (ekf.time_offset(0).to_f64() * 1e9) as i128;
+            if due > rec.stamp_ns as i128 {
+                break;
+            }
+            self.next += 1;
+            if index == 0 {
+                self.run.skip_measurement(
+                    "cam0",
+                    frame.stamp_ns,
+                    "before the first IMU sample",
+                );
+                continue;
+            }
+            if frame.corners.len() < MIN_CORNERS {
+                self.run
+                    .skip_measurement("cam0", frame.stamp_ns, "too few corners");
+                continue;
+            }
+            if ekf.frame(0).is_none() {
+                if let Err(why) = self.init_target(ekf, frame) {
+                    self.run.skip_measurement("cam0", frame.stamp_ns, &why);
+                    continue;
+                }
+            }
+            self.fuse(ekf, frame);
+        }
+        Ok(())
+    }
+}
+
+impl<T: Scalar> CornerFeed<'_, T> {
+    /// `T_G_T = T_G_I T_I_C T_C_T(PnP)` at the current estimate, with sigmas covering the
+    /// extrinsic prior's error seen at the target's distance.
+    fn init_target(&self, ekf: &mut CameraImuEkf<T>, frame: &CornerFrame) -> Result<(), String> {
+        let camera = self.camera.cast::<f64>();
+        let pnp = pnp_of(&camera, frame).map_err(|e| format!("no PnP pose for the target: {e}"))?;
+        let t_g_c = convert::isometry(&ekf.imu().pose()) * convert::isometry(&ekf.extrinsic(0));
+        let t_g_t = t_g_c * convert::isometry(&pnp.t_cam_target);
+        let distance = pnp.t_cam_target.translation.norm();
+        let sigma_rotation = self.prior.rotation_sigma_rad + 0.02;
+        let sigma_position = self.prior.translation_sigma_m + sigma_rotation * distance;
+        ekf.init_frame(
+            0,
+            convert::pose::<T>(&t_g_t),
+            T::lit(sigma_rotation),
+            T::lit(sigma_position),
+        )
+        .map_err(|e| format!("cannot initialise the target: {e}"))
+    }
+
+    fn fuse(&mut self, ekf: &mut CameraImuEkf<T>, frame: &CornerFrame) {
+        self.buffer.clear();
+        self.buffer
+            .extend(frame.corners.iter().map(|c| CornerObservation {
+                point_in_target: convert::vec3(&c.point_in_target),
+                pixel: Vector2::new(T::lit(c.pixel.x), T::lit(c.pixel.y)),
+            }));
+        let before = self.mean_error(ekf);
+        let meas = CornerSet {
+            stamp_ns: frame.stamp_ns,
+            corners: &self.buffer,
+            pixel_sigma: self.pixel_sigma,
+        };
+        match ekf.update_reprojection(0, 0, &self.camera, &meas) {
+            Ok(report) => {
+                self.run.record_update(ekf, frame.stamp_ns, &report);
+                let after = self.mean_error(ekf);
+                self.reprojection.push(FrameReprojection {
+                    t_s: self.run.seconds(frame.stamp_ns),
+                    corners: frame.corners.len(),
+                    mean_error_before_px: before,
+                    mean_error_px: after,
+                    accepted: report.accepted,
+                });
+            }
+            Err(FilterError::NotProjectable) => self.run.skip_measurement(
+                "cam0",
+                frame.stamp_ns,
+                "corners not projectable at the estimate",
+            ),
+            Err(e) => self
+                .run
+                .skip_measurement("cam0", frame.stamp_ns, &format!("{e}")),
+        }
+    }
+
+    /// Mean distance between the buffered corners and their projection at the filter's
+    /// current state (NaN when one does not project).
+    fn mean_error(&self, ekf: &CameraImuEkf<T>) -> f64 {
+        let Some(target) = ekf.frame(0) else {
+            return f64::NAN;
+        };
+        let imu = ekf.imu().pose();
+        let extrinsic = ekf.extrinsic(0);
+        let mut sum = 0.0;
+        for c in &self.buffer {
+            let p = msreg_estimator::update::reprojection::point_in_camera(
+                &imu,
+                &extrinsic,
+                &target,
+                &c.point_in_target,
+            );
+            match self.camera.project(&p) {
+                Some(projected) => sum += (projected.pixel - c.pixel).norm().to_f64(),
+                None => return f64::NAN,
+            }
+        }
+        sum / self.buffer.len().max(1) as f64
+    }
+}
+
+fn pnp_of(camera: &Camera<f64>, frame: &CornerFrame) -> Result<PnpSolution, String> {
+    let points: Vec<Vector3<f64>> = frame.corners.iter().map(|c| c.point_in_target).collect();
+    let pixels: Vec<Vector2<f64>> = frame.corners.iter().map(|c| c.pixel).collect();
+    solve_pnp(camera, &points, &pixels).map_err(|e| e.to_string())
+}
+
+/// PnP of every image with enough corners.
+fn frame_poses(camera: &Camera<f64>, frames: &[CornerFrame]) -> Vec<FramePose> {
+    use rayon::prelude::*;
+    frames
+        .par_iter()
+        .filter(|f| f.corners.len() >= MIN_CORNERS)
+        .filter_map(|f| {
+            pnp_of(camera, f).ok().map(|pnp| FramePose {
+                stamp_ns: f.stamp_ns,
+                points: f.corners.len(),
+                pnp,
+            })
+        })
+        .collect()
+}
+
+/// The camera's pose in the target frame as odometry (`T_T_C`, origin = target).
+fn camera_in_target(pose: &FramePose) -> PoseRecord {
+    let t_t_c = convert::isometry(&pose.pnp.t_cam_target).inverse();
+    PoseRecord {
+        stamp_ns: pose.stamp_ns,
+        position: t_t_c.translation.vector,
+        rotation: t_t_c.rotation,
+    }
+}
+
+/// Per-axis corner noise from the PnP fits: the median RMS residual, per axis, corrected
+/// for the 6 DoF the fit absorbs.
+fn pixel_sigma_from_pnp(poses: &[FramePose]) -> f64 {
+    let mut per_axis: Vec<f64> = poses
+        .iter()
+        .filter_map(|p| {
+            let n = p.points;
+            (n > 3).then(|| {
+                p.pnp.rms_px / 2f64.sqrt() * (2.0 * n as f64 / (2.0 * n as f64 - 6.0)).sqrt()
+            })
+        })
+        .collect();
+    per_axis.sort_by(f64::total_cmp);
+    per_axis
+        .get(per_axis.len() / 2)
+        .copied()
+        .unwrap_or(MIN_PIXEL_SIGMA)
+        .max(MIN_PIXEL_SIGMA)
+}
+
+/// MoCal's odometry noise per increment: two independent PnP poses, each with the median
+/// of the frames' largest per-axis sigma of `T_T_C`.
+fn increment_noise(poses: &[FramePose]) -> PoseSensorYaml {
+    let mut rotation = Vec::with_capacity(poses.len());
+    let mut translation = Vec::with_capacity(poses.len());
+    for p in poses {
+        let t_c_t = convert::isometry(&p.pnp.t_cam_target);
+        let (_, cov) = invert_with_covariance(&t_c_t, &p.pnp.covariance);
+        let max_sd = |b: usize| {
+            (0..3)
+                .map(|i| cov[(b + i, b + i)].max(0.0).sqrt())
+                .fold(0.0, f64::max)
+        };
+        rotation.push(max_sd(0));
+        translation.push(max_sd(3));
+    }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(0.0)
+    };
+    PoseSensorYaml {
+        rotation_noise_rad: median(&mut rotation) * 2f64.sqrt(),
+        translation_noise_m: median(&mut translation) * 2f64.sqrt(),
+        rate_hz: None,
+    }
+}
