@@ -272,8 +272,12 @@ impl<T: Scalar> ImuHooks<T> for PoseFeed<'_> {
 pub(crate) trait ImuHooks<T: Scalar, E = PoseImuEkf<T>> {
     /// Before sample `index` is propagated: fuse every measurement due by `rec.stamp_ns`
     /// (the filter is still at the previous sample, holding it).
-    fn before_sample(&mut self, ekf: &mut E, index: usize, rec: &ImuRecord)
-        -> Result<(), PoseImuError>;
+    fn before_sample(
+        &mut self,
+        ekf: &mut E,
+        index: usize,
+        rec: &ImuRecord,
+    ) -> Result<(), PoseImuError>;
 
     /// After sample `rec` was propagated (and a standstill ZUPT applied).
     fn after_sample(&mut self, _ekf: &E, _rec: &ImuRecord) {}
@@ -482,7 +486,8 @@ impl Run {
 
     /// Books a measurement of `sensor` that was not fused, with the reason.
     pub(crate) fn skip_measurement(&mut self, sensor: &str, stamp_ns: u64, why: &str) {
-        self.skipped.push(format!("{sensor} stamp {stamp_ns}: {why}"));
+        self.skipped
+            .push(format!("{sensor} stamp {stamp_ns}: {why}"));
     }
 
     /// Anchors a new odometry segment or fuses the increment from the previous pose.
