@@ -93,7 +93,10 @@ pub fn read_camera_csv(path: impl AsRef<Path>) -> Result<Vec<CameraFrame>, Datas
 }
 
 /// Writes `cam0/data.csv`: the file name of each frame's path.
-pub fn write_camera_csv(path: impl AsRef<Path>, frames: &[CameraFrame]) -> Result<(), DatasetError> {
+pub fn write_camera_csv(
+    path: impl AsRef<Path>,
+    frames: &[CameraFrame],
+) -> Result<(), DatasetError> {
     let path = path.as_ref();
     let file = File::create(path).map_err(|source| io_error(path, source))?;
     let mut out = BufWriter::new(file);
@@ -229,7 +232,10 @@ mod tests {
         assert_eq!(read_camera_csv(&path)?, frames);
         // EuRoC's own header and spaces.
         std::fs::write(&path, "#timestamp [ns],filename\r\n5 , a.png\n")?;
-        assert_eq!(read_camera_csv(&path)?[0].path, dir.path().join("data/a.png"));
+        assert_eq!(
+            read_camera_csv(&path)?[0].path,
+            dir.path().join("data/a.png")
+        );
         Ok(())
     }
 
@@ -251,11 +257,17 @@ mod tests {
                 matches!(err, DatasetError::MalformedLine { line: l, .. } if l == line),
                 "{text:?}: {err}"
             );
-            assert!(err.to_string().contains(&format!("data.csv:{line}")), "{err}");
+            assert!(
+                err.to_string().contains(&format!("data.csv:{line}")),
+                "{err}"
+            );
         }
         std::fs::write(&path, "2,a.png\n2,b.png\n")?;
         let err = read_camera_csv(&path).err().ok_or("expected an error")?;
-        assert!(matches!(err, DatasetError::TimeNotIncreasing { line: 2, .. }));
+        assert!(matches!(
+            err,
+            DatasetError::TimeNotIncreasing { line: 2, .. }
+        ));
         std::fs::write(&path, "#only a header\n")?;
         let err = read_camera_csv(&path).err().ok_or("expected an error")?;
         assert!(matches!(err, DatasetError::Empty { .. }));
@@ -302,7 +314,10 @@ mod tests {
         }
         std::fs::write(&path, "5,0,1,1,1\n4,0,1,1,1\n")?;
         let err = read_corners_csv(&path).err().ok_or("expected an error")?;
-        assert!(matches!(err, DatasetError::TimeNotIncreasing { line: 2, .. }));
+        assert!(matches!(
+            err,
+            DatasetError::TimeNotIncreasing { line: 2, .. }
+        ));
         Ok(())
     }
 }

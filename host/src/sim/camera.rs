@@ -6,7 +6,7 @@
 //!   centre near its optical axis while turning at 1-2 rad/s about every axis, so the full
 //!   board stays in view in nearly every frame. The IMU follows as `T_G_I = T_G_C T_cam_imu`,
 //!   synthesised exactly as in the other scenarios (VN-300-class, 400 Hz).
-//! - Board: `rows x cols` inner corners (default 6 x 7 at 6 cm, Kalibr ids), 0.9 m in front
+//! - Board: `rows x cols` inner corners (default 6 x 7 at 6 cm, Kalibr ids), 0.75 m in front
 //!   of the viewpoint, facing it within +-0.2 rad, turned in its plane within +-0.2 rad.
 //! - Camera: pinhole + radtan (EuRoC cam0 intrinsics, 752 x 480) or pinhole + equidistant;
 //!   frames at `rate_hz`, image stamped `t_C` shows the scene at IMU time `t_C + t_d`
@@ -46,8 +46,7 @@ use crate::dataset::{
     GROUNDTRUTH_TARGET_POSES_CSV, GROUNDTRUTH_TRAJECTORY_CSV, IMU_CSV, IMU_YAML, TARGET_YAML,
 };
 use crate::vision::render::{
-    add_noise, apply_lighting_gradient, render_exposure, BoardPattern, PixelRays,
-    RenderSettings,
+    add_noise, apply_lighting_gradient, render_exposure, BoardPattern, PixelRays, RenderSettings,
 };
 use crate::vision::GrayImage;
 
@@ -96,9 +95,8 @@ impl CameraModelChoice {
             ),
         };
         // Valid constants: positive focal lengths, finite coefficients.
-        Camera::new(Projection::Pinhole, intrinsics, distortion, (752, 480)).unwrap_or_else(
-            |_| unreachable!("the built-in camera parameters are valid"),
-        )
+        Camera::new(Projection::Pinhole, intrinsics, distortion, (752, 480))
+            .unwrap_or_else(|_| unreachable!("the built-in camera parameters are valid"))
     }
 }
 
@@ -151,8 +149,8 @@ impl Default for CameraImuSimConfig {
                 ..TrajectoryConfig::default()
             },
             look_at: LookAtConfig {
-                distance_m: 0.9,
-                max_offset_m: [0.2, 0.12, 0.15],
+                distance_m: 0.75,
+                max_offset_m: [0.15, 0.1, 0.12],
                 max_deviation_rad: [0.15, 0.18, 0.35],
             },
             imu: ImuSimConfig::default(),
@@ -206,8 +204,7 @@ impl CameraImuSimConfig {
         if !(l.distance_m.is_finite() && l.distance_m > 0.1) {
             return bad("look_at.distance_m", "must be > 0.1 m");
         }
-        if l
-            .max_offset_m
+        if l.max_offset_m
             .iter()
             .chain(&l.max_deviation_rad)
             .any(|x| !(x.is_finite() && *x >= 0.0))
@@ -273,10 +270,7 @@ pub fn random_camera_mounting(rng: &mut impl Rng) -> Isometry3<f64> {
         rng.gen_range(-0.1..=0.1),
         rng.gen_range(-0.1..=0.1),
     );
-    Isometry3::from_parts(
-        translation,
-        base * UnitQuaternion::from_scaled_axis(jitter),
-    )
+    Isometry3::from_parts(translation, base * UnitQuaternion::from_scaled_axis(jitter))
 }
 
 /// The viewpoint frame `W` (x right, y down, z forward) and the board `T_G_T`.
@@ -301,14 +295,10 @@ fn random_scene(
     // Board: target x along W y (down), y along W x (right), z = -W z (facing the camera);
     // then a turn in its plane and a tilt.
     let facing = Matrix3::new(0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, -1.0);
-    let r_facing =
-        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(facing));
+    let r_facing = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(facing));
     let spin = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), rng.gen_range(-0.2..0.2));
-    let tilt = UnitQuaternion::from_euler_angles(
-        rng.gen_range(-0.2..0.2),
-        rng.gen_range(-0.2..0.2),
-        0.0,
-    );
+    let tilt =
+        UnitQuaternion::from_euler_angles(rng.gen_range(-0.2..0.2), rng.gen_range(-0.2..0.2), 0.0);
     let r_w_t = tilt * spin * r_facing;
     let b = &config.board;
     let centre_t = Vector3::new(
@@ -480,7 +470,10 @@ impl CameraImuSim {
     fn blur_steps(&self, t: f64, e: f64) -> usize {
         let cam = &self.config.camera;
         let board = &self.config.board;
-        let (a, b) = (self.t_cam_target(t - e / 2.0), self.t_cam_target(t + e / 2.0));
+        let (a, b) = (
+            self.t_cam_target(t - e / 2.0),
+            self.t_cam_target(t + e / 2.0),
+        );
         let corners = [0, board.cols - 1, board.rows * board.cols - 1];
         let motion = corners
             .iter()
@@ -662,8 +655,7 @@ mod tests {
     }
 
     #[test]
-    fn the_board_stays_in_view_and_the_camera_turns_fast_on_every_axis() -> Result<(), SimError>
-    {
+    fn the_board_stays_in_view_and_the_camera_turns_fast_on_every_axis() -> Result<(), SimError> {
         for seed in 0..6 {
             let sim = simulate_camera_imu(&short(seed))?;
             let n = sim.frame_stamps.len();
@@ -676,8 +668,14 @@ mod tests {
                 let w_c = r_c_i * sim.trajectory.body_rate(t);
                 max_rate = max_rate.zip_map(&w_c, |m, w| m.max(w.abs()));
             }
-            println!("seed {seed}: {in_view}/{n} frames with the full board, max rates {:?}", max_rate.as_slice());
-            assert!(in_view as f64 >= 0.95 * n as f64, "seed {seed}: {in_view}/{n}");
+            println!(
+                "seed {seed}: {in_view}/{n} frames with the full board, max rates {:?}",
+                max_rate.as_slice()
+            );
+            assert!(
+                in_view as f64 >= 0.95 * n as f64,
+                "seed {seed}: {in_view}/{n}"
+            );
             assert!(
                 max_rate.iter().all(|&w| (0.8..3.0).contains(&w)),
                 "seed {seed}: {max_rate}"

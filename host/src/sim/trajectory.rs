@@ -239,7 +239,10 @@ impl Trajectory {
     pub fn body_rate(&self, t: f64) -> Vector3<f64> {
         match &self.mount {
             None => self.frame_rate(t),
-            Some(m) => m.t_f_i.rotation.inverse_transform_vector(&self.frame_rate(t)),
+            Some(m) => m
+                .t_f_i
+                .rotation
+                .inverse_transform_vector(&self.frame_rate(t)),
         }
     }
 

@@ -10,8 +10,8 @@ use msreg_estimator::camera::Camera;
 use msreg_estimator::Pose;
 use nalgebra::{Vector2, Vector3};
 use rand::Rng;
-use rayon::prelude::*;
 use rand_distr::{Distribution, Normal};
+use rayon::prelude::*;
 
 /// The printed board.
 #[derive(Clone, Copy, Debug, PartialEq)]
