@@ -12,7 +12,7 @@
 //!   frames at `rate_hz`, image stamped `t_C` shows the scene at IMU time `t_C + t_d`
 //!   (mid-exposure). Rendering ([`crate::vision::render`]): anti-aliased edges (8 x 8
 //!   supersampling), optional motion blur (the mean over `exposure_s` of sharp renders, enough
-//!   of them that the image moves < 0.25 px between two), lighting gradient and Gaussian
+//!   of them that the image moves < 0.5 px between two), lighting gradient and Gaussian
 //!   noise, then 8-bit PNG.
 //! - Ground truth: `T_cam_imu`, `timeshift_cam_imu`, the IMU trajectory, the board pose
 //!   `T_G_T` per frame and the true pixel of every corner with an in-image flag.
@@ -466,7 +466,8 @@ impl CameraImuSim {
     }
 
     /// Sharp renders over an exposure of `e` s at `t`: the largest corner motion over the
-    /// exposure divided by 0.25 px, 2..=64.
+    /// exposure divided by 0.5 px, 2..=64 (sharp renders half a pixel apart average to the
+    /// continuous blur within a small symmetric error that does not move corners).
     fn blur_steps(&self, t: f64, e: f64) -> usize {
         let cam = &self.config.camera;
         let board = &self.config.board;
@@ -484,7 +485,7 @@ impl CameraImuSim {
                 Some((pa - pb).norm())
             })
             .fold(0.0, f64::max);
-        ((motion / 0.25).ceil() as usize).clamp(2, 64)
+        ((motion / 0.5).ceil() as usize).clamp(2, 64)
     }
 
     /// `groundtruth/corners.csv` rows of every frame.

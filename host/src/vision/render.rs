@@ -164,27 +164,84 @@ pub fn render_exposure(
     let (w, h) = (rays.width, rays.height);
     let mut sum = vec![0.0f32; w * h];
     let mut plane = vec![Vector2::repeat(f64::NAN); (w + 1) * (h + 1)];
+    let mut classes = vec![Class::Background; (w + 1) * (h + 1)];
+    let (x0, x1, y0, y1) = board_region(&rays.camera, poses, board);
     for pose in poses {
         let t_target_cam = pose.inverse();
-        // Board-plane intersection of every corner ray (printed face only).
+        // Board-plane intersection and class of every corner ray of the region.
         plane
             .par_chunks_mut(w + 1)
+            .zip(classes.par_chunks_mut(w + 1))
             .zip(rays.rays.par_chunks(w + 1))
-            .for_each(|(out, row)| {
-                for (o, b) in out.iter_mut().zip(row) {
-                    *o = intersect(&t_target_cam, b).unwrap_or(Vector2::repeat(f64::NAN));
+            .enumerate()
+            .filter(|(y, _)| (y0..=y1).contains(y))
+            .for_each(|(_, ((out, cls), row))| {
+                for x in x0..=x1 {
+                    let q = intersect(&t_target_cam, &row[x]);
+                    out[x] = q.unwrap_or(Vector2::repeat(f64::NAN));
+                    cls[x] = q.map_or(Class::Background, |q| board.class(q.x, q.y));
                 }
             });
-        let plane = &plane;
+        let (plane, classes) = (&plane, &classes);
         sum.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
             for (x, acc) in row.iter_mut().enumerate() {
-                *acc += shade_pixel(rays, &t_target_cam, plane, x, y, board, settings);
+                *acc += if (y0..y1).contains(&y) && (x0..x1).contains(&x) {
+                    shade_pixel(rays, &t_target_cam, plane, classes, x, y, board, settings)
+                } else {
+                    settings.background
+                };
             }
         });
     }
     let n = poses.len().max(1) as f32;
     let data = sum.into_iter().map(|v| v / n).collect();
     GrayImage::from_vec(w, h, data).unwrap_or_else(|| GrayImage::new(w, h, 0.0))
+}
+
+/// The pixels (`x0..x1`, `y0..y1`) that can show the board in any of `poses`: the bounding
+/// box of its outline (margin included) projected into the image, padded by 3 px; the whole
+/// image when part of the outline does not project inside it (a lens model can fold points
+/// far outside its field of view back into the image, so those cannot bound anything).
+fn board_region(
+    camera: &Camera<f64>,
+    poses: &[Pose<f64>],
+    board: &BoardPattern,
+) -> (usize, usize, usize, usize) {
+    let (w, h) = (camera.resolution.0 as usize, camera.resolution.1 as usize);
+    let whole = (0, w, 0, h);
+    let (rs, cs, m) = (board.row_spacing_m, board.col_spacing_m, board.margin_m);
+    let (ax, bx) = (-rs - m, board.rows as f64 * rs + m);
+    let (ay, by) = (-cs - m, board.cols as f64 * cs + m);
+    let steps = 64;
+    let (mut lo, mut hi) = (Vector2::repeat(f64::MAX), Vector2::repeat(f64::MIN));
+    for pose in poses {
+        for k in 0..=steps {
+            let f = k as f64 / steps as f64;
+            let (x, y) = (ax + (bx - ax) * f, ay + (by - ay) * f);
+            for p in [
+                Vector3::new(x, ay, 0.0),
+                Vector3::new(x, by, 0.0),
+                Vector3::new(ax, y, 0.0),
+                Vector3::new(bx, y, 0.0),
+            ] {
+                let Some(px) = camera.project(&pose.transform_point(&p)) else {
+                    return whole;
+                };
+                if !camera.in_image(&px.pixel, 0.0) {
+                    return whole;
+                }
+                lo = lo.inf(&px.pixel);
+                hi = hi.sup(&px.pixel);
+            }
+        }
+    }
+    let clamp = |v: f64, n: usize| (v.max(0.0) as usize).min(n);
+    (
+        clamp(lo.x - 3.0, w),
+        clamp(hi.x + 4.0, w),
+        clamp(lo.y - 3.0, h),
+        clamp(hi.y + 4.0, h),
+    )
 }
 
 /// The board-plane point `(x, y)` hit by bearing `b` (camera frame), if the printed face
@@ -201,10 +258,12 @@ fn intersect(t_target_cam: &Pose<f64>, b: &Vector3<f64>) -> Option<Vector2<f64>>
 
 /// Mean grey value over pixel `(x, y)`: uniform pixels from their corners and centre,
 /// edge pixels supersampled.
+#[allow(clippy::too_many_arguments)]
 fn shade_pixel(
     rays: &PixelRays,
     t_target_cam: &Pose<f64>,
     plane: &[Vector2<f64>],
+    classes: &[Class],
     x: usize,
     y: usize,
     board: &BoardPattern,
@@ -226,7 +285,13 @@ fn shade_pixel(
     if p.iter().all(|q| q.x.is_finite()) {
         let class = |q: Vector2<f64>| board.class(q.x, q.y);
         let centre = class((p[0] + p[1] + p[2] + p[3]) / 4.0);
-        if p.iter().all(|&q| class(q) == centre) {
+        let corner_classes = [
+            classes[y * stride + x],
+            classes[y * stride + x + 1],
+            classes[(y + 1) * stride + x],
+            classes[(y + 1) * stride + x + 1],
+        ];
+        if corner_classes.iter().all(|&c| c == centre) {
             return value(centre);
         }
         let mut acc = 0.0;
