@@ -79,6 +79,8 @@ enum DetectTarget {
     Checkerboard(detect_cmd::DetectCheckerboardArgs),
 }
 
+// The variants are the subcommand names (`pose-imu`, `lidar-imu`, `camera-imu`).
+#[allow(clippy::enum_variant_names)]
 #[derive(Subcommand)]
 enum Scenario {
     /// IMU + generic pose sensor (odometry) with drifting increments.

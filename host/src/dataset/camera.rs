@@ -149,9 +149,10 @@ pub fn read_corners_csv(path: impl AsRef<Path>) -> Result<Vec<CornerTruth>, Data
         if id < 0.0 || id.fract() != 0.0 || id > 1e9 {
             return Err(malformed("a non-negative integer corner_id in column 2"));
         }
-        let in_image = match flag {
-            f if f == 0.0 => false,
-            f if f == 1.0 => true,
+        // Exactly 0 or 1 as written; anything else is a column mix-up.
+        let in_image = match flag.to_bits() {
+            b if b == 0f64.to_bits() => false,
+            b if b == 1f64.to_bits() => true,
             _ => return Err(malformed("in_image 0 or 1 in column 5")),
         };
         if let Some(previous) = out.last() {

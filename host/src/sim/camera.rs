@@ -237,7 +237,7 @@ impl CameraImuSimConfig {
         if !(self.noise_sigma.is_finite() && (0.0..50.0).contains(&self.noise_sigma)) {
             return bad("noise_sigma", "must be in [0, 50) grey levels");
         }
-        if self.lighting_gradient.iter().any(|g| !(g.abs() < 1.0)) {
+        if !self.lighting_gradient.iter().all(|g| g.abs() < 1.0) {
             return bad("lighting_gradient", "each gain must be within (-1, 1)");
         }
         if self.duration_s < 0.3 + 3.0 / self.rate_hz {
