@@ -12,7 +12,8 @@ use msreg_host::dataset::{
 };
 use msreg_host::sim::camera::{simulate_camera_imu, CameraImuSim, CameraImuSimConfig};
 use msreg_host::vision::{
-    detect_checkerboard, CameraDataset, CameraInputError, DetectorParams, GrayImage, NoDetection,
+    detect_checkerboard, solve_pnp, CameraDataset, CameraInputError, DetectorParams, GrayImage,
+    NoDetection,
 };
 
 fn config(seed: u64, duration_s: f64) -> CameraImuSimConfig {
@@ -179,9 +180,15 @@ fn the_written_dataset_reads_back_and_detects_like_the_truth() {
     assert_eq!(corners.len(), 42 * cam.frames.len());
     let results = cam.detect(&DetectorParams::default(), &|_| {}).unwrap();
     let mut detected = 0;
-    for r in &results {
+    for (k, r) in results.iter().enumerate() {
         let Ok(c) = &r.corners else { continue };
         detected += 1;
+        // Ids, target frame, trajectory and mounting agree end to end: PnP on the detected
+        // corners gives the true T_cam_target at the frame's IMU time.
+        let pnp = solve_pnp(&cam.camera, &c.target_points(&cam.target), &c.pixels).unwrap();
+        let truth = sim.t_cam_target(sim.frame_time(k));
+        assert!((pnp.t_cam_target.translation - truth.translation).norm() < 2e-3);
+        assert!(pnp.t_cam_target.rotation.angle_to(&truth.rotation) < 0.2_f64.to_radians());
         for (id, p) in c.ids.iter().zip(&c.pixels) {
             let t = corners
                 .iter()

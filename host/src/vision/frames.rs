@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use msreg_estimator::camera::Camera;
-use nalgebra::Vector2;
+use nalgebra::{Vector2, Vector3};
 use rayon::prelude::*;
 
 use super::checkerboard::{detect_checkerboard, DetectorParams, NoDetection};
@@ -115,6 +115,16 @@ pub struct FrameCorners {
     pub ids: Vec<usize>,
     /// Refined pixel of each id.
     pub pixels: Vec<Vector2<f64>>,
+}
+
+impl FrameCorners {
+    /// The target-frame point of every id (for PnP or a reprojection residual).
+    pub fn target_points(&self, target: &CheckerboardTarget) -> Vec<Vector3<f64>> {
+        self.ids
+            .iter()
+            .map(|&id| target.corner_in_target(id))
+            .collect()
+    }
 }
 
 /// The outcome for one image.
