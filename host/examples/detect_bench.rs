@@ -1,7 +1,8 @@
 //! Checkerboard detection timing (not a test): median wall time per image of
 //! `detect_checkerboard` on the real 640x480 OpenCV samples (`../shared/data`) and on
 //! rendered 1600x1200 images (6 x 9 board, pinhole with radtan, blur 1 px, noise 3 grey
-//! levels), single-threaded. Usage: `detect_bench [runs] [<shared-data-dir>]`.
+//! levels), and the camera-IMU simulator's 752x480 frames (render time, detection time,
+//! parallel stream throughput against 20 Hz). Usage: `detect_bench [runs] [<shared-data-dir>]`.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -59,6 +60,62 @@ fn main() -> Result<()> {
         }));
     }
     report("1600x1200 rendered", &mut times);
+    simulated_stream(runs)?;
+    Ok(())
+}
+
+/// The camera-IMU simulator's 752x480 frames (EuRoC-like camera, 6 x 7 board, blur and
+/// noise): rendering time per frame, detection time per frame, and the throughput of
+/// `detect_frames`-style parallel detection over a stream (both cores), against 20 Hz.
+fn simulated_stream(runs: usize) -> Result<()> {
+    use msreg_host::sim::camera::{simulate_camera_imu, CameraImuSimConfig};
+    use rayon::prelude::*;
+    for (label, config) in [
+        ("sharp", CameraImuSimConfig::default()),
+        (
+            "blur+noise",
+            CameraImuSimConfig::default().with_blur_and_noise(),
+        ),
+    ] {
+        let sim = simulate_camera_imu(&CameraImuSimConfig {
+            seed: 3,
+            duration_s: 10.0,
+            ..config
+        })
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+        let frames: Vec<usize> = (0..sim.frame_stamps.len()).step_by(5).collect();
+        let start = Instant::now();
+        let images: Vec<GrayImage> = frames
+            .iter()
+            .map(|&k| GrayImage::from_luma8(&sim.image(k).to_luma8()))
+            .collect();
+        let render_ms = start.elapsed().as_secs_f64() * 1e3 / images.len() as f64;
+        let params = DetectorParams::default();
+        let (rows, cols) = (sim.config.board.rows, sim.config.board.cols);
+        let mut times: Vec<f64> = images
+            .iter()
+            .map(|img| {
+                median_ms(runs, || {
+                    let _ = detect_checkerboard(img, rows, cols, &params);
+                })
+            })
+            .collect();
+        let start = Instant::now();
+        let found = images
+            .par_iter()
+            .filter(|img| detect_checkerboard(img, rows, cols, &params).is_ok())
+            .count();
+        let rate = images.len() as f64 / start.elapsed().as_secs_f64();
+        println!(
+            "752x480 simulated ({label}): render {render_ms:.1} ms per frame (rayon); \
+             parallel stream {rate:.1} frames/s ({found}/{} detected; 20 Hz needs 20)",
+            images.len()
+        );
+        report(
+            &format!("752x480 simulated ({label}) detection"),
+            &mut times,
+        );
+    }
     Ok(())
 }
 

@@ -154,3 +154,35 @@ fn bad_targets_are_errors_naming_file_and_line() {
     assert!(msg.contains("rowSpacingMeters"), "{msg}");
     assert!(read_target_yaml(Path::new("/nonexistent/target.yaml")).is_err());
 }
+
+#[test]
+fn written_camera_and_target_yaml_read_back_exactly() {
+    use msreg_host::camera_yaml::{camera_yaml_string, checkerboard_yaml_string};
+    for text in [
+        KALIBR_PINHOLE,
+        "camera_model: pinhole\nintrinsics: [290.05, 289.39, 399.94, 273.89]\n\
+         distortion_model: equidistant\n\
+         distortion_coeffs: [-0.030464, -0.019695, 0.002098, 1.0e-9]\n\
+         resolution: [800, 503]\n",
+        "camera_model: omni\nintrinsics: [0.9, 750, 748, 640, 480]\n\
+         distortion_model: none\ndistortion_coeffs: []\nresolution: [1280, 960]\n",
+    ] {
+        let cam = parse_camera_yaml(Path::new("in.yaml"), text).unwrap();
+        let written = camera_yaml_string(&cam);
+        assert_eq!(
+            parse_camera_yaml(Path::new("out.yaml"), &written).unwrap(),
+            cam,
+            "{written}"
+        );
+    }
+    let text = "target_type: 'checkerboard'\ntargetCols: 7\ntargetRows: 6\n\
+                rowSpacingMeters: 0.06\ncolSpacingMeters: 0.055\nwidth_m: 0.6\n";
+    let Target::Checkerboard(cb) = parse_target_yaml(Path::new("t.yaml"), text).unwrap() else {
+        panic!("not a checkerboard")
+    };
+    let written = checkerboard_yaml_string(&cb);
+    assert_eq!(
+        parse_target_yaml(Path::new("t.yaml"), &written).unwrap(),
+        Target::Checkerboard(cb)
+    );
+}
