@@ -367,3 +367,72 @@ fn target_from_doc(doc: &Doc) -> Result<Target, YamlError> {
         )),
     }
 }
+
+/// A YAML float that both serde_yaml and PyYAML (Kalibr) read back exactly: shortest
+/// digits, a `.` in the mantissa and a signed exponent.
+fn yaml_float(x: f64) -> String {
+    let debug = format!("{x:?}");
+    match debug.split_once('e') {
+        None => debug,
+        Some((m, e)) => {
+            let m = if m.contains('.') {
+                m.to_string()
+            } else {
+                format!("{m}.0")
+            };
+            let e = if e.starts_with('-') {
+                e.to_string()
+            } else {
+                format!("+{e}")
+            };
+            format!("{m}e{e}")
+        }
+    }
+}
+
+fn yaml_list(values: &[f64]) -> String {
+    let items: Vec<String> = values.iter().map(|&v| yaml_float(v)).collect();
+    format!("[{}]", items.join(", "))
+}
+
+/// Kalibr `camera.yaml` text of `camera` (one camchain entry at top level), as
+/// [`read_camera_yaml`] reads it back.
+pub fn camera_yaml_string(camera: &Camera<f64>) -> String {
+    let i = camera.intrinsics();
+    let (model, intrinsics) = match camera.projection() {
+        Projection::Pinhole => ("pinhole", vec![i.fu, i.fv, i.cu, i.cv]),
+        Projection::Omni { xi } => ("omni", vec![*xi, i.fu, i.fv, i.cu, i.cv]),
+    };
+    let (distortion, coeffs) = match camera.distortion() {
+        Distortion::None => ("none", vec![]),
+        Distortion::RadTan(d) if d.k3 == 0.0 => ("radtan", vec![d.k1, d.k2, d.p1, d.p2]),
+        Distortion::RadTan(d) => ("radtan", vec![d.k1, d.k2, d.p1, d.p2, d.k3]),
+        Distortion::Equidistant(d) => ("equidistant", vec![d.k1, d.k2, d.k3, d.k4]),
+    };
+    format!(
+        "# Kalibr camchain entry\ncamera_model: {model}\nintrinsics: {}\n\
+         distortion_model: {distortion}\ndistortion_coeffs: {}\nresolution: [{}, {}]\n",
+        yaml_list(&intrinsics),
+        yaml_list(&coeffs),
+        camera.resolution.0,
+        camera.resolution.1
+    )
+}
+
+/// Kalibr `target.yaml` text of a checkerboard, as [`read_target_yaml`] reads it back.
+pub fn checkerboard_yaml_string(target: &CheckerboardTarget) -> String {
+    let mut text = format!(
+        "target_type: 'checkerboard'\ntargetCols: {}\ntargetRows: {}\n\
+         colSpacingMeters: {}\nrowSpacingMeters: {}\n",
+        target.cols,
+        target.rows,
+        yaml_float(target.col_spacing_m),
+        yaml_float(target.row_spacing_m)
+    );
+    for (key, value) in [("width_m", target.width_m), ("height_m", target.height_m)] {
+        if let Some(v) = value {
+            text.push_str(&format!("{key}: {}\n", yaml_float(v)));
+        }
+    }
+    text
+}

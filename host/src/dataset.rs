@@ -8,6 +8,7 @@
 //! emits floats in their shortest exact decimal form, so a write followed by a
 //! read reproduces the values bit for bit.
 
+mod camera;
 mod csv;
 mod error;
 mod groundtruth;
@@ -19,6 +20,11 @@ mod pose;
 mod result;
 mod yaml;
 
+pub use camera::{
+    read_camera_csv, read_corners_csv, read_target_poses_csv, write_camera_csv, write_corners_csv,
+    CameraFrame, CornerTruth, CAMERA_CSV, CAMERA_DATA_DIR, CAMERA_YAML, GROUNDTRUTH_CORNERS_CSV,
+    GROUNDTRUTH_TARGET_POSES_CSV, TARGET_YAML,
+};
 pub use error::DatasetError;
 pub use groundtruth::{read_groundtruth_csv, write_groundtruth_csv, GroundTruthRecord};
 pub use imu::{read_imu_csv, write_imu_csv, ImuNoiseYaml, ImuRecord};

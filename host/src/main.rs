@@ -85,6 +85,8 @@ enum Scenario {
     PoseImu(SimulatePoseImu),
     /// IMU + spinning LiDAR (Ouster OS1-like, motion-distorted scans) in a box-world room.
     LidarImu(msreg_host::lidar::cli::SimulateLidarImu),
+    /// IMU + camera waved in front of a checkerboard (rendered images, true corners).
+    CameraImu(msreg_host::sim::camera_cli::SimulateCameraImu),
 }
 
 #[derive(Args)]
@@ -169,6 +171,9 @@ fn run(command: Command) -> Result<(), Failure> {
         Command::Simulate {
             scenario: Scenario::LidarImu(args),
         } => Ok(msreg_host::lidar::cli::simulate(&args)?),
+        Command::Simulate {
+            scenario: Scenario::CameraImu(args),
+        } => Ok(msreg_host::sim::camera_cli::simulate(&args)?),
         Command::Calibrate {
             task: Task::LidarImu(args),
         } => match msreg_host::lidar::cli::calibrate(&args)? {

@@ -20,6 +20,8 @@
 //!   (trajectory, mounting, IMU, odometry), so changing e.g. the odometry
 //!   options leaves the trajectory and the IMU data unchanged.
 
+pub mod camera;
+pub mod camera_cli;
 mod clock;
 mod config;
 mod extrinsic;
@@ -36,6 +38,7 @@ mod tests;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
+pub use camera::{simulate_camera_imu, CameraImuSim, CameraImuSimConfig, CameraModelChoice};
 pub use clock::Clock;
 pub use config::{ImuSimConfig, Knock, PoseSimConfig, SimConfig, SimError, DEFAULT_START_STAMP_NS};
 pub use extrinsic::{random_mounting, random_pose};
@@ -44,7 +47,7 @@ pub use lidar::{simulate_lidar_imu, Environment, LidarImuSim, LidarImuSimConfig,
 pub use odometry::{pose_sensor_yaml, synthesize_odometry};
 pub use output::SimDataset;
 pub use signal::{EnvelopedSignal, Jet, Sinusoid, SmoothStep};
-pub use trajectory::{gravity_in_g, Trajectory, TrajectoryConfig, GRAVITY};
+pub use trajectory::{gravity_in_g, LookAtConfig, Mount, Trajectory, TrajectoryConfig, GRAVITY};
 
 /// Random stream of each component (see the module docs).
 #[derive(Clone, Copy)]
@@ -55,6 +58,9 @@ enum Stream {
     Odometry = 4,
     LidarMounting = 5,
     LidarNoise = 6,
+    CameraMounting = 7,
+    CameraScene = 8,
+    CameraNoise = 9,
 }
 
 fn rng_for(seed: u64, stream: Stream) -> ChaCha8Rng {

@@ -5,6 +5,7 @@
 //! measured accuracy: docs/checkerboard.md.
 
 pub mod checkerboard;
+pub mod frames;
 pub mod gray;
 pub mod grid;
 pub mod pnp;
@@ -13,5 +14,6 @@ pub mod saddle;
 pub mod subpix;
 
 pub use checkerboard::{detect_checkerboard, CheckerboardDetection, DetectorParams, NoDetection};
+pub use frames::{detect_frames, CameraDataset, CameraInputError, FrameCorners, FrameResult};
 pub use gray::{GrayImage, ImageLoadError};
 pub use pnp::{solve_pnp, PnpError, PnpSolution};

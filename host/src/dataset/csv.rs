@@ -88,7 +88,7 @@ pub(crate) fn parse_rows<const N: usize>(
     Ok(rows)
 }
 
-fn parse_row<const N: usize>(
+pub(crate) fn parse_row<const N: usize>(
     path: &Path,
     line: usize,
     text: &str,

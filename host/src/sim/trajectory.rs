@@ -65,10 +65,38 @@ impl Default for TrajectoryConfig {
 /// The ground-truth motion of the IMU in `G`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Trajectory {
-    /// `p_G_I` x, y, z.
+    /// `p_G_I` x, y, z (with a [`Mount`]: `p_W_F`).
     position: [EnvelopedSignal; 3],
-    /// Roll, pitch, yaw of `R_G_I` (ZYX).
+    /// Roll, pitch, yaw of `R_G_I` (ZYX) (with a [`Mount`]: of `R_W_F`).
     euler: [EnvelopedSignal; 3],
+    /// `None` for the plain hand-held trajectory.
+    mount: Option<Mount>,
+}
+
+/// Constant frames around the sinusoidal motion, for motions shaped in another frame than
+/// the IMU's (the look-at trajectory of the camera simulator): the signals describe
+/// `T_W_F(t)` of a frame `F` in a frame `W`, and `T_G_I(t) = T_G_W * T_W_F(t) * T_F_I`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Mount {
+    /// `T_G_W`: where the motion frame `W` is in `G`.
+    pub t_g_w: Isometry3<f64>,
+    /// `T_F_I`: the IMU in the moving frame `F` (e.g. `T_cam_imu`).
+    pub t_f_i: Isometry3<f64>,
+}
+
+/// Shape of a look-at motion ([`Trajectory::random_look_at`]): a hand-held camera `F`
+/// waved in front of a point `distance_m` ahead of it along its optical axis (`W` z; x right,
+/// y down), translating and turning while its view direction follows the point to first
+/// order, plus independent turns around that direction.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LookAtConfig {
+    /// Nominal distance from the camera to the looked-at point (m), > 0.
+    pub distance_m: f64,
+    /// Cap on the summed position amplitudes along `W` x, y, z (m).
+    pub max_offset_m: [f64; 3],
+    /// Cap on the summed amplitudes of the turns that are not look-at corrections: about
+    /// `F` x (tilt), y (pan) and z (the optical axis), rad.
+    pub max_deviation_rad: [f64; 3],
 }
 
 impl Trajectory {
@@ -95,14 +123,80 @@ impl Trajectory {
             .map(|base| random_signal(config, envelope, rng, base, speed, f64::INFINITY));
         let euler = [0, 1, 2]
             .map(|k| random_signal(config, envelope, rng, euler_base[k], rate, euler_cap[k]));
-        Self { position, euler }
+        Self {
+            position,
+            euler,
+            mount: None,
+        }
+    }
+
+    /// A look-at trajectory: `F` moves about the origin of `W` looking along `W` z at the
+    /// point `(0, 0, look.distance_m)`. Position offsets are random sinusoids (speed
+    /// amplitude and frequencies of `config`, capped by `look.max_offset_m`); each lateral
+    /// offset `x` (`y`) is paired with a pan of `-x / d` (a tilt of `y / d`) with the same
+    /// frequency and phase, which keeps the point centred to first order; independent turns
+    /// (rate amplitude of `config`, capped by `look.max_deviation_rad`) come on top. The
+    /// Euler angles stay small, far from their singularity; `config`'s roll/pitch caps are
+    /// not used.
+    pub fn random_look_at(
+        config: &TrajectoryConfig,
+        look: &LookAtConfig,
+        mount: Mount,
+        rng: &mut impl Rng,
+    ) -> Self {
+        let envelope = SmoothStep {
+            start_s: config.stationary_s,
+            duration_s: config.ramp_s,
+        };
+        let speed = config.speed_amplitude_m_s;
+        let rate = config.rate_amplitude_rad_s;
+        let position = [0, 1, 2]
+            .map(|k| random_signal(config, envelope, rng, 0.0, speed, look.max_offset_m[k]));
+        let mut euler = [0, 1, 2]
+            .map(|k| random_signal(config, envelope, rng, 0.0, rate, look.max_deviation_rad[k]));
+        // Small angles: R ~ I + [(roll, pitch, yaw)]x turns the optical axis to
+        // (pitch, -roll, 1); the point seen from (x, y) lies along (-x, -y, d).
+        let d = look.distance_m;
+        let follow = |signal: &EnvelopedSignal, scale: f64| -> Vec<Sinusoid> {
+            signal
+                .sinusoids
+                .iter()
+                .map(|s| Sinusoid {
+                    amplitude: s.amplitude * scale,
+                    ..*s
+                })
+                .collect()
+        };
+        let tilt = follow(&position[1], 1.0 / d);
+        let pan = follow(&position[0], -1.0 / d);
+        euler[0].sinusoids.extend(tilt);
+        euler[1].sinusoids.extend(pan);
+        Self {
+            position,
+            euler,
+            mount: Some(mount),
+        }
+    }
+
+    /// The constant frames of a look-at trajectory (`None` for the plain one).
+    pub fn mount(&self) -> Option<&Mount> {
+        self.mount.as_ref()
     }
 
     /// `(R_G_I, p_G_I)` at `t` [s since the start stamp].
     pub fn pose(&self, t: f64) -> (UnitQuaternion<f64>, Vector3<f64>) {
         let [roll, pitch, yaw] = self.euler_jets(t);
         let r_g_i = UnitQuaternion::from_euler_angles(roll.v, pitch.v, yaw.v);
-        (r_g_i, self.position_jets(t).map(|j| j.v).into())
+        let p: Vector3<f64> = self.position_jets(t).map(|j| j.v).into();
+        match &self.mount {
+            None => (r_g_i, p),
+            Some(m) => {
+                // Here `r_g_i` is R_W_F and `p` is p_W_F.
+                let t_w_f = Isometry3::from_parts(Translation3::from(p), r_g_i);
+                let t_g_i = m.t_g_w * t_w_f * m.t_f_i;
+                (t_g_i.rotation, t_g_i.translation.vector)
+            }
+        }
     }
 
     /// `T_G_I` at `t`.
@@ -113,17 +207,53 @@ impl Trajectory {
 
     /// `v_G_I`, velocity of `I` in `G` [m/s].
     pub fn velocity(&self, t: f64) -> Vector3<f64> {
-        self.position_jets(t).map(|j| j.d1).into()
+        let v: Vector3<f64> = self.position_jets(t).map(|j| j.d1).into();
+        match &self.mount {
+            None => v,
+            Some(m) => {
+                // d/dt (p_W_F + R_W_F p_F_I) = v + R_W_F (omega_F x p_F_I).
+                let r_w_f = self.frame_rotation(t);
+                let lever = m.t_f_i.translation.vector;
+                m.t_g_w.rotation * (v + r_w_f * self.frame_rate(t).cross(&lever))
+            }
+        }
     }
 
     /// Acceleration of `I` in `G` [m/s^2] (without gravity).
     pub fn acceleration(&self, t: f64) -> Vector3<f64> {
-        self.position_jets(t).map(|j| j.d2).into()
+        let a: Vector3<f64> = self.position_jets(t).map(|j| j.d2).into();
+        match &self.mount {
+            None => a,
+            Some(m) => {
+                let r_w_f = self.frame_rotation(t);
+                let lever = m.t_f_i.translation.vector;
+                let w = self.frame_rate(t);
+                let alpha = self.frame_angular_acceleration(t);
+                m.t_g_w.rotation * (a + r_w_f * (alpha.cross(&lever) + w.cross(&w.cross(&lever))))
+            }
+        }
     }
 
     /// `omega_I`, angular velocity of `I` relative to `G` in `I` [rad/s]:
     /// `R_G_I(t + h) ~ R_G_I(t) Exp(omega_I h)`.
     pub fn body_rate(&self, t: f64) -> Vector3<f64> {
+        match &self.mount {
+            None => self.frame_rate(t),
+            Some(m) => m
+                .t_f_i
+                .rotation
+                .inverse_transform_vector(&self.frame_rate(t)),
+        }
+    }
+
+    /// Rotation of the signals' frame (`R_G_I`, or `R_W_F` with a mount).
+    fn frame_rotation(&self, t: f64) -> UnitQuaternion<f64> {
+        let [roll, pitch, yaw] = self.euler_jets(t);
+        UnitQuaternion::from_euler_angles(roll.v, pitch.v, yaw.v)
+    }
+
+    /// Body rate of the signals' frame from the ZYX Euler-rate kinematics.
+    fn frame_rate(&self, t: f64) -> Vector3<f64> {
         let [roll, pitch, yaw] = self.euler_jets(t);
         let (sr, cr) = roll.v.sin_cos();
         let (sp, cp) = pitch.v.sin_cos();
@@ -131,6 +261,21 @@ impl Trajectory {
             roll.d1 - sp * yaw.d1,
             cr * pitch.d1 + sr * cp * yaw.d1,
             -sr * pitch.d1 + cr * cp * yaw.d1,
+        )
+    }
+
+    /// Time derivative of [`Self::frame_rate`] (body-frame angular acceleration).
+    fn frame_angular_acceleration(&self, t: f64) -> Vector3<f64> {
+        let [roll, pitch, yaw] = self.euler_jets(t);
+        let (sr, cr) = roll.v.sin_cos();
+        let (sp, cp) = pitch.v.sin_cos();
+        let (r1, p1, y1) = (roll.d1, pitch.d1, yaw.d1);
+        Vector3::new(
+            roll.d2 - cp * p1 * y1 - sp * yaw.d2,
+            -sr * r1 * p1 + cr * pitch.d2 + cr * r1 * cp * y1 - sr * sp * p1 * y1
+                + sr * cp * yaw.d2,
+            -cr * r1 * p1 - sr * pitch.d2 - sr * r1 * cp * y1 - cr * sp * p1 * y1
+                + cr * cp * yaw.d2,
         )
     }
 
@@ -251,6 +396,69 @@ mod tests {
             let a_fd = (p_plus - 2.0 * p + p_minus) / (h * h);
             let f_fd = r.inverse_transform_vector(&(a_fd - gravity_in_g()));
             assert!((f_fd - traj.specific_force(t)).norm() < 1e-3, "t {t}");
+        }
+    }
+
+    fn look_at(seed: u64) -> Trajectory {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mount = Mount {
+            t_g_w: Isometry3::from_parts(
+                Translation3::new(0.3, -0.2, 1.4),
+                UnitQuaternion::from_euler_angles(-1.9, 0.1, 0.7),
+            ),
+            t_f_i: Isometry3::from_parts(
+                Translation3::new(0.05, -0.08, 0.03),
+                UnitQuaternion::from_euler_angles(1.5, -0.2, 3.0),
+            ),
+        };
+        let look = LookAtConfig {
+            distance_m: 0.9,
+            max_offset_m: [0.2, 0.15, 0.15],
+            max_deviation_rad: [0.15, 0.15, 0.5],
+        };
+        let config = TrajectoryConfig {
+            min_frequency_hz: 0.6,
+            max_frequency_hz: 1.6,
+            ..TrajectoryConfig::default()
+        };
+        Trajectory::random_look_at(&config, &look, mount, &mut rng)
+    }
+
+    #[test]
+    fn look_at_derivatives_match_finite_differences() {
+        let h = 1e-4;
+        for seed in 0..3 {
+            let traj = look_at(seed);
+            for t in TIMES {
+                let (r_minus, p_minus) = traj.pose(t - h);
+                let (r_plus, p_plus) = traj.pose(t + h);
+                let v_fd = (p_plus - p_minus) / (2.0 * h);
+                assert!((v_fd - traj.velocity(t)).norm() < 1e-6, "seed {seed} t {t}");
+                let a_fd = (traj.velocity(t + h) - traj.velocity(t - h)) / (2.0 * h);
+                let a = traj.acceleration(t);
+                assert!((a_fd - a).norm() < 1e-5, "seed {seed} t {t}: {a_fd} vs {a}");
+                let omega_fd = (r_minus.inverse() * r_plus).scaled_axis() / (2.0 * h);
+                let omega = traj.body_rate(t);
+                assert!((omega_fd - omega).norm() < 1e-6, "seed {seed} t {t}");
+            }
+        }
+    }
+
+    #[test]
+    fn look_at_keeps_the_point_near_the_optical_axis() {
+        for seed in 0..3 {
+            let traj = look_at(seed);
+            let m = *traj.mount().unwrap();
+            let point_g = m.t_g_w * nalgebra::Point3::new(0.0, 0.0, 0.9);
+            let mut worst: f64 = 0.0;
+            for k in 0..3000 {
+                let t = 0.02 * f64::from(k);
+                let t_g_f = traj.isometry(t) * m.t_f_i.inverse();
+                let p_f = t_g_f.inverse() * point_g;
+                worst = worst.max((p_f.x.hypot(p_f.y) / p_f.z).atan());
+            }
+            // Independent pan/tilt deviations are capped at 0.15 rad each.
+            assert!(worst < 0.3, "seed {seed}: {worst}");
         }
     }
 
