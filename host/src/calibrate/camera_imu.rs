@@ -155,6 +155,20 @@ pub struct CameraImuCalibration {
     pub covariance: Matrix6<f64>,
     /// The report.
     pub report: CameraImuReport,
+    /// One image's corners with their final reprojection (RepErrCal; the dissertation's
+    /// Fig. 4.4).
+    pub sample: Option<ReprojectionSample>,
+}
+
+/// Detected corners of one image and where the filter reprojects them after its update.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReprojectionSample {
+    /// Image stamp, ns.
+    pub stamp_ns: u64,
+    /// Detected pixels.
+    pub detected: Vec<Vector2<f64>>,
+    /// Reprojected pixels, same order.
+    pub reprojected: Vec<Vector2<f64>>,
 }
 
 impl CameraImuCalibration {
@@ -234,6 +248,7 @@ pub fn calibrate<T: Scalar>(
             initialization: None,
             filter: motion.report,
         },
+        sample: None,
     };
     match options.update {
         CameraUpdate::Motion => {
@@ -291,12 +306,15 @@ fn reprojection_calibration<T: Scalar>(
         prior,
         reprojection: Vec::new(),
         buffer: Vec::new(),
+        sample_from_ns: input.frames[input.frames.len() / 2].stamp_ns,
+        sample: None,
     };
     drive_imu(&mut ekf, imu, standstill.as_ref(), progress, &mut feed)?;
     let CornerFeed {
         mut run,
         next,
         reprojection,
+        sample,
         ..
     } = feed;
     for frame in &input.frames[next..] {
@@ -340,6 +358,7 @@ fn reprojection_calibration<T: Scalar>(
             }),
             filter: calibration.report,
         },
+        sample,
     })
 }
 
@@ -425,6 +444,9 @@ struct CornerFeed<'a, T: Scalar> {
     prior: PoseImuOptions,
     reprojection: Vec<FrameReprojection>,
     buffer: Vec<CornerObservation<T>>,
+    /// The first accepted image from this stamp on becomes the report's sample.
+    sample_from_ns: u64,
+    sample: Option<ReprojectionSample>,
 }
 
 impl<T: Scalar> ImuHooks<T, CameraImuEkf<T>> for CornerFeed<'_, T> {
@@ -499,6 +521,10 @@ impl<T: Scalar> CornerFeed<'_, T> {
             Ok(report) => {
                 self.run.record_update(ekf, frame.stamp_ns, &report);
                 let after = self.mean_error(ekf);
+                if report.accepted && self.sample.is_none() && frame.stamp_ns >= self.sample_from_ns
+                {
+                    self.sample = self.reprojection_sample(ekf, frame.stamp_ns);
+                }
                 self.reprojection.push(FrameReprojection {
                     t_s: self.run.seconds(frame.stamp_ns),
                     corners: frame.corners.len(),
@@ -516,6 +542,34 @@ impl<T: Scalar> CornerFeed<'_, T> {
                 .run
                 .skip_measurement("cam0", frame.stamp_ns, &format!("{e}")),
         }
+    }
+
+    /// The buffered corners and their reprojection at the current state.
+    fn reprojection_sample(
+        &self,
+        ekf: &CameraImuEkf<T>,
+        stamp_ns: u64,
+    ) -> Option<ReprojectionSample> {
+        let target = ekf.frame(0)?;
+        let pixel = |p: &Vector2<T>| Vector2::new(p.x.to_f64(), p.y.to_f64());
+        let reprojected = self
+            .buffer
+            .iter()
+            .map(|c| {
+                let p = msreg_estimator::update::reprojection::point_in_camera(
+                    &ekf.imu().pose(),
+                    &ekf.extrinsic(0),
+                    &target,
+                    &c.point_in_target,
+                );
+                self.camera.project(&p).map(|x| pixel(&x.pixel))
+            })
+            .collect::<Option<Vec<_>>>()?;
+        Some(ReprojectionSample {
+            stamp_ns,
+            detected: self.buffer.iter().map(|c| pixel(&c.pixel)).collect(),
+            reprojected,
+        })
     }
 
     /// Mean distance between the buffered corners and their projection at the filter's
