@@ -12,4 +12,5 @@ pub mod ndt;
 pub mod pointcloud;
 pub mod shared_data;
 pub mod sim;
+pub mod solve;
 pub mod vision;
