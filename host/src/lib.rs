@@ -7,6 +7,7 @@ pub mod camera_yaml;
 pub mod dataset;
 pub mod eval;
 pub mod lidar;
+pub mod lidar_camera;
 pub mod link;
 pub mod ndt;
 pub mod pointcloud;
