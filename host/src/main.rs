@@ -85,6 +85,8 @@ enum Scenario {
     PoseImu(SimulatePoseImu),
     /// IMU + spinning LiDAR (Ouster OS1-like, motion-distorted scans) in a box-world room.
     LidarImu(msreg_host::lidar::cli::SimulateLidarImu),
+    /// Static LiDAR + camera suite and a plain board at many still poses.
+    LidarCamera(msreg_host::lidar_camera::cli::SimulateLidarCamera),
 }
 
 #[derive(Args)]
@@ -111,6 +113,8 @@ enum Task {
     PoseImu(CalibratePoseImu),
     /// LiDAR-IMU calibration: predict, deskew, NDT, relative-pose update (EKF).
     LidarImu(msreg_host::lidar::cli::CalibrateLidarImu),
+    /// LiDAR-camera calibration with a plain board (PBPC-Cal or PPC-Cal), judged by MLRE.
+    LidarCamera(msreg_host::lidar_camera::cli::CalibrateLidarCamera),
 }
 
 #[derive(Args)]
@@ -174,6 +178,17 @@ fn run(command: Command) -> Result<(), Failure> {
         } => match msreg_host::lidar::cli::calibrate(&args)? {
             msreg_host::lidar::cli::Outcome::Converged => Ok(()),
             msreg_host::lidar::cli::Outcome::NotConverged(why) => Err(Failure::NotConverged(why)),
+        },
+        Command::Simulate {
+            scenario: Scenario::LidarCamera(args),
+        } => Ok(msreg_host::lidar_camera::cli::simulate(&args)?),
+        Command::Calibrate {
+            task: Task::LidarCamera(args),
+        } => match msreg_host::lidar_camera::cli::calibrate(&args)? {
+            msreg_host::lidar_camera::cli::Outcome::Converged => Ok(()),
+            msreg_host::lidar_camera::cli::Outcome::NotConverged(why) => {
+                Err(Failure::NotConverged(why))
+            }
         },
         Command::Eval {
             result,

@@ -3,8 +3,9 @@
 //! the back-projected plane of each edge (eq. 2.3).
 //!
 //! - Segmentation: Otsu's threshold, then the largest bright connected region whose
-//!   interior is uniform (a plain board; bright wall texture is not) is the board. A region
-//!   touching the image border is a board cut by the border.
+//!   interior is uniform and which stands out from its surroundings (a plain board; a
+//!   bright patch of wall texture is neither) is the board. A region touching the image
+//!   border is a board cut by the border.
 //! - Quadrilateral: four extreme boundary pixels (farthest from the centroid, farthest from
 //!   it, farthest on either side of their line); the region must fill the quadrilateral.
 //! - Sub-pixel edges: along each side, the gradient maximum across the edge (parabola fit
@@ -32,6 +33,8 @@ pub struct CameraFeatureParams {
     pub max_interior_std: f64,
     /// Smallest fraction of the quadrilateral the region must fill.
     pub min_fill: f64,
+    /// Smallest grey-level difference between the board and its surroundings.
+    pub min_board_contrast: f64,
     /// Search half-length across an edge, pixels.
     pub search_px: f64,
     /// Smallest grey-level step across an edge.
@@ -48,6 +51,7 @@ impl Default for CameraFeatureParams {
             min_area_px: 2000,
             max_interior_std: 15.0,
             min_fill: 0.93,
+            min_board_contrast: 60.0,
             search_px: 6.0,
             min_contrast: 30.0,
             min_edge_samples: 15,
@@ -242,6 +246,35 @@ fn interior_std(img: &GrayImage, region: &Region) -> f64 {
     (vals.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / vals.len() as f64).sqrt()
 }
 
+/// Mean grey level of the region minus that of the pixels 4 px outside its boundary: a
+/// board stands out from the wall, a bright patch of wall texture does not.
+fn border_contrast(img: &GrayImage, region: &Region) -> f64 {
+    let (w, h) = (img.width() as i64, img.height() as i64);
+    let mut mask = vec![false; (w * h) as usize];
+    for &(x, y) in &region.pixels {
+        mask[(y * w as usize) + x] = true;
+    }
+    let at = |x: i64, y: i64| (x >= 0 && y >= 0 && x < w && y < h).then(|| (y * w + x) as usize);
+    let (mut inside, mut outside) = ((0.0, 0usize), (0.0, 0usize));
+    for &(x, y) in &region.pixels {
+        inside.0 += f64::from(img.at(x, y));
+        inside.1 += 1;
+        for (dx, dy) in [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)] {
+            let (x, y) = (x as i64, y as i64);
+            if at(x + dx, y + dy).is_some_and(|i| !mask[i]) {
+                if let Some(i) = at(x + 4 * dx, y + 4 * dy).filter(|&i| !mask[i]) {
+                    outside.0 += f64::from(img.data()[i]);
+                    outside.1 += 1;
+                }
+            }
+        }
+    }
+    if inside.1 == 0 || outside.1 == 0 {
+        return 0.0;
+    }
+    inside.0 / inside.1 as f64 - outside.0 / outside.1 as f64
+}
+
 /// Four corners of a convex region, in cyclic order.
 fn quad_corners(region: &Region) -> [Vector2<f64>; 4] {
     let pts: Vec<Vector2<f64>> = region
@@ -423,7 +456,10 @@ pub fn extract_camera_board(
     let regions = bright_regions(img, threshold, params.min_area_px);
     let region = regions
         .iter()
-        .find(|r| interior_std(img, r) <= params.max_interior_std)
+        .find(|r| {
+            interior_std(img, r) <= params.max_interior_std
+                && border_contrast(img, r) >= params.min_board_contrast
+        })
         .ok_or(CameraReject::NoBoard)?;
     if region.touches_border {
         return Err(CameraReject::CutByBorder);

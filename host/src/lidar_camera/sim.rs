@@ -6,8 +6,9 @@
 //! - World: the LiDAR frame `L` (x forward, z up); wall `x = 8.5 m`, ground `z = -1.4 m`.
 //! - Board poses: centre on a random camera ray 2-6 m out, facing the camera within
 //!   +-30 deg of tilt about two axes, rolled 30-60 deg about its normal so that all four
-//!   edges cross the rings; all corners inside the image with a 30 px margin and the
-//!   centre inside the LiDAR's dense elevation band.
+//!   edges cross the rings (each edge spans at least 5 ring elevations); all corners
+//!   inside the image with a 30 px margin and the centre inside the LiDAR's dense
+//!   elevation band.
 //! - LiDAR ([`LidarModel`]): VLP-32C-like (32 rings at the Velodyne's non-uniform
 //!   elevations, 1800 columns, 1 cm range noise) or Ouster OS1-64-like (64 uniform rings
 //!   over +-16.6 deg, 2048 columns, 3 cm range noise); only the forward +-80 deg sector is
@@ -374,6 +375,20 @@ fn sample_good_pose(
     let (lo, hi) = config.lidar.centre_band_deg();
     if !(lo..=hi).contains(&elevation) {
         return None;
+    }
+    // Every edge must cross at least 5 rings (so the LiDAR can fit all four lines).
+    let elevations = config.lidar.elevations_deg();
+    let corners = config.board.corners().map(|c| pose * nalgebra::Point3::from(c));
+    for j in 0..4 {
+        let el = |p: &nalgebra::Point3<f64>| p.z.atan2(p.coords.xy().norm()).to_degrees();
+        let (a, b) = (el(&corners[j]), el(&corners[(j + 1) % 4]));
+        let crossed = elevations
+            .iter()
+            .filter(|&&e| e > a.min(b) && e < a.max(b))
+            .count();
+        if crossed < 5 {
+            return None;
+        }
     }
     let t_cam_target = t_lidar_cam.inverse() * pose;
     for c in config.board.corners() {
