@@ -580,3 +580,40 @@ pub fn extract_dataset(
     }
     Ok((accepted, rejected))
 }
+
+/// Every frame of a simulation, made and extracted in memory (no files): for tests and
+/// studies.
+pub fn extract_simulation(
+    sim: &super::sim::LidarCameraSim,
+    options: &CalibrationOptions,
+) -> (Vec<FrameFeatures>, Vec<RejectedFrame>) {
+    let results: Vec<Result<FrameFeatures, RejectedFrame>> = (0..sim.frames.len())
+        .into_par_iter()
+        .map(|k| {
+            let f = &sim.frames[k];
+            extract_frame(&sim.scan(k), &sim.image(k), &sim.camera, &sim.config.board, options)
+                .map(|(lidar, camera)| FrameFeatures {
+                    frame: k,
+                    scan_stamp_ns: f.scan_stamp_ns,
+                    image_stamp_ns: f.image_stamp_ns,
+                    lidar,
+                    camera,
+                })
+                .map_err(|reason| RejectedFrame {
+                    frame: k,
+                    scan_stamp_ns: f.scan_stamp_ns,
+                    image_stamp_ns: Some(f.image_stamp_ns),
+                    reason,
+                })
+        })
+        .collect();
+    let mut accepted = Vec::new();
+    let mut rejected = Vec::new();
+    for r in results {
+        match r {
+            Ok(f) => accepted.push(f),
+            Err(j) => rejected.push(j),
+        }
+    }
+    (accepted, rejected)
+}
