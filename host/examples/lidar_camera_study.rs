@@ -7,27 +7,40 @@
 //! Run: `cargo run --release -p msreg --example lidar_camera_study -- accuracy 5 30`
 
 use msreg_estimator::Pose;
-use msreg_host::lidar_camera::pipeline::{extract_frame, solve, CalibrationOptions, FrameFeatures, Method};
-use msreg_host::lidar_camera::{simulate_lidar_camera, LidarCameraSim, LidarCameraSimConfig, LidarModel};
+use msreg_host::lidar_camera::pipeline::{
+    extract_frame, solve, CalibrationOptions, FrameFeatures, Method,
+};
+use msreg_host::lidar_camera::{
+    simulate_lidar_camera, LidarCameraSim, LidarCameraSimConfig, LidarModel,
+};
 use nalgebra::{UnitQuaternion, Vector3};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use rayon::prelude::*;
 
-fn features(sim: &LidarCameraSim, options: &CalibrationOptions) -> (Vec<FrameFeatures>, Vec<String>) {
+fn features(
+    sim: &LidarCameraSim,
+    options: &CalibrationOptions,
+) -> (Vec<FrameFeatures>, Vec<String>) {
     let results: Vec<Result<FrameFeatures, String>> = (0..sim.frames.len())
         .into_par_iter()
         .map(|k| {
             let f = &sim.frames[k];
-            extract_frame(&sim.scan(k), &sim.image(k), &sim.camera, &sim.config.board, options).map(
-                |(lidar, camera)| FrameFeatures {
-                    frame: k,
-                    scan_stamp_ns: f.scan_stamp_ns,
-                    image_stamp_ns: f.image_stamp_ns,
-                    lidar,
-                    camera,
-                },
-            ).map_err(|e| format!("frame {k}: {e}"))
+            extract_frame(
+                &sim.scan(k),
+                &sim.image(k),
+                &sim.camera,
+                &sim.config.board,
+                options,
+            )
+            .map(|(lidar, camera)| FrameFeatures {
+                frame: k,
+                scan_stamp_ns: f.scan_stamp_ns,
+                image_stamp_ns: f.image_stamp_ns,
+                lidar,
+                camera,
+            })
+            .map_err(|e| format!("frame {k}: {e}"))
         })
         .collect();
     let mut ok = Vec::new();
@@ -53,7 +66,13 @@ fn accuracy(seeds: u64, poses: usize) {
     println!("|---|---|---|---|---|---|---|---|---|---|");
     for model in [LidarModel::Vlp32, LidarModel::Ouster] {
         for seed in 0..seeds {
-            let sim = simulate_lidar_camera(&LidarCameraSimConfig { seed, lidar: model, poses, ..Default::default() }).expect("sim");
+            let sim = simulate_lidar_camera(&LidarCameraSimConfig {
+                seed,
+                lidar: model,
+                poses,
+                ..Default::default()
+            })
+            .expect("sim");
             let options = CalibrationOptions::default();
             let (frames, bad) = features(&sim, &options);
             for b in &bad {
@@ -76,7 +95,12 @@ fn accuracy(seeds: u64, poses: usize) {
 }
 
 fn random_init(trials: usize) {
-    let sim = simulate_lidar_camera(&LidarCameraSimConfig { seed: 0, lidar: LidarModel::Ouster, ..Default::default() }).expect("sim");
+    let sim = simulate_lidar_camera(&LidarCameraSimConfig {
+        seed: 0,
+        lidar: LidarModel::Ouster,
+        ..Default::default()
+    })
+    .expect("sim");
     let base = CalibrationOptions::default();
     let (frames, _) = features(&sim, &base);
     let reference = solve(&frames, &sim.camera, &base).expect("solve");
@@ -90,13 +114,32 @@ fn random_init(trials: usize) {
             UnitQuaternion::from_scaled_axis(Vector3::from_fn(|_, _| rot.sample(&mut rng))),
             Vector3::from_fn(|_, _| trans.sample(&mut rng)),
         );
-        let options = CalibrationOptions { start: Some(start), ..base };
-        let Ok(sol) = solve(&frames, &sim.camera, &options) else { continue };
-        let dr = sol.t_cam_lidar.rotation.angle_to(&reference.t_cam_lidar.rotation).to_degrees();
+        let options = CalibrationOptions {
+            start: Some(start),
+            ..base
+        };
+        let Ok(sol) = solve(&frames, &sim.camera, &options) else {
+            continue;
+        };
+        let dr = sol
+            .t_cam_lidar
+            .rotation
+            .angle_to(&reference.t_cam_lidar.rotation)
+            .to_degrees();
         let dt = (sol.t_cam_lidar.translation - reference.t_cam_lidar.translation).norm() * 1e3;
-        let drp = sol.t_cam_lidar_ppc.rotation.angle_to(&reference.t_cam_lidar_ppc.rotation).to_degrees();
-        let dtp = (sol.t_cam_lidar_ppc.translation - reference.t_cam_lidar_ppc.translation).norm() * 1e3;
-        worst = (worst.0.max(dr), worst.1.max(dt), worst.2.max(drp), worst.3.max(dtp));
+        let drp = sol
+            .t_cam_lidar_ppc
+            .rotation
+            .angle_to(&reference.t_cam_lidar_ppc.rotation)
+            .to_degrees();
+        let dtp =
+            (sol.t_cam_lidar_ppc.translation - reference.t_cam_lidar_ppc.translation).norm() * 1e3;
+        worst = (
+            worst.0.max(dr),
+            worst.1.max(dt),
+            worst.2.max(drp),
+            worst.3.max(dtp),
+        );
         if dr < 0.01 && dt < 1.0 {
             ok += 1;
         }
@@ -109,7 +152,45 @@ fn main() {
     let num = |i: usize, d: u64| args.get(i).and_then(|s| s.parse().ok()).unwrap_or(d);
     match args.get(1).map(String::as_str) {
         Some("random-init") => random_init(num(2, 100) as usize),
+        Some("timing") => timing(),
         _ => accuracy(num(2, 5), num(3, 30) as usize),
     }
     let _ = Method::Pbpc;
+}
+
+/// Timing of the simulator and the feature extraction per frame (for keeping tests short).
+#[allow(dead_code)]
+fn timing() {
+    use msreg_host::lidar_camera::camera_features::{extract_camera_board, CameraFeatureParams};
+    use msreg_host::lidar_camera::lidar_features::{extract_lidar_board, LidarFeatureParams};
+    let sim = simulate_lidar_camera(&LidarCameraSimConfig {
+        seed: 0,
+        lidar: LidarModel::Ouster,
+        poses: 3,
+        ..Default::default()
+    })
+    .expect("sim");
+    for k in 0..3 {
+        let t = std::time::Instant::now();
+        let _ = sim.image(k);
+        println!("image {k}: {:.3} s", t.elapsed().as_secs_f64());
+    }
+    let t = std::time::Instant::now();
+    let img = sim.image(0);
+    let a = t.elapsed().as_secs_f64();
+    let t = std::time::Instant::now();
+    let scan = sim.scan(0);
+    let b = t.elapsed().as_secs_f64();
+    let t = std::time::Instant::now();
+    let _ = extract_camera_board(
+        &img,
+        &sim.camera,
+        &sim.config.board,
+        &CameraFeatureParams::default(),
+    );
+    let c = t.elapsed().as_secs_f64();
+    let t = std::time::Instant::now();
+    let _ = extract_lidar_board(&scan, &sim.config.board, &LidarFeatureParams::default());
+    let d = t.elapsed().as_secs_f64();
+    println!("image {a:.3} s, scan {b:.3} s, camera features {c:.3} s, lidar features {d:.3} s");
 }

@@ -9,7 +9,9 @@ use msreg_estimator::Pose;
 use msreg_host::lidar_camera::pipeline::{
     extract_simulation, solve, CalibrationOptions, FrameFeatures, Method,
 };
-use msreg_host::lidar_camera::{simulate_lidar_camera, LidarCameraSim, LidarCameraSimConfig, LidarModel};
+use msreg_host::lidar_camera::{
+    simulate_lidar_camera, LidarCameraSim, LidarCameraSimConfig, LidarModel,
+};
 use nalgebra::{UnitQuaternion, Vector3};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
@@ -49,7 +51,11 @@ fn pbpc_meets_the_accuracy_targets_with_a_noisy_lidar() {
     let mut trans = (0.0, 0.0);
     for seed in 0..SEEDS {
         let (sim, frames) = seed_data(seed);
-        assert!(frames.len() >= 27, "seed {seed}: only {} frames usable", frames.len());
+        assert!(
+            frames.len() >= 27,
+            "seed {seed}: only {} frames usable",
+            frames.len()
+        );
         let sol = solve(frames, &sim.camera, &CalibrationOptions::default()).expect("solve");
         let (r, t) = errors(&sol.t_cam_lidar, &sim.t_cam_lidar);
         let (rp, tp) = errors(&sol.t_cam_lidar_ppc, &sim.t_cam_lidar);
@@ -70,9 +76,20 @@ fn pbpc_meets_the_accuracy_targets_with_a_noisy_lidar() {
         .scaled_axis();
         let d_t = sim.t_cam_lidar.translation.vector - sol.t_cam_lidar.translation;
         for k in 0..3 {
-            let (sr, st) = (sol.covariance[(k, k)].sqrt(), sol.covariance[(k + 3, k + 3)].sqrt());
-            assert!(d_rot[k].abs() < 3.0 * sr.max(1e-9) + 1e-4, "seed {seed}: rot axis {k}: {} vs sigma {sr}", d_rot[k]);
-            assert!(d_t[k].abs() < 3.0 * st.max(1e-9) + 1e-3, "seed {seed}: trans axis {k}: {} vs sigma {st}", d_t[k]);
+            let (sr, st) = (
+                sol.covariance[(k, k)].sqrt(),
+                sol.covariance[(k + 3, k + 3)].sqrt(),
+            );
+            assert!(
+                d_rot[k].abs() < 3.0 * sr.max(1e-9) + 1e-4,
+                "seed {seed}: rot axis {k}: {} vs sigma {sr}",
+                d_rot[k]
+            );
+            assert!(
+                d_t[k].abs() < 3.0 * st.max(1e-9) + 1e-3,
+                "seed {seed}: trans axis {k}: {} vs sigma {st}",
+                d_t[k]
+            );
         }
         mlre.0 += sol.mlre_px / SEEDS as f64;
         mlre.1 += sol.mlre_ppc_px / SEEDS as f64;
@@ -114,9 +131,16 @@ fn random_starts_converge_to_the_same_solution() {
                 Method::Ppc => reference.t_cam_lidar_ppc,
                 Method::Pbpc => reference.t_cam_lidar,
             };
-            let dr = sol.t_cam_lidar.rotation.angle_to(&target.rotation).to_degrees();
+            let dr = sol
+                .t_cam_lidar
+                .rotation
+                .angle_to(&target.rotation)
+                .to_degrees();
             let dt = (sol.t_cam_lidar.translation - target.translation).norm();
-            assert!(dr < 0.01 && dt < 0.001, "trial {trial} {method:?}: {dr} deg, {dt} m");
+            assert!(
+                dr < 0.01 && dt < 0.001,
+                "trial {trial} {method:?}: {dr} deg, {dt} m"
+            );
         }
     }
 }

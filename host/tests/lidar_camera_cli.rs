@@ -28,7 +28,15 @@ fn dataset() -> &'static (tempfile::TempDir, PathBuf) {
         let path = dir.path().join("ds");
         let p = path.to_string_lossy().into_owned();
         let out = msreg(&[
-            "simulate", "lidar-camera", &p, "--seed", "2", "--lidar", "ouster", "--poses", "4",
+            "simulate",
+            "lidar-camera",
+            &p,
+            "--seed",
+            "2",
+            "--lidar",
+            "ouster",
+            "--poses",
+            "4",
             "--bad-frames",
         ]);
         assert!(out.status.success(), "{}", stderr(&out));
@@ -65,7 +73,12 @@ fn bad_frames_are_rejected_with_reasons_and_the_result_evaluates() {
     let report = out_dir.path().join("report.json");
     let ds_s = ds.to_string_lossy();
     let out = msreg(&[
-        "calibrate", "lidar-camera", &ds_s, "-o", &result.to_string_lossy(), "--report",
+        "calibrate",
+        "lidar-camera",
+        &ds_s,
+        "-o",
+        &result.to_string_lossy(),
+        "--report",
         &report.to_string_lossy(),
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
@@ -80,13 +93,21 @@ fn bad_frames_are_rejected_with_reasons_and_the_result_evaluates() {
         .collect();
     assert_eq!(reasons.len(), 3, "{reasons:?}");
     assert!(reasons[0].contains("no board"), "{reasons:?}");
-    assert!(reasons[1].contains("cut by the image border"), "{reasons:?}");
+    assert!(
+        reasons[1].contains("cut by the image border"),
+        "{reasons:?}"
+    );
     assert!(reasons[2].contains("edge-on"), "{reasons:?}");
     let frames = json["frames"].as_array().expect("frames");
     assert_eq!(frames.len(), 4);
-    assert!(frames.iter().all(|f| f["mlre_px"].as_f64().is_some_and(|m| m < 2.0)
-        && f["edges"].as_array().is_some_and(|e| e.len() == 4)));
-    assert!(report.with_extension("png").is_file(), "overlay PNG written");
+    assert!(frames
+        .iter()
+        .all(|f| f["mlre_px"].as_f64().is_some_and(|m| m < 2.0)
+            && f["edges"].as_array().is_some_and(|e| e.len() == 4)));
+    assert!(
+        report.with_extension("png").is_file(),
+        "overlay PNG written"
+    );
     let estimate = CalibrationResult::read(&result).expect("result");
     assert!(estimate.cam0_lidar0.is_some());
     let eval = msreg(&["eval", &result.to_string_lossy(), &ds_s]);
@@ -110,14 +131,25 @@ fn too_few_views_exit_1_with_the_reason() {
     let out_dir = tempfile::tempdir().expect("tempdir");
     let report = out_dir.path().join("r.json");
     let out = msreg(&[
-        "calibrate", "lidar-camera", &ds.to_string_lossy(), "-o",
-        &out_dir.path().join("r.yaml").to_string_lossy(), "--report", &report.to_string_lossy(),
+        "calibrate",
+        "lidar-camera",
+        &ds.to_string_lossy(),
+        "-o",
+        &out_dir.path().join("r.yaml").to_string_lossy(),
+        "--report",
+        &report.to_string_lossy(),
     ]);
     assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
-    assert!(stderr(&out).contains("only 2 usable views"), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("only 2 usable views"),
+        "{}",
+        stderr(&out)
+    );
     let json: serde_json::Value =
         serde_json::from_str(&fs::read_to_string(&report).expect("report")).expect("json");
-    assert!(json["reason"].as_str().is_some_and(|r| r.contains("3 of 5 frames rejected")));
+    assert!(json["reason"]
+        .as_str()
+        .is_some_and(|r| r.contains("3 of 5 frames rejected")));
 }
 
 #[test]
@@ -141,7 +173,11 @@ fn malformed_input_exits_2_naming_the_file() {
     fs::write(&png, b"not a png").expect("write");
     let out = msreg(&["calibrate", "lidar-camera", &ds.to_string_lossy()]);
     assert_eq!(out.status.code(), Some(2));
-    assert!(stderr(&out).contains(&*png.to_string_lossy()), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains(&*png.to_string_lossy()),
+        "{}",
+        stderr(&out)
+    );
 
     let (_c, ds) = copy("target");
     fs::write(

@@ -146,7 +146,11 @@ fn otsu(img: &GrayImage) -> f32 {
         hist[v.round().clamp(0.0, 255.0) as usize] += 1;
     }
     let total = img.data().len() as f64;
-    let sum: f64 = hist.iter().enumerate().map(|(i, &c)| i as f64 * c as f64).sum();
+    let sum: f64 = hist
+        .iter()
+        .enumerate()
+        .map(|(i, &c)| i as f64 * c as f64)
+        .sum();
     let (mut w0, mut sum0, mut best, mut thr) = (0.0, 0.0, -1.0, 128.0);
     for (i, &c) in hist.iter().enumerate() {
         w0 += c as f64;
@@ -213,7 +217,7 @@ fn bright_regions(img: &GrayImage, threshold: f32, min_area: usize) -> Vec<Regio
             });
         }
     }
-    regions.sort_by(|a, b| b.pixels.len().cmp(&a.pixels.len()));
+    regions.sort_by_key(|r| std::cmp::Reverse(r.pixels.len()));
     regions
 }
 
@@ -228,7 +232,11 @@ fn interior_std(img: &GrayImage, region: &Region) -> f64 {
         (-3i64..=3).all(|d| {
             let (xa, ya) = (x as i64 + d, y as i64 + d);
             let ok = |xx: i64, yy: i64| {
-                xx >= 0 && yy >= 0 && (xx as usize) < w && (yy as usize) < h && mask[yy as usize * w + xx as usize]
+                xx >= 0
+                    && yy >= 0
+                    && (xx as usize) < w
+                    && (yy as usize) < h
+                    && mask[yy as usize * w + xx as usize]
             };
             ok(xa, y as i64) && ok(x as i64, ya)
         })
@@ -286,15 +294,27 @@ fn quad_corners(region: &Region) -> [Vector2<f64>; 4] {
     let farthest = |from: &Vector2<f64>| {
         pts.iter()
             .copied()
-            .max_by(|a, b| (a - from).norm_squared().total_cmp(&(b - from).norm_squared()))
+            .max_by(|a, b| {
+                (a - from)
+                    .norm_squared()
+                    .total_cmp(&(b - from).norm_squared())
+            })
             .unwrap_or(*from)
     };
     let c0 = farthest(&centroid);
     let c1 = farthest(&c0);
     let d = c1 - c0;
     let side = |p: &Vector2<f64>| d.x * (p.y - c0.y) - d.y * (p.x - c0.x);
-    let c2 = pts.iter().copied().max_by(|a, b| side(a).total_cmp(&side(b))).unwrap_or(c0);
-    let c3 = pts.iter().copied().min_by(|a, b| side(a).total_cmp(&side(b))).unwrap_or(c1);
+    let c2 = pts
+        .iter()
+        .copied()
+        .max_by(|a, b| side(a).total_cmp(&side(b)))
+        .unwrap_or(c0);
+    let c3 = pts
+        .iter()
+        .copied()
+        .min_by(|a, b| side(a).total_cmp(&side(b)))
+        .unwrap_or(c1);
     let mut corners = [c0, c2, c1, c3];
     let centre = corners.iter().sum::<Vector2<f64>>() / 4.0;
     corners.sort_by(|a, b| {
@@ -335,16 +355,17 @@ fn edge_across(
     let grad: Vec<f64> = (1..profile.len() - 1)
         .map(|i| (profile[i + 1] - profile[i - 1]).abs())
         .collect();
-    let (imax, _) = grad
-        .iter()
-        .enumerate()
-        .max_by(|a, b| a.1.total_cmp(b.1))?;
+    let (imax, _) = grad.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1))?;
     if imax == 0 || imax + 1 >= grad.len() {
         return None;
     }
     let (a, b, c) = (grad[imax - 1], grad[imax], grad[imax + 1]);
     let denom = a - 2.0 * b + c;
-    let frac = if denom.abs() > 1e-12 { 0.5 * (a - c) / denom } else { 0.0 };
+    let frac = if denom.abs() > 1e-12 {
+        0.5 * (a - c) / denom
+    } else {
+        0.0
+    };
     let offset = (imax as f64 - n as f64 + frac) * step;
     Some(p + normal * offset)
 }
@@ -361,7 +382,11 @@ fn fit_line_2d(points: &[Vector2<f64>]) -> Option<Vector3<f64>> {
         cov += d * d.transpose();
     }
     let eig = SymmetricEigen::new(cov);
-    let imin = if eig.eigenvalues[0] < eig.eigenvalues[1] { 0 } else { 1 };
+    let imin = if eig.eigenvalues[0] < eig.eigenvalues[1] {
+        0
+    } else {
+        1
+    };
     let nrm = eig.eigenvectors.column(imin).into_owned();
     Some(Vector3::new(nrm.x, nrm.y, -nrm.dot(&mean)))
 }
@@ -372,6 +397,9 @@ fn normalised(camera: &Camera<f64>, px: &Vector2<f64>) -> Option<Vector2<f64>> {
     (b.z > 1e-6).then(|| Vector2::new(b.x / b.z, b.y / b.z))
 }
 
+/// A fitted edge: line in normalised coordinates, its samples (px), RMS (px).
+type EdgeFit = (Vector3<f64>, Vec<Vector2<f64>>, f64);
+
 /// Fits one edge from samples along the image curve `points(t)`, `t in [0.08, 0.92]`.
 fn fit_edge(
     img: &GrayImage,
@@ -380,7 +408,7 @@ fn fit_edge(
     length_px: f64,
     inward: &Vector2<f64>,
     params: &CameraFeatureParams,
-) -> Option<(Vector3<f64>, Vec<Vector2<f64>>, f64)> {
+) -> Option<EdgeFit> {
     let count = (length_px / 2.0).max(4.0) as usize;
     let mut samples = Vec::new();
     for k in 0..=count {
@@ -435,6 +463,24 @@ fn fit_edge(
     Some((l, kept, rms))
 }
 
+/// [`fit_edge`] with at least `min_edge_samples` samples, else the rejection of edge `j`.
+fn checked_edge(
+    img: &GrayImage,
+    camera: &Camera<f64>,
+    along: &dyn Fn(f64) -> Option<Vector2<f64>>,
+    length_px: f64,
+    inward: &Vector2<f64>,
+    params: &CameraFeatureParams,
+    j: usize,
+) -> Result<EdgeFit, CameraReject> {
+    let fit = fit_edge(img, camera, along, length_px, inward, params);
+    let samples = fit.as_ref().map_or(0, |f| f.1.len());
+    match fit {
+        Some(f) if samples >= params.min_edge_samples => Ok(f),
+        _ => Err(CameraReject::WeakEdge { edge: j, samples }),
+    }
+}
+
 /// Intersection of two lines in normalised coordinates.
 fn intersect(a: &Vector3<f64>, b: &Vector3<f64>) -> Option<Vector2<f64>> {
     let p = a.cross(b);
@@ -442,7 +488,9 @@ fn intersect(a: &Vector3<f64>, b: &Vector3<f64>) -> Option<Vector2<f64>> {
 }
 
 fn project_normalised(camera: &Camera<f64>, m: &Vector2<f64>) -> Option<Vector2<f64>> {
-    camera.project(&Vector3::new(m.x, m.y, 1.0)).map(|p| p.pixel)
+    camera
+        .project(&Vector3::new(m.x, m.y, 1.0))
+        .map(|p| p.pixel)
 }
 
 /// Extracts the board from an image (see the module docs).
@@ -477,14 +525,7 @@ pub fn extract_camera_board(
         let (a, b) = (rough[j], rough[(j + 1) % 4]);
         let inward = centre - 0.5 * (a + b);
         let along = |t: f64| Some(a + (b - a) * t);
-        let (l, samples, _) = fit_edge(&smooth, camera, &along, (b - a).norm(), &inward, params)
-            .ok_or(CameraReject::WeakEdge { edge: j, samples: 0 })?;
-        if samples.len() < params.min_edge_samples {
-            return Err(CameraReject::WeakEdge {
-                edge: j,
-                samples: samples.len(),
-            });
-        }
+        let (l, _, _) = checked_edge(&smooth, camera, &along, (b - a).norm(), &inward, params, j)?;
         lines.push(l);
     }
     // Pass 2: along the (curved) image of the pass-1 lines between their intersections.
@@ -504,14 +545,15 @@ pub fn extract_camera_board(
             return Err(CameraReject::NotQuadrilateral { fill });
         };
         let inward = centre - 0.5 * (pa + pb);
-        let (l, samples, rms) = fit_edge(&smooth, camera, &along, (pb - pa).norm(), &inward, params)
-            .ok_or(CameraReject::WeakEdge { edge: j, samples: 0 })?;
-        if samples.len() < params.min_edge_samples {
-            return Err(CameraReject::WeakEdge {
-                edge: j,
-                samples: samples.len(),
-            });
-        }
+        let (l, samples, rms) = checked_edge(
+            &smooth,
+            camera,
+            &along,
+            (pb - pa).norm(),
+            &inward,
+            params,
+            j,
+        )?;
         edges.push(ImageEdge {
             normal: l.normalize(),
             samples,
@@ -528,31 +570,8 @@ pub fn extract_camera_board(
         return Err(CameraReject::NotQuadrilateral { fill });
     }
     let corners_px = [corners_px[0], corners_px[1], corners_px[2], corners_px[3]];
-    // Edge j of the image joins corners j and j+1 (corner j = lines j-1 and j).
-    let board_corners = board.corners();
-    let mut best: Option<(f64, Pose<f64>, f64)> = None;
-    for mirror in [false, true] {
-        for shift in 0..4 {
-            let pts: Vec<Vector3<f64>> = (0..4)
-                .map(|k| {
-                    let idx = if mirror { (shift + 4 - k) % 4 } else { (shift + k) % 4 };
-                    board_corners[idx]
-                })
-                .collect();
-            let Ok(sol) = solve_pnp(camera, &pts, &corners_px) else {
-                continue;
-            };
-            let t = &sol.t_cam_target;
-            let n = t.rotation * Vector3::z();
-            if t.translation.z <= 0.0 || n.dot(&t.translation) >= 0.0 {
-                continue; // behind the camera or showing its back
-            }
-            if best.as_ref().is_none_or(|b| sol.rms_px < b.0) {
-                best = Some((sol.rms_px, sol.t_cam_target, sol.rms_px));
-            }
-        }
-    }
-    let (_, t_cam_target, pnp_rms) = best.ok_or(CameraReject::Pnp)?;
+    let (t_cam_target, pnp_rms) =
+        board_pose(camera, board, &corners_px).ok_or(CameraReject::Pnp)?;
     let normal = t_cam_target.rotation * Vector3::z();
     let offset = normal.dot(&t_cam_target.translation);
     let sight = t_cam_target.translation.normalize();
@@ -576,6 +595,44 @@ pub fn extract_camera_board(
         offset,
         quality,
     })
+}
+
+/// The board pose from its four image corners (edge `j` joins corners `j` and `j + 1`):
+/// the cyclic or mirrored assignment to the board corners with the lowest PnP error that
+/// puts the board in front of the camera, face on. Returns the pose and its RMS (px).
+fn board_pose(
+    camera: &Camera<f64>,
+    board: &Board,
+    corners_px: &[Vector2<f64>; 4],
+) -> Option<(Pose<f64>, f64)> {
+    let board_corners = board.corners();
+    let mut best: Option<(f64, Pose<f64>, f64)> = None;
+    for mirror in [false, true] {
+        for shift in 0..4 {
+            let pts: Vec<Vector3<f64>> = (0..4)
+                .map(|k| {
+                    let idx = if mirror {
+                        (shift + 4 - k) % 4
+                    } else {
+                        (shift + k) % 4
+                    };
+                    board_corners[idx]
+                })
+                .collect();
+            let Ok(sol) = solve_pnp(camera, &pts, corners_px) else {
+                continue;
+            };
+            let t = &sol.t_cam_target;
+            let n = t.rotation * Vector3::z();
+            if t.translation.z <= 0.0 || n.dot(&t.translation) >= 0.0 {
+                continue; // behind the camera or showing its back
+            }
+            if best.as_ref().is_none_or(|b| sol.rms_px < b.0) {
+                best = Some((sol.rms_px, sol.t_cam_target, sol.rms_px));
+            }
+        }
+    }
+    best.map(|(rms, pose, _)| (pose, rms))
 }
 
 /// The 3x3 pinhole matrix `K` of a camera (for reporting lines in pixel form).

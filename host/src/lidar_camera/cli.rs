@@ -14,7 +14,7 @@ use serde::Serialize;
 
 use super::pipeline::{
     extract_dataset, solve, CalibrationOptions, FrameFeatures, FrameReport, LidarCameraDataset,
-    Method, RejectedFrame, SolveError, SolverRun,
+    Method, RejectedFrame, Solution, SolveError, SolverRun,
 };
 use super::sim::{simulate_lidar_camera, LidarCameraSimConfig, LidarModel};
 use crate::dataset::{CalibrationResult, ExtrinsicEstimate};
@@ -99,7 +99,9 @@ pub fn simulate(args: &SimulateLidarCamera) -> anyhow::Result<()> {
     let sim = simulate_lidar_camera(&config).map_err(|e| anyhow!("simulate: {e}"))?;
     let bar = bar(sim.frames.len() as u64, "writing frames");
     let total = sim.frames.len() as f64;
-    sim.write(&args.out_dir, &mut |f| bar.set_position((f * total).round() as u64))?;
+    sim.write(&args.out_dir, &mut |f| {
+        bar.set_position((f * total).round() as u64)
+    })?;
     bar.finish_and_clear();
     eprintln!(
         "msreg: wrote {} ({} frames, LiDAR {})",
@@ -191,50 +193,7 @@ pub fn calibrate(args: &CalibrateLidarCamera) -> anyhow::Result<Outcome> {
         extraction_time_s,
     };
     let result = match outcome {
-        Ok(solution) => {
-            let estimate = ExtrinsicEstimate::from_covariance(
-                isometry(&solution.t_cam_lidar),
-                0.0,
-                &solution.covariance,
-            );
-            let converged = solution.ppc.converged
-                && solution.pbpc.as_ref().is_none_or(|r| r.converged);
-            report.converged = converged;
-            if !converged {
-                report.reason = Some("the solver hit its iteration limit".into());
-            }
-            report.mlre_px = Some(solution.mlre_px);
-            report.mlre_ppc_px = Some(solution.mlre_ppc_px);
-            report.t_cam_lidar = Some(matrix(&solution.t_cam_lidar));
-            report.sigma_rot_deg = Some(estimate.sigma_rot_deg.into());
-            report.sigma_trans_m = Some(estimate.sigma_trans_m.into());
-            report.ppc = Some(solution.ppc.clone());
-            report.pbpc = solution.pbpc.clone();
-            report.frames = solution.frames.clone();
-            CalibrationResult {
-                cam0_lidar0: Some(estimate),
-                ..CalibrationResult::default()
-            }
-            .write(&args.output)?;
-            eprintln!(
-                "msreg: wrote {} (MLRE {:.3} px over {} frames; PPC-Cal alone {:.3} px)",
-                args.output.display(),
-                solution.mlre_px,
-                frames.len(),
-                solution.mlre_ppc_px
-            );
-            let overlay = args.overlay.clone().or_else(|| {
-                args.report.as_ref().map(|r| r.with_extension("png"))
-            });
-            if let (Some(path), Some(first)) = (overlay, frames.first()) {
-                write_overlay(&path, &data, first, &data.camera, &solution.t_cam_lidar)?;
-            }
-            if converged {
-                Outcome::Converged
-            } else {
-                Outcome::NotConverged("the solver hit its iteration limit".into())
-            }
-        }
+        Ok(solution) => finish(args, &data, &frames, &solution, &mut report)?,
         Err(e) => {
             let why = match &e {
                 SolveError::TooFewViews { .. } => format!(
@@ -256,6 +215,58 @@ pub fn calibrate(args: &CalibrateLidarCamera) -> anyhow::Result<Outcome> {
     Ok(result)
 }
 
+/// Writes the result and overlay of a solved calibration and fills the report.
+fn finish(
+    args: &CalibrateLidarCamera,
+    data: &LidarCameraDataset,
+    frames: &[FrameFeatures],
+    solution: &Solution,
+    report: &mut Report<'_>,
+) -> anyhow::Result<Outcome> {
+    let estimate = ExtrinsicEstimate::from_covariance(
+        isometry(&solution.t_cam_lidar),
+        0.0,
+        &solution.covariance,
+    );
+    let converged = solution.ppc.converged && solution.pbpc.as_ref().is_none_or(|r| r.converged);
+    report.converged = converged;
+    if !converged {
+        report.reason = Some("the solver hit its iteration limit".into());
+    }
+    report.mlre_px = Some(solution.mlre_px);
+    report.mlre_ppc_px = Some(solution.mlre_ppc_px);
+    report.t_cam_lidar = Some(matrix(&solution.t_cam_lidar));
+    report.sigma_rot_deg = Some(estimate.sigma_rot_deg.into());
+    report.sigma_trans_m = Some(estimate.sigma_trans_m.into());
+    report.ppc = Some(solution.ppc.clone());
+    report.pbpc = solution.pbpc.clone();
+    report.frames = solution.frames.clone();
+    CalibrationResult {
+        cam0_lidar0: Some(estimate),
+        ..CalibrationResult::default()
+    }
+    .write(&args.output)?;
+    eprintln!(
+        "msreg: wrote {} (MLRE {:.3} px over {} frames; PPC-Cal alone {:.3} px)",
+        args.output.display(),
+        solution.mlre_px,
+        frames.len(),
+        solution.mlre_ppc_px
+    );
+    let overlay = args
+        .overlay
+        .clone()
+        .or_else(|| args.report.as_ref().map(|r| r.with_extension("png")));
+    if let (Some(path), Some(first)) = (overlay, frames.first()) {
+        write_overlay(&path, data, first, &data.camera, &solution.t_cam_lidar)?;
+    }
+    Ok(if converged {
+        Outcome::Converged
+    } else {
+        Outcome::NotConverged("the solver hit its iteration limit".into())
+    })
+}
+
 /// The image of `frame` in colour with its LiDAR edge points (red) and board points
 /// (green, sparse) projected by `t_cam_lidar` through the camera model (Fig. 2.13).
 pub fn write_overlay(
@@ -265,8 +276,7 @@ pub fn write_overlay(
     camera: &Camera<f64>,
     t_cam_lidar: &Pose<f64>,
 ) -> anyhow::Result<()> {
-    let Some((_, image_path)) = data.images.iter().find(|(s, _)| *s == frame.image_stamp_ns)
-    else {
+    let Some((_, image_path)) = data.images.iter().find(|(s, _)| *s == frame.image_stamp_ns) else {
         return Ok(());
     };
     let grey = GrayImage::load(image_path)

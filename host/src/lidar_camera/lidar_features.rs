@@ -296,7 +296,10 @@ fn largest_cluster(points: &[Vector3<f64>], idx: &[usize], radius: f64) -> Vec<u
 
 /// Largest extent of points in a plane (max over 36 directions of the projected spread).
 fn diameter(points: &[Vector3<f64>], normal: &Vector3<f64>) -> f64 {
-    let u = normal.cross(&Vector3::x()).try_normalize(1e-6).unwrap_or_else(|| normal.cross(&Vector3::y()).normalize());
+    let u = normal
+        .cross(&Vector3::x())
+        .try_normalize(1e-6)
+        .unwrap_or_else(|| normal.cross(&Vector3::y()).normalize());
     let v = normal.cross(&u);
     (0..36)
         .map(|k| {
@@ -563,7 +566,8 @@ fn quadrilateral(edges: &[LidarEdge], normal: &Vector3<f64>) -> ([f64; 4], [f64;
         let s = (r.x * (-e.y) - r.y * (-e.x)) / det;
         p + d * s
     };
-    let corners: [Vector2<f64>; 4] = std::array::from_fn(|j| corner(&edges[j], &edges[(j + 1) % 4]));
+    let corners: [Vector2<f64>; 4] =
+        std::array::from_fn(|j| corner(&edges[j], &edges[(j + 1) % 4]));
     let sides = std::array::from_fn(|j| (corners[(j + 1) % 4] - corners[j]).norm());
     // Angle between adjacent lines, 0-90 deg (90 for a rectangle).
     let angles = std::array::from_fn(|j| {

@@ -22,8 +22,8 @@ use super::lidar_features::{
 };
 use super::mlre::{line_distances_px, mean};
 use super::solver::{
-    associate_edges, plane_alignment, EdgeObservation, PlaneObservation,
-    PointToBackProjectedPlane, PointToPlane,
+    associate_edges, plane_alignment, EdgeObservation, PlaneObservation, PointToBackProjectedPlane,
+    PointToPlane,
 };
 use crate::camera_yaml::{read_camera_yaml, read_target_yaml, Target};
 use crate::dataset::{list_scans, LIDAR_DIR};
@@ -114,7 +114,8 @@ pub fn extract_frame(
     board: &Board,
     options: &CalibrationOptions,
 ) -> Result<(LidarBoardFeatures, CameraBoardFeatures), String> {
-    let cam = extract_camera_board(image, camera, board, &options.camera).map_err(|e| e.to_string())?;
+    let cam =
+        extract_camera_board(image, camera, board, &options.camera).map_err(|e| e.to_string())?;
     let lidar = extract_lidar_board(cloud, board, &options.lidar).map_err(|e| e.to_string())?;
     Ok((lidar, cam))
 }
@@ -425,7 +426,8 @@ pub struct LidarCameraDataset {
 
 /// Reads `cam0/data.csv` (`timestamp [ns], filename`), naming file and line on errors.
 pub fn read_image_list(path: &Path) -> anyhow::Result<Vec<(u64, PathBuf)>> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
     let dir = path.parent().map(|p| p.join("data")).unwrap_or_default();
     let mut out: Vec<(u64, PathBuf)> = Vec::new();
     for (i, line) in text.lines().enumerate() {
@@ -471,7 +473,10 @@ impl LidarCameraDataset {
     /// per frame later).
     pub fn open(root: &Path) -> anyhow::Result<Self> {
         if !root.is_dir() {
-            return Err(anyhow!("{}: dataset directory does not exist", root.display()));
+            return Err(anyhow!(
+                "{}: dataset directory does not exist",
+                root.display()
+            ));
         }
         let camera = read_camera_yaml(&root.join("cam0/camera.yaml"))?;
         let target_path = root.join("target.yaml");
@@ -591,20 +596,26 @@ pub fn extract_simulation(
         .into_par_iter()
         .map(|k| {
             let f = &sim.frames[k];
-            extract_frame(&sim.scan(k), &sim.image(k), &sim.camera, &sim.config.board, options)
-                .map(|(lidar, camera)| FrameFeatures {
-                    frame: k,
-                    scan_stamp_ns: f.scan_stamp_ns,
-                    image_stamp_ns: f.image_stamp_ns,
-                    lidar,
-                    camera,
-                })
-                .map_err(|reason| RejectedFrame {
-                    frame: k,
-                    scan_stamp_ns: f.scan_stamp_ns,
-                    image_stamp_ns: Some(f.image_stamp_ns),
-                    reason,
-                })
+            extract_frame(
+                &sim.scan(k),
+                &sim.image(k),
+                &sim.camera,
+                &sim.config.board,
+                options,
+            )
+            .map(|(lidar, camera)| FrameFeatures {
+                frame: k,
+                scan_stamp_ns: f.scan_stamp_ns,
+                image_stamp_ns: f.image_stamp_ns,
+                lidar,
+                camera,
+            })
+            .map_err(|reason| RejectedFrame {
+                frame: k,
+                scan_stamp_ns: f.scan_stamp_ns,
+                image_stamp_ns: Some(f.image_stamp_ns),
+                reason,
+            })
         })
         .collect();
     let mut accepted = Vec::new();

@@ -14,9 +14,9 @@
 //!   over +-16.6 deg, 2048 columns, 3 cm range noise); only the forward +-80 deg sector is
 //!   cast (the rest can never be in the camera's view and would only inflate the files).
 //! - Camera: pinhole with radial-tangential distortion; every pixel corner's bearing is
-//!   computed once, pixels whose corners see different surfaces are supersampled 6x6
-//!   (anti-aliased edges, as in [`crate::vision::render`]), then a 0.6 px Gaussian blur and
-//!   2 grey levels of noise.
+//!   computed once per dataset and cast once per frame; pixels crossed by a board edge are
+//!   supersampled 6x6 (anti-aliased edges, as in [`crate::vision::render`]), others take
+//!   the mean of their corners; then a 0.6 px Gaussian blur and 2 grey levels of noise.
 //! - Bad frames (option): board out of view, board cut by the image border, board seen
 //!   almost edge-on (84 deg) — the calibration must reject each with a reason.
 //! - Randomness: ChaCha8 seeded with `seed`, one stream per component.
@@ -290,11 +290,23 @@ pub fn simulate_lidar_camera(config: &LidarCameraSimConfig) -> Result<LidarCamer
             FrameKind::Missing,
         ));
         poses.push((
-            facing_pose(&camera, &t_lidar_cam, (1230.0, 470.0), 3.0, [0.0, 0.0, 45.0]),
+            facing_pose(
+                &camera,
+                &t_lidar_cam,
+                (1230.0, 470.0),
+                3.0,
+                [0.0, 0.0, 45.0],
+            ),
             FrameKind::CutByBorder,
         ));
         poses.push((
-            facing_pose(&camera, &t_lidar_cam, (640.0, 520.0), 3.5, [0.0, 84.0, 40.0]),
+            facing_pose(
+                &camera,
+                &t_lidar_cam,
+                (640.0, 520.0),
+                3.5,
+                [0.0, 84.0, 40.0],
+            ),
             FrameKind::EdgeOn,
         ));
     }
@@ -378,7 +390,10 @@ fn sample_good_pose(
     }
     // Every edge must cross at least 5 rings (so the LiDAR can fit all four lines).
     let elevations = config.lidar.elevations_deg();
-    let corners = config.board.corners().map(|c| pose * nalgebra::Point3::from(c));
+    let corners = config
+        .board
+        .corners()
+        .map(|c| pose * nalgebra::Point3::from(c));
     for j in 0..4 {
         let el = |p: &nalgebra::Point3<f64>| p.z.atan2(p.coords.xy().norm()).to_degrees();
         let (a, b) = (el(&corners[j]), el(&corners[(j + 1) % 4]));
@@ -415,39 +430,56 @@ enum Hit {
     Ground(f64, f64),
 }
 
-/// First hit of the ray `origin + s dir` (`s > 0`) in the scene with the board at `t_l_t`.
-fn cast(
-    board: &Board,
-    t_l_t: &Isometry3<f64>,
-    origin: &Vector3<f64>,
-    dir: &Vector3<f64>,
-) -> Option<(f64, Hit)> {
-    let mut best: Option<(f64, Hit)> = None;
-    let mut consider = |s: f64, hit: Hit| {
-        if s > 1e-9 && best.is_none_or(|(b, _)| s < b) {
-            best = Some((s, hit));
-        }
-    };
-    let n = t_l_t.rotation * Vector3::z();
-    let denom = n.dot(dir);
-    if denom.abs() > 1e-12 {
-        let s = n.dot(&(t_l_t.translation.vector - origin)) / denom;
-        let local = t_l_t.inverse_transform_point(&nalgebra::Point3::from(origin + dir * s));
-        if board.contains(local.x, local.y) {
-            consider(s, Hit::Board);
+/// The board of one frame, precomputed for ray casting.
+struct Scene {
+    half: (f64, f64),
+    centre: Vector3<f64>,
+    normal: Vector3<f64>,
+    x_axis: Vector3<f64>,
+    y_axis: Vector3<f64>,
+}
+
+impl Scene {
+    fn new(board: &Board, t_l_t: &Isometry3<f64>) -> Self {
+        let r = t_l_t.rotation.to_rotation_matrix().into_inner();
+        Self {
+            half: (0.5 * board.width_m, 0.5 * board.height_m),
+            centre: t_l_t.translation.vector,
+            normal: r.column(2).into_owned(),
+            x_axis: r.column(0).into_owned(),
+            y_axis: r.column(1).into_owned(),
         }
     }
-    if dir.x > 1e-12 {
-        let s = (WALL_X - origin.x) / dir.x;
-        let p = origin + dir * s;
-        consider(s, Hit::Wall(p.y, p.z));
+
+    /// First hit of the ray `origin + s dir` (`s > 0`).
+    fn cast(&self, origin: &Vector3<f64>, dir: &Vector3<f64>) -> Option<(f64, Hit)> {
+        let mut best: Option<(f64, Hit)> = None;
+        let mut consider = |s: f64, hit: Hit| {
+            if s > 1e-9 && best.is_none_or(|(b, _)| s < b) {
+                best = Some((s, hit));
+            }
+        };
+        let denom = self.normal.dot(dir);
+        if denom.abs() > 1e-12 {
+            let s = self.normal.dot(&(self.centre - origin)) / denom;
+            let d = origin + dir * s - self.centre;
+            if self.x_axis.dot(&d).abs() <= self.half.0 && self.y_axis.dot(&d).abs() <= self.half.1
+            {
+                consider(s, Hit::Board);
+            }
+        }
+        if dir.x > 1e-12 {
+            let s = (WALL_X - origin.x) / dir.x;
+            let p = origin + dir * s;
+            consider(s, Hit::Wall(p.y, p.z));
+        }
+        if dir.z < -1e-12 {
+            let s = (GROUND_Z - origin.z) / dir.z;
+            let p = origin + dir * s;
+            consider(s, Hit::Ground(p.x, p.y));
+        }
+        best
     }
-    if dir.z < -1e-12 {
-        let s = (GROUND_Z - origin.z) / dir.z;
-        let p = origin + dir * s;
-        consider(s, Hit::Ground(p.x, p.y));
-    }
-    best
 }
 
 /// Smooth value noise in [0, 1] on a unit grid (bilinear between hashed lattice values).
@@ -472,8 +504,9 @@ fn grey(hit: Hit) -> f32 {
     match hit {
         Hit::Board => BOARD_GREY,
         Hit::Wall(y, z) => {
-            (40.0 + 55.0 * value_noise(y / 0.12, z / 0.12, 1) + 25.0 * value_noise(y / 0.03, z / 0.03, 2))
-                as f32
+            (40.0
+                + 55.0 * value_noise(y / 0.12, z / 0.12, 1)
+                + 25.0 * value_noise(y / 0.03, z / 0.03, 2)) as f32
         }
         Hit::Ground(x, y) => (60.0 + 50.0 * value_noise(x / 0.2, y / 0.2, 3)) as f32,
     }
@@ -496,6 +529,7 @@ impl LidarCameraSim {
         let mut rng = rng_for(self.config.seed, Stream::Range, k as u128);
         let mut points = Vec::new();
         let origin = Vector3::zeros();
+        let scene = Scene::new(&self.config.board, &frame.t_lidar_target);
         for c in 0..columns {
             let mut az = 360.0 * c as f64 / columns as f64;
             if az > 180.0 {
@@ -510,8 +544,7 @@ impl LidarCameraSim {
                 let (se, ce) = el.to_radians().sin_cos();
                 let dir = Vector3::new(ce * ca, ce * sa, se);
                 let noise = model.range_noise_m() * rng.sample::<f64, _>(StandardNormal);
-                let Some((range, hit)) = cast(&self.config.board, &frame.t_lidar_target, &origin, &dir)
-                else {
+                let Some((range, hit)) = scene.cast(&origin, &dir) else {
                     continue;
                 };
                 let intensity = match hit {
@@ -545,46 +578,56 @@ impl LidarCameraSim {
         };
         let t_lidar_cam = self.t_cam_lidar.inverse();
         let origin = t_lidar_cam.translation.vector;
-        let rot = t_lidar_cam.rotation;
-        let board = &self.config.board;
-        let hit_of = |b: Vector3<f64>| cast(board, &frame.t_lidar_target, &origin, &(rot * b));
-        let corner_hit = |x: usize, y: usize| {
-            let b = self.corner_bearings[y * (w + 1) + x];
-            let b = Vector3::new(f64::from(b[0]), f64::from(b[1]), f64::from(b[2]));
-            (hit_of(b).map(|(_, hit)| hit), b)
+        let rot = t_lidar_cam.rotation.to_rotation_matrix().into_inner();
+        let scene = Scene::new(&self.config.board, &frame.t_lidar_target);
+        let hit_of = |b: &Vector3<f64>| scene.cast(&origin, &(rot * b)).map(|(_, hit)| hit);
+        // Surface kind and grey level at every pixel corner, cast once.
+        let kind = |h: Option<Hit>| match h {
+            None => 0u8,
+            Some(Hit::Board) => 1,
+            Some(Hit::Wall(..)) => 2,
+            Some(Hit::Ground(..)) => 3,
         };
+        let corners: Vec<(u8, f32)> = self
+            .corner_bearings
+            .par_iter()
+            .map(|b| {
+                let b = Vector3::new(f64::from(b[0]), f64::from(b[1]), f64::from(b[2]));
+                let hit = hit_of(&b);
+                (kind(hit), hit.map_or(0.0, grey))
+            })
+            .collect();
         let data: Vec<f32> = (0..w * h)
             .into_par_iter()
             .map(|i| {
                 let (x, y) = (i % w, i / w);
-                let corners = [
-                    corner_hit(x, y),
-                    corner_hit(x + 1, y),
-                    corner_hit(x, y + 1),
-                    corner_hit(x + 1, y + 1),
+                let c = [
+                    corners[y * (w + 1) + x],
+                    corners[y * (w + 1) + x + 1],
+                    corners[(y + 1) * (w + 1) + x],
+                    corners[(y + 1) * (w + 1) + x + 1],
                 ];
-                let kind = |h: Option<Hit>| match h {
-                    None => 0,
-                    Some(Hit::Board) => 1,
-                    Some(Hit::Wall(..)) => 2,
-                    Some(Hit::Ground(..)) => 3,
-                };
-                let same = corners.iter().all(|c| kind(c.0) == kind(corners[0].0));
-                if same {
-                    let mean = corners.iter().map(|c| c.1).sum::<Vector3<f64>>();
-                    return hit_of(mean.normalize()).map_or(0.0, |(_, hit)| grey(hit));
+                if c.iter().all(|k| k.0 == c[0].0) || c.iter().all(|k| k.0 != 1) {
+                    // One surface (or only background, smooth at pixel scale): average the
+                    // corners.
+                    return 0.25 * c.iter().map(|k| k.1).sum::<f32>();
                 }
+                // A board edge crosses the pixel: 6x6 samples, bearings interpolated between
+                // the corners' (distortion is linear to 1e-6 px within a pixel).
+                let b = |xx: usize, yy: usize| {
+                    let b = self.corner_bearings[yy * (w + 1) + xx];
+                    Vector3::new(f64::from(b[0]), f64::from(b[1]), f64::from(b[2]))
+                };
+                let (b00, b10, b01, b11) = (b(x, y), b(x + 1, y), b(x, y + 1), b(x + 1, y + 1));
                 let n = 6;
                 let mut acc = 0.0;
                 for sy in 0..n {
                     for sx in 0..n {
-                        let u = x as f64 - 0.5 + (sx as f64 + 0.5) / n as f64;
-                        let v = y as f64 - 0.5 + (sy as f64 + 0.5) / n as f64;
-                        acc += self
-                            .camera
-                            .unproject(&Vector2::new(u, v))
-                            .and_then(hit_of)
-                            .map_or(0.0, |(_, hit)| grey(hit));
+                        let u = (sx as f64 + 0.5) / n as f64;
+                        let v = (sy as f64 + 0.5) / n as f64;
+                        let bearing = (b00 * (1.0 - u) + b10 * u) * (1.0 - v)
+                            + (b01 * (1.0 - u) + b11 * u) * v;
+                        acc += hit_of(&bearing).map_or(0.0, grey);
                     }
                 }
                 acc / (n * n) as f32
@@ -685,7 +728,9 @@ impl LidarCameraSim {
              G = the LiDAR frame)\n",
         );
         for (k, frame) in self.frames.iter().enumerate() {
-            let scan_path = dir.join(LIDAR_DIR).join(format!("{}.pcd", frame.scan_stamp_ns));
+            let scan_path = dir
+                .join(LIDAR_DIR)
+                .join(format!("{}.pcd", frame.scan_stamp_ns));
             write_pcd(&scan_path, &self.scan(k), PcdWriteOptions::default()).map_err(|e| {
                 DatasetError::Io {
                     path: scan_path.clone(),
@@ -702,7 +747,10 @@ impl LidarCameraSim {
                     source: std::io::Error::other(e.to_string()),
                 })?;
             csv.push_str(&format!("{},{name}\n", frame.image_stamp_ns));
-            let (p, q) = (frame.t_lidar_target.translation.vector, frame.t_lidar_target.rotation);
+            let (p, q) = (
+                frame.t_lidar_target.translation.vector,
+                frame.t_lidar_target.rotation,
+            );
             targets.push_str(&format!(
                 "{},{},{},{},{},{},{},{}\n",
                 frame.scan_stamp_ns, p.x, p.y, p.z, q.w, q.i, q.j, q.k

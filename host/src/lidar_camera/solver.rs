@@ -48,7 +48,9 @@ fn point_residual(
     let j_rot = -(n.transpose() * rot * skew(p));
     let mut jacobian = RowVector6::zeros();
     jacobian.fixed_view_mut::<1, 3>(0, 0).copy_from(&j_rot);
-    jacobian.fixed_view_mut::<1, 3>(0, 3).copy_from(&n.transpose());
+    jacobian
+        .fixed_view_mut::<1, 3>(0, 3)
+        .copy_from(&n.transpose());
     Residual {
         value: n.dot(&pose.transform_point(p)) - d,
         jacobian,
@@ -72,7 +74,14 @@ impl Se3Problem for PointToPlane<'_> {
         for plane in self.planes {
             let w = mean / plane.points_lidar.len().max(1) as f64 / (self.sigma_m * self.sigma_m);
             for p in &plane.points_lidar {
-                out.push(point_residual(pose, &rot, &plane.normal_cam, plane.offset_cam, p, w));
+                out.push(point_residual(
+                    pose,
+                    &rot,
+                    &plane.normal_cam,
+                    plane.offset_cam,
+                    p,
+                    w,
+                ));
             }
         }
         true
@@ -213,8 +222,8 @@ mod tests {
         (0..6)
             .map(|k| {
                 let k = k as f64;
-                let normal = Vector3::new(0.3 * (k - 2.5).sin(), 0.2 * (k * 1.3).cos(), -1.0)
-                    .normalize();
+                let normal =
+                    Vector3::new(0.3 * (k - 2.5).sin(), 0.2 * (k * 1.3).cos(), -1.0).normalize();
                 let centre = Vector3::new(0.4 * (k - 2.5), 0.1 * k - 0.3, 2.0 + 0.5 * k);
                 let u = normal.cross(&Vector3::x()).normalize();
                 let v = normal.cross(&u);
