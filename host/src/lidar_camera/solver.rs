@@ -11,7 +11,6 @@
 //! - Edges ([`associate_edges`]): per frame, the permutation of the four LiDAR edges onto
 //!   the four image edges with the smallest mean angle of the points from the planes.
 
-use msreg_estimator::lie::skew;
 use msreg_estimator::Pose;
 use nalgebra::{Matrix3, RowVector6, UnitQuaternion, Vector3};
 
@@ -37,25 +36,27 @@ pub struct EdgeObservation {
     pub normal_cam: Vector3<f64>,
 }
 
-fn point_residual(
+/// Residuals `n . (R p + t) - d` of points on one plane `(n, d)`, with
+/// `d r / d theta = -(n^T R [p]x) = -(a x p)^T` for `a = R^T n` (computed once per plane)
+/// and `d r / d t = n^T`.
+fn plane_residuals(
     pose: &Pose<f64>,
-    rot: &Matrix3<f64>,
     n: &Vector3<f64>,
     d: f64,
-    p: &Vector3<f64>,
+    points: &[Vector3<f64>],
     weight: f64,
-) -> Residual {
-    let j_rot = -(n.transpose() * rot * skew(p));
-    let mut jacobian = RowVector6::zeros();
-    jacobian.fixed_view_mut::<1, 3>(0, 0).copy_from(&j_rot);
-    jacobian
-        .fixed_view_mut::<1, 3>(0, 3)
-        .copy_from(&n.transpose());
-    Residual {
-        value: n.dot(&pose.transform_point(p)) - d,
-        jacobian,
-        weight,
-    }
+    out: &mut Vec<Residual>,
+) {
+    let a = pose.rotation.inverse() * n;
+    let c = n.dot(&pose.translation) - d;
+    out.extend(points.iter().map(|p| {
+        let j_rot = -a.cross(p);
+        Residual {
+            value: a.dot(p) + c,
+            jacobian: RowVector6::new(j_rot.x, j_rot.y, j_rot.z, n.x, n.y, n.z),
+            weight,
+        }
+    }));
 }
 
 /// PPC-Cal's cost (eq. 2.4) over `T_cam_lidar`.
@@ -68,21 +69,18 @@ pub struct PointToPlane<'a> {
 
 impl Se3Problem for PointToPlane<'_> {
     fn residuals(&self, pose: &Pose<f64>, out: &mut Vec<Residual>) -> bool {
-        let rot = pose.rotation.to_rotation_matrix().into_inner();
         let total: usize = self.planes.iter().map(|p| p.points_lidar.len()).sum();
         let mean = total as f64 / self.planes.len().max(1) as f64;
         for plane in self.planes {
             let w = mean / plane.points_lidar.len().max(1) as f64 / (self.sigma_m * self.sigma_m);
-            for p in &plane.points_lidar {
-                out.push(point_residual(
-                    pose,
-                    &rot,
-                    &plane.normal_cam,
-                    plane.offset_cam,
-                    p,
-                    w,
-                ));
-            }
+            plane_residuals(
+                pose,
+                &plane.normal_cam,
+                plane.offset_cam,
+                &plane.points_lidar,
+                w,
+                out,
+            );
         }
         true
     }
@@ -98,14 +96,11 @@ pub struct PointToBackProjectedPlane<'a> {
 
 impl Se3Problem for PointToBackProjectedPlane<'_> {
     fn residuals(&self, pose: &Pose<f64>, out: &mut Vec<Residual>) -> bool {
-        let rot = pose.rotation.to_rotation_matrix().into_inner();
         let total: usize = self.edges.iter().map(|e| e.points_lidar.len()).sum();
         let mean = total as f64 / self.edges.len().max(1) as f64;
         for edge in self.edges {
             let w = mean / edge.points_lidar.len().max(1) as f64 / (self.sigma_m * self.sigma_m);
-            for q in &edge.points_lidar {
-                out.push(point_residual(pose, &rot, &edge.normal_cam, 0.0, q, w));
-            }
+            plane_residuals(pose, &edge.normal_cam, 0.0, &edge.points_lidar, w, out);
         }
         true
     }

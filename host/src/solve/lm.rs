@@ -129,8 +129,8 @@ fn linearise(
         lin.cost += loss.rho(s);
         lin.weighted_ssr += w * r.value * r.value;
         let jt = r.jacobian.transpose();
-        lin.hessian += w * jt * r.jacobian;
-        lin.gradient += (w * r.value) * jt;
+        lin.hessian.ger(w, &jt, &jt, 1.0);
+        lin.gradient.axpy(w * r.value, &jt, 1.0);
     }
     Some(lin)
 }
