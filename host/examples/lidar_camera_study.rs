@@ -3,12 +3,13 @@
 //! - `accuracy [seeds] [poses]`: PBPC-Cal and PPC-Cal errors and MLRE per seed and LiDAR.
 //! - `random-init [trials]`: PPC then PBPC from random starts (rotation sigma 90 deg per
 //!   axis, translation sigma 50 cm), spread of the solutions.
+//! - `timing`: simulator and feature-extraction time of one frame.
 //!
 //! Run: `cargo run --release -p msreg --example lidar_camera_study -- accuracy 5 30`
 
 use msreg_estimator::Pose;
 use msreg_host::lidar_camera::pipeline::{
-    extract_frame, solve, CalibrationOptions, FrameFeatures, Method,
+    extract_simulation, solve, CalibrationOptions, FrameFeatures,
 };
 use msreg_host::lidar_camera::{
     simulate_lidar_camera, LidarCameraSim, LidarCameraSimConfig, LidarModel,
@@ -16,42 +17,19 @@ use msreg_host::lidar_camera::{
 use nalgebra::{UnitQuaternion, Vector3};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
-use rayon::prelude::*;
 
-fn features(
-    sim: &LidarCameraSim,
-    options: &CalibrationOptions,
-) -> (Vec<FrameFeatures>, Vec<String>) {
-    let results: Vec<Result<FrameFeatures, String>> = (0..sim.frames.len())
-        .into_par_iter()
-        .map(|k| {
-            let f = &sim.frames[k];
-            extract_frame(
-                &sim.scan(k),
-                &sim.image(k),
-                &sim.camera,
-                &sim.config.board,
-                options,
-            )
-            .map(|(lidar, camera)| FrameFeatures {
-                frame: k,
-                scan_stamp_ns: f.scan_stamp_ns,
-                image_stamp_ns: f.image_stamp_ns,
-                lidar,
-                camera,
-            })
-            .map_err(|e| format!("frame {k}: {e}"))
-        })
-        .collect();
-    let mut ok = Vec::new();
-    let mut bad = Vec::new();
-    for r in results {
-        match r {
-            Ok(f) => ok.push(f),
-            Err(e) => bad.push(e),
-        }
+fn features(sim: &LidarCameraSim, options: &CalibrationOptions) -> Vec<FrameFeatures> {
+    let (frames, rejected) = extract_simulation(sim, options);
+    for r in &rejected {
+        eprintln!(
+            "{}: seed {}: frame {}: {}",
+            sim.config.lidar.name(),
+            sim.config.seed,
+            r.frame,
+            r.reason
+        );
     }
-    (ok, bad)
+    frames
 }
 
 fn errors(est: &Pose<f64>, truth: &nalgebra::Isometry3<f64>) -> (f64, f64) {
@@ -74,10 +52,7 @@ fn accuracy(seeds: u64, poses: usize) {
             })
             .expect("sim");
             let options = CalibrationOptions::default();
-            let (frames, bad) = features(&sim, &options);
-            for b in &bad {
-                eprintln!("{}: seed {seed}: {b}", model.name());
-            }
+            let frames = features(&sim, &options);
             let clock = std::time::Instant::now();
             let sol = solve(&frames, &sim.camera, &options).expect("solve");
             let ms = clock.elapsed().as_secs_f64() * 1e3;
@@ -102,7 +77,7 @@ fn random_init(trials: usize) {
     })
     .expect("sim");
     let base = CalibrationOptions::default();
-    let (frames, _) = features(&sim, &base);
+    let frames = features(&sim, &base);
     let reference = solve(&frames, &sim.camera, &base).expect("solve");
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(42);
     let rot = Normal::new(0.0, 90f64.to_radians()).expect("normal");
@@ -155,11 +130,9 @@ fn main() {
         Some("timing") => timing(),
         _ => accuracy(num(2, 5), num(3, 30) as usize),
     }
-    let _ = Method::Pbpc;
 }
 
 /// Timing of the simulator and the feature extraction per frame (for keeping tests short).
-#[allow(dead_code)]
 fn timing() {
     use msreg_host::lidar_camera::camera_features::{extract_camera_board, CameraFeatureParams};
     use msreg_host::lidar_camera::lidar_features::{extract_lidar_board, LidarFeatureParams};

@@ -21,5 +21,8 @@ pub mod pipeline;
 pub mod sim;
 pub mod solver;
 
+#[cfg(test)]
+mod tests;
+
 pub use board::Board;
 pub use sim::{simulate_lidar_camera, LidarCameraSim, LidarCameraSimConfig, LidarModel};
