@@ -377,12 +377,15 @@ pub fn extract_lidar_board(
     let pts: Vec<Vector3<f64>> = cluster.iter().map(|&i| points[i]).collect();
     let (normal, offset, rms) = fit_plane(&pts).ok_or(LidarReject::NoBoard { planes: 1 })?;
     let keep = (3.0 * rms).max(0.01);
-    let on_board: std::collections::HashSet<usize> = cluster
+    let mut kept: Vec<usize> = cluster
         .iter()
         .copied()
         .filter(|&i| (normal.dot(&points[i]) - offset).abs() < keep)
         .collect();
-    let plane_points: Vec<Vector3<f64>> = on_board.iter().map(|&i| points[i]).collect();
+    // Scan order, so that the result does not depend on hashing.
+    kept.sort_unstable();
+    let plane_points: Vec<Vector3<f64>> = kept.iter().map(|&i| points[i]).collect();
+    let on_board: std::collections::HashSet<usize> = kept.into_iter().collect();
     let (normal, offset, plane_rms) =
         fit_plane(&plane_points).ok_or(LidarReject::NoBoard { planes: 1 })?;
     let candidates = edge_points(cloud, &on_board, &normal, offset, params, plane_rms);
@@ -430,7 +433,8 @@ fn edge_points(
     params: &LidarFeatureParams,
     plane_rms: f64,
 ) -> Vec<Vector3<f64>> {
-    let mut rings: HashMap<u16, Vec<(f64, usize)>> = HashMap::new();
+    // Ordered by ring, so that the line RANSAC sees the candidates in a fixed order.
+    let mut rings: std::collections::BTreeMap<u16, Vec<(f64, usize)>> = Default::default();
     for (i, p) in cloud.points.iter().enumerate() {
         rings
             .entry(p.ring)
