@@ -89,6 +89,8 @@ enum Scenario {
     LidarImu(msreg_host::lidar::cli::SimulateLidarImu),
     /// IMU + camera waved in front of a checkerboard (rendered images, true corners).
     CameraImu(msreg_host::sim::camera_cli::SimulateCameraImu),
+    /// Static LiDAR + camera suite and a plain board at many still poses.
+    LidarCamera(msreg_host::lidar_camera::cli::SimulateLidarCamera),
 }
 
 #[derive(Args)]
@@ -115,6 +117,8 @@ enum Task {
     PoseImu(CalibratePoseImu),
     /// LiDAR-IMU calibration: predict, deskew, NDT, relative-pose update (EKF).
     LidarImu(msreg_host::lidar::cli::CalibrateLidarImu),
+    /// LiDAR-camera calibration with a plain board (PBPC-Cal or PPC-Cal), judged by MLRE.
+    LidarCamera(msreg_host::lidar_camera::cli::CalibrateLidarCamera),
 }
 
 #[derive(Args)]
@@ -181,6 +185,17 @@ fn run(command: Command) -> Result<(), Failure> {
         } => match msreg_host::lidar::cli::calibrate(&args)? {
             msreg_host::lidar::cli::Outcome::Converged => Ok(()),
             msreg_host::lidar::cli::Outcome::NotConverged(why) => Err(Failure::NotConverged(why)),
+        },
+        Command::Simulate {
+            scenario: Scenario::LidarCamera(args),
+        } => Ok(msreg_host::lidar_camera::cli::simulate(&args)?),
+        Command::Calibrate {
+            task: Task::LidarCamera(args),
+        } => match msreg_host::lidar_camera::cli::calibrate(&args)? {
+            msreg_host::lidar_camera::cli::Outcome::Converged => Ok(()),
+            msreg_host::lidar_camera::cli::Outcome::NotConverged(why) => {
+                Err(Failure::NotConverged(why))
+            }
         },
         Command::Eval {
             result,

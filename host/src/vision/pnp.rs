@@ -1,8 +1,8 @@
 //! Target pose from corner pixels (PnP for a planar target): a linear start from the
 //! homography between the target plane and the unprojected bearings (DLT with
-//! `b x (H X) = 0`, valid for any bearing, also beyond 90 degrees off axis), then
-//! Levenberg-Marquardt on SE(3) minimising the reprojection error through the camera model
-//! ([`Camera::project`] and its Jacobian). Perturbation: right on the rotation, additive on
+//! `b x (H X) = 0`, valid for any bearing, also beyond 90 degrees off axis), then the
+//! SE(3) Levenberg-Marquardt of [`crate::solve`] minimising the reprojection error through
+//! the camera model ([`Camera::project`] and its Jacobian). Perturbation: right on the rotation, additive on
 //! the translation ([`Pose::boxplus`]); the covariance is `sigma^2 (J^T J)^-1` in that
 //! order `[d_theta, d_p]`, `sigma^2` the residual variance (`SSR / (2N - 6)`).
 
@@ -10,9 +10,10 @@ use msreg_estimator::camera::Camera;
 use msreg_estimator::lie::skew;
 use msreg_estimator::Pose;
 use nalgebra::{
-    DMatrix, Matrix2x3, Matrix3, Matrix6, Rotation3, SMatrix, UnitQuaternion, Vector2, Vector3,
-    Vector6,
+    DMatrix, Matrix2x3, Matrix3, Matrix6, Rotation3, RowVector6, UnitQuaternion, Vector2, Vector3,
 };
+
+use crate::solve::{solve_se3, LmError, LmOptions, Residual, Se3Problem};
 
 /// Why no pose was found.
 #[non_exhaustive]
@@ -159,34 +160,42 @@ fn homography_pose(
     Ok(Pose::new(q, h3 / lambda))
 }
 
-type Jacobian = SMatrix<f64, 2, 6>;
-
-/// Residuals (`projected - observed`) and their Jacobians; `None` when a point cannot be
-/// projected.
-fn linearise(
-    camera: &Camera<f64>,
-    points: &[Vector3<f64>],
-    pixels: &[Vector2<f64>],
-    pose: &Pose<f64>,
-) -> Option<(Vec<Vector2<f64>>, Vec<Jacobian>)> {
-    let rot = pose.rotation.to_rotation_matrix().into_inner();
-    let mut res = Vec::with_capacity(points.len());
-    let mut jac = Vec::with_capacity(points.len());
-    for (p, px) in points.iter().zip(pixels) {
-        let proj = camera.project(&pose.transform_point(p))?;
-        // d p_cam / d theta = -R [p]_x (right perturbation), d p_cam / d p = I.
-        let j_rot: Matrix2x3<f64> = proj.jacobian * (-rot * skew(p));
-        let mut j = Jacobian::zeros();
-        j.fixed_view_mut::<2, 3>(0, 0).copy_from(&j_rot);
-        j.fixed_view_mut::<2, 3>(0, 3).copy_from(&proj.jacobian);
-        res.push(proj.pixel - px);
-        jac.push(j);
-    }
-    Some((res, jac))
+/// Reprojection residuals (`projected - observed`, one scalar per pixel coordinate) for the
+/// SE(3) Levenberg-Marquardt of [`crate::solve`]; a pose that cannot project every point is
+/// invalid.
+struct Reprojection<'a> {
+    camera: &'a Camera<f64>,
+    points: &'a [Vector3<f64>],
+    pixels: &'a [Vector2<f64>],
 }
 
-fn cost(res: &[Vector2<f64>]) -> f64 {
-    res.iter().map(|r| r.norm_squared()).sum()
+impl Se3Problem for Reprojection<'_> {
+    fn residuals(&self, pose: &Pose<f64>, out: &mut Vec<Residual>) -> bool {
+        let rot = pose.rotation.to_rotation_matrix().into_inner();
+        for (p, px) in self.points.iter().zip(self.pixels) {
+            let Some(proj) = self.camera.project(&pose.transform_point(p)) else {
+                return false;
+            };
+            // d p_cam / d theta = -R [p]x (right perturbation), d p_cam / d p = I.
+            let j_rot: Matrix2x3<f64> = proj.jacobian * (-rot * skew(p));
+            let r = proj.pixel - px;
+            for k in 0..2 {
+                let mut jacobian = RowVector6::zeros();
+                jacobian
+                    .fixed_view_mut::<1, 3>(0, 0)
+                    .copy_from(&j_rot.row(k));
+                jacobian
+                    .fixed_view_mut::<1, 3>(0, 3)
+                    .copy_from(&proj.jacobian.row(k));
+                out.push(Residual {
+                    value: r[k],
+                    jacobian,
+                    weight: 1.0,
+                });
+            }
+        }
+        true
+    }
 }
 
 fn refine(
@@ -195,71 +204,29 @@ fn refine(
     pixels: &[Vector2<f64>],
     start: Pose<f64>,
 ) -> Result<PnpSolution, PnpError> {
-    let mut pose = start;
-    let (mut res, mut jac) =
-        linearise(camera, points, pixels, &pose).ok_or(PnpError::NotConverged)?;
-    let mut c = cost(&res);
-    let mut mu = 1e-3;
-    let mut iterations = 0;
-    for it in 0..100 {
-        iterations = it + 1;
-        let mut jtj = Matrix6::<f64>::zeros();
-        let mut jtr = Vector6::<f64>::zeros();
-        for (r, j) in res.iter().zip(&jac) {
-            jtj += j.transpose() * j;
-            jtr += j.transpose() * r;
-        }
-        let mut improved = false;
-        for _ in 0..10 {
-            let mut damped = jtj;
-            for k in 0..6 {
-                damped[(k, k)] += mu * jtj[(k, k)].max(1e-12);
-            }
-            let Some(delta) = damped.cholesky().map(|ch| ch.solve(&(-jtr))) else {
-                mu *= 10.0;
-                continue;
-            };
-            let cand = pose.boxplus(
-                &Vector3::new(delta[0], delta[1], delta[2]),
-                &Vector3::new(delta[3], delta[4], delta[5]),
-            );
-            if let Some((r2, j2)) = linearise(camera, points, pixels, &cand) {
-                let c2 = cost(&r2);
-                if c2 < c {
-                    let small = delta.norm() < 1e-12 || (c - c2) < 1e-14 * c.max(1e-30);
-                    pose = cand;
-                    res = r2;
-                    jac = j2;
-                    c = c2;
-                    mu = (mu * 0.3).max(1e-12);
-                    improved = !small;
-                    break;
-                }
-            }
-            mu *= 10.0;
-        }
-        if !improved {
-            break;
-        }
-    }
-    if !pose.is_finite() {
+    let problem = Reprojection {
+        camera,
+        points,
+        pixels,
+    };
+    let options = LmOptions {
+        max_iterations: 100,
+        initial_lambda: 1e-3,
+        ..LmOptions::default()
+    };
+    let sol = solve_se3(&problem, start, &options).map_err(|e| match e {
+        LmError::Degenerate => PnpError::Degenerate,
+        _ => PnpError::NotConverged,
+    })?;
+    if !sol.pose.is_finite() {
         return Err(PnpError::NotConverged);
     }
-    let mut jtj = Matrix6::<f64>::zeros();
-    for j in &jac {
-        jtj += j.transpose() * j;
-    }
-    let dof = (2 * points.len()).saturating_sub(6).max(1) as f64;
-    let sigma2 = c / dof;
-    let covariance = jtj
-        .try_inverse()
-        .map(|inv| inv * sigma2)
-        .ok_or(PnpError::Degenerate)?;
+    // The solver's covariance is sigma^2 (J^T J)^-1 with sigma^2 = SSR / (2N - 6).
     Ok(PnpSolution {
-        t_cam_target: pose,
-        covariance,
-        rms_px: (c / points.len() as f64).sqrt(),
-        iterations,
+        t_cam_target: sol.pose,
+        covariance: sol.covariance,
+        rms_px: (sol.final_cost / points.len() as f64).sqrt(),
+        iterations: sol.iterations,
     })
 }
 
@@ -267,6 +234,7 @@ fn refine(
 mod tests {
     use super::*;
     use msreg_estimator::camera::{equidistant::Equidistant, Distortion, Intrinsics, Projection};
+    use nalgebra::Vector6;
 
     fn grid() -> Vec<Vector3<f64>> {
         (0..30)
@@ -302,6 +270,55 @@ mod tests {
         assert!((sol.t_cam_target.translation - truth.translation).norm() < 1e-8);
         assert!(sol.t_cam_target.rotation.angle_to(&truth.rotation) < 1e-8);
         assert!(sol.rms_px < 1e-6);
+    }
+
+    #[test]
+    fn reprojection_jacobians_match_finite_differences() {
+        let k = Intrinsics {
+            fu: 500.0,
+            fv: 480.0,
+            cu: 320.0,
+            cv: 240.0,
+        };
+        let d = Distortion::Equidistant(Equidistant {
+            k1: -0.03,
+            k2: -0.02,
+            k3: 0.002,
+            k4: 0.001,
+        });
+        let cam = Camera::new(Projection::Pinhole, k, d, (640, 480)).unwrap();
+        let pose = Pose::new(
+            UnitQuaternion::from_euler_angles(2.9, 0.2, -0.3),
+            Vector3::new(-0.1, 0.05, 0.5),
+        );
+        let pts = grid();
+        let px = vec![Vector2::new(300.0, 200.0); pts.len()];
+        let problem = Reprojection {
+            camera: &cam,
+            points: &pts,
+            pixels: &px,
+        };
+        let mut base = Vec::new();
+        assert!(problem.residuals(&pose, &mut base));
+        let h = 1e-6;
+        for k in 0..6 {
+            let mut d = Vector6::zeros();
+            d[k] = h;
+            let step = |d: Vector6<f64>| {
+                pose.boxplus(
+                    &d.fixed_rows::<3>(0).into_owned(),
+                    &d.fixed_rows::<3>(3).into_owned(),
+                )
+            };
+            let (mut a, mut b) = (Vec::new(), Vec::new());
+            assert!(problem.residuals(&step(d), &mut a));
+            assert!(problem.residuals(&step(-d), &mut b));
+            for i in 0..base.len() {
+                let numeric = (a[i].value - b[i].value) / (2.0 * h);
+                let scale = base[i].jacobian[k].abs().max(1.0);
+                assert!((numeric - base[i].jacobian[k]).abs() < 1e-5 * scale);
+            }
+        }
     }
 
     #[test]
