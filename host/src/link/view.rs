@@ -181,14 +181,30 @@ fn nis_text(e: &Estimate, color: bool) -> String {
     format!("{:.2} ({})", e.nis_per_dof, paint(color, code, word))
 }
 
-fn diagnostic_text(d: &UpdateDiagnostic) -> String {
+/// The earliest device stamp of the session: filter times are shown from it (device stamps
+/// are the sensor clock's, often seconds since 1970).
+fn origin_ns(c: &Collected) -> u64 {
+    let first_estimate = c.estimates.first().map(|(_, e)| e.stamp_ns);
+    let first_update = c.diagnostics.first().map(|(_, d)| d.stamp_ns);
+    first_estimate
+        .into_iter()
+        .chain(first_update)
+        .min()
+        .unwrap_or(0)
+}
+
+fn since(stamp_ns: u64, origin_ns: u64) -> f64 {
+    stamp_ns.saturating_sub(origin_ns) as f64 * 1e-9
+}
+
+fn diagnostic_text(d: &UpdateDiagnostic, origin_ns: u64) -> String {
     let kind = match d.kind {
         UpdateKind::RelativePose => "relative pose",
         UpdateKind::ZeroVelocity => "zero velocity",
     };
     format!(
-        "{kind} at {:.2} s: NIS {:.2} vs gate {:.2} ({} dof), {}",
-        d.stamp_ns as f64 * 1e-9,
+        "{kind} at t+{:.2} s: NIS {:.2} vs gate {:.2} ({} dof), {}",
+        since(d.stamp_ns, origin_ns),
         d.nis,
         d.threshold,
         d.dof,
@@ -228,12 +244,13 @@ pub fn dashboard(
         push_link_rows(&mut rows, c, rx_per_s, color);
         return rows;
     };
+    let origin = origin_ns(c);
     rows.push(format!(
-        "NIS/dof {}   updates {} accepted, {} rejected   filter time {:.2} s",
+        "NIS/dof {}   updates {} accepted, {} rejected   filter time t+{:.2} s",
         nis_text(e, color),
         e.updates_accepted,
         e.updates_rejected,
-        e.stamp_ns as f64 * 1e-9
+        since(e.stamp_ns, origin)
     ));
     rows.push(String::new());
     rows.push(paint(
@@ -269,7 +286,7 @@ pub fn dashboard(
     ));
     rows.push(String::new());
     rows.push(match c.diagnostics.last() {
-        Some((_, d)) => format!("last update  {}", diagnostic_text(d)),
+        Some((_, d)) => format!("last update  {}", diagnostic_text(d, origin)),
         None => "last update  none yet".into(),
     });
     rows.push(match c.alarms.last() {
@@ -282,8 +299,8 @@ pub fn dashboard(
                 color,
                 YELLOW,
                 &format!(
-                    "last alarm   {kind} at {:.2} s (statistic {:.1}), host t {t:.1} s",
-                    a.stamp_ns as f64 * 1e-9,
+                    "last alarm   {kind} at t+{:.2} s (statistic {:.1}), host t {t:.1} s",
+                    since(a.stamp_ns, origin),
                     a.statistic
                 ),
             )
@@ -383,7 +400,8 @@ mod tests {
         );
         let text = rows.join("\n");
         assert!(text.contains("ALARM"), "{text}");
-        assert!(text.contains("rotation step at 14.00 s"), "{text}");
+        // Stamps from the first estimate's (12.5 s).
+        assert!(text.contains("rotation step at t+1.50 s"), "{text}");
         assert!(text.contains("crc 3"), "{text}");
         assert!(text.contains("42 msg/s"), "{text}");
         assert!(text.contains("120 accepted, 3 rejected"), "{text}");
