@@ -343,7 +343,7 @@ impl Session {
         let (sr, st) = f.extrinsic_sigma(SENSOR);
         defmt::info!(
             "t {=u64} ms: {=u32} IMU samples, {=u32} updates ({=u32} accepted), sigma {=f32} deg / {=f32} mm",
-            (now - self.progress_origin_ns) / 1_000_000,
+            now.saturating_sub(self.progress_origin_ns) / 1_000_000,
             self.counts.imu_samples,
             self.counts.updates,
             self.counts.accepted,

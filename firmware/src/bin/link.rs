@@ -2,7 +2,7 @@
 //! Receives frames into a bounded buffer, applies them in order, streams estimates,
 //! diagnostics, alarms and typed error reports back. Bad input is counted, never fatal.
 //! Logs with `defmt` over semihosting (QEMU's stdout; `msreg link log` decodes it), including
-//! its RAM use (statics + painted stack peak) whenever the host asks for a Status.
+//! its RAM use (statics + painted stack peak) at boot and, when the peak grew, after a Status.
 #![no_std]
 #![no_main]
 
