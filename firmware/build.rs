@@ -1,5 +1,5 @@
 //! Puts `memory.x` on the linker search path (cortex-m-rt's `link.x` includes it) and
-//! relinks when it changes.
+//! relinks when it changes; adds defmt's linker script.
 
 use std::{env, fs, path::PathBuf};
 
@@ -7,6 +7,10 @@ fn main() {
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
     fs::copy("memory.x", out.join("memory.x")).expect("copy memory.x to OUT_DIR");
     println!("cargo:rustc-link-search={}", out.display());
+    // Only `link` logs with defmt (to semihosting) and links a defmt logger; the library's
+    // interned log strings still reach the other binaries' objects, and without defmt.x
+    // lld places them at address 0, over .text. defmt.x keeps them in a non-loaded section.
+    println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
     println!("cargo:rerun-if-changed=memory.x");
     println!("cargo:rerun-if-changed=build.rs");
 }

@@ -6,6 +6,8 @@
 //! the current `t_d` estimate) and are applied just before the IMU sample that passes it;
 //! an increment without a matching anchor re-anchors at its end, as the host does.
 //! Every refusal is counted by [`ErrorKind`] and reported; nothing resets the device.
+//! Log lines (`defmt`, typed primitive arguments only: see `msreg link log`) mark the
+//! configuration, each fault, each alarm and the progress every [`PROGRESS_PERIOD_NS`].
 
 use heapless::Deque;
 use msreg_estimator::chi2::Confidence;
@@ -27,6 +29,8 @@ pub type Filter = PoseImuEkf<f32>;
 const SENSOR: usize = 0;
 /// Pose messages that may wait for the IMU stream.
 pub const PENDING_MAX: usize = 16;
+/// Filter time between two progress log lines.
+pub const PROGRESS_PERIOD_NS: u64 = 5_000_000_000;
 
 #[derive(Clone, Copy)]
 enum Pending {
@@ -57,7 +61,11 @@ struct Counts {
     errors: [u32; ErrorKind::COUNT],
 }
 
-/// Session state. Large (it holds the filter): keep it in a `static`.
+/// Session state. Large (it holds the filter): keep it in a `static` (`new` is `const`).
+///
+/// Stack: the filter calls run in their own non-inlined functions (`#[inline(never)]` on
+/// the handlers), so their multi-kilobyte frames exist only while they run. Inlined into
+/// one caller, LLVM gave `main` a single 39 KB frame holding all of them at once.
 pub struct Session {
     filter: Option<Filter>,
     config: Option<Config>,
@@ -67,6 +75,9 @@ pub struct Session {
     tx_seq: u32,
     imu_index: u32,
     last_estimate_ns: u64,
+    last_progress_ns: u64,
+    /// Filter time of the first sample after the configuration (progress lines count from it).
+    progress_origin_ns: u64,
     alarm: bool,
     /// Sequence number of the frame being applied (estimates carry it, for latency).
     current_seq: u32,
@@ -85,6 +96,7 @@ pub struct Tx<'a, W: embedded_io::Write> {
 }
 
 impl<W: embedded_io::Write> Tx<'_, W> {
+    #[inline(never)]
     fn send(&mut self, msg: &DeviceMsg) {
         let mut buf = [0u8; DEVICE_FRAME_MAX];
         if let Ok(n) = frame::encode(*self.seq, msg, &mut buf) {
@@ -116,6 +128,8 @@ impl Session {
             tx_seq: 0,
             imu_index: 0,
             last_estimate_ns: 0,
+            last_progress_ns: 0,
+            progress_origin_ns: 0,
             alarm: false,
             current_seq: 0,
         }
@@ -149,6 +163,13 @@ impl Session {
     ) {
         let count = &mut self.counts.errors[kind.index()];
         *count = count.saturating_add(1);
+        defmt::warn!(
+            "fault {=str} (#{=u32}), frame {=u32}, stamp {=u64} ns",
+            kind.name(),
+            *count,
+            seq,
+            stamp_ns
+        );
         let report = ErrorReport {
             kind,
             count: *count,
@@ -177,6 +198,7 @@ impl Session {
     }
 
     /// Applies one decoded packet and acknowledges it.
+    #[inline(never)]
     pub fn handle<W: embedded_io::Write>(&mut self, w: &mut W, packet: Packet<HostMsg>) {
         let seq = packet.seq;
         let is_hello = matches!(packet.msg, HostMsg::Hello(_));
@@ -224,6 +246,7 @@ impl Session {
         AckStatus::Ok
     }
 
+    #[inline(never)]
     fn on_config<W: embedded_io::Write>(&mut self, w: &mut W, seq: u32, c: &Config) -> AckStatus {
         match new_filter(c) {
             Ok(f) => {
@@ -232,7 +255,14 @@ impl Session {
                 self.pending.clear();
                 self.imu_index = 0;
                 self.last_estimate_ns = 0;
+                self.last_progress_ns = 0;
                 self.alarm = false;
+                defmt::info!(
+                    "configured: estimate every {=u32} ns, sigma prior {=f32} rad / {=f32} m",
+                    c.estimate_period_ns,
+                    c.sigma_rotation_rad,
+                    c.sigma_translation_m
+                );
                 let errors = self.counts.errors;
                 self.counts = Counts {
                     errors,
@@ -260,6 +290,7 @@ impl Session {
         AckStatus::Ok
     }
 
+    #[inline(never)]
     fn on_imu<W: embedded_io::Write>(&mut self, w: &mut W, seq: u32, b: &ImuBatch) -> AckStatus {
         if self.filter.is_none() {
             self.fault(w, ErrorKind::NotConfigured, seq, b.base_stamp_ns);
@@ -289,7 +320,36 @@ impl Session {
             }
         }
         self.periodic_estimate(w, seq);
+        self.progress();
         AckStatus::Ok
+    }
+
+    /// A log line every [`PROGRESS_PERIOD_NS`] of filter time.
+    fn progress(&mut self) {
+        let Some(f) = self.filter.as_ref() else {
+            return;
+        };
+        let now = f.time_ns();
+        if now < self.last_progress_ns.saturating_add(PROGRESS_PERIOD_NS) {
+            return;
+        }
+        if self.last_progress_ns == 0 {
+            // First sample: start the clock, nothing to report yet.
+            self.last_progress_ns = now;
+            self.progress_origin_ns = now;
+            return;
+        }
+        self.last_progress_ns = now;
+        let (sr, st) = f.extrinsic_sigma(SENSOR);
+        defmt::info!(
+            "t {=u64} ms: {=u32} IMU samples, {=u32} updates ({=u32} accepted), sigma {=f32} deg / {=f32} mm",
+            now.saturating_sub(self.progress_origin_ns) / 1_000_000,
+            self.counts.imu_samples,
+            self.counts.updates,
+            self.counts.accepted,
+            sr.max() * 57.29578,
+            st.max() * 1000.0
+        );
     }
 
     /// Applies every pending pose whose IMU time is at or before `imu_stamp_ns`.
@@ -319,6 +379,7 @@ impl Session {
         }
     }
 
+    #[inline(never)]
     fn anchor<W: embedded_io::Write>(&mut self, w: &mut W, stamp_ns: u64, seq: u32) {
         let Some(filter) = self.filter.as_mut() else {
             return;
@@ -329,6 +390,7 @@ impl Session {
         }
     }
 
+    #[inline(never)]
     fn increment<W: embedded_io::Write>(&mut self, w: &mut W, r: &RelativePose, seq: u32) {
         let Some(filter) = self.filter.as_mut() else {
             return;
@@ -345,6 +407,7 @@ impl Session {
         }
     }
 
+    #[inline(never)]
     fn zero_velocity<W: embedded_io::Write>(&mut self, w: &mut W, stamp_ns: u64) {
         let Some(c) = self.config else { return };
         let every = u32::from(c.zero_velocity_every.max(1));
@@ -378,6 +441,16 @@ impl Session {
         if let Some(event) = &report.event {
             self.alarm = true;
             self.counts.alarms = self.counts.alarms.saturating_add(1);
+            let a = alarm(event);
+            defmt::warn!(
+                "health alarm {=str} at {=u64} ns: statistic {=f32}",
+                match a.kind {
+                    AlarmKind::RotationStep => "rotation step",
+                    AlarmKind::TranslationStep => "translation step",
+                },
+                a.stamp_ns,
+                a.statistic
+            );
             Self::tx(&mut self.tx_seq, w).send(&DeviceMsg::HealthAlarm(alarm(event)));
         }
         if self.config.is_some_and(|c| c.estimate_period_ns == 0) {
@@ -400,6 +473,7 @@ impl Session {
         }
     }
 
+    #[inline(never)]
     fn send_estimate<W: embedded_io::Write>(&mut self, w: &mut W, seq: u32) {
         let Some(f) = self.filter.as_ref() else {
             return;

@@ -12,6 +12,8 @@ const GUARD_BYTES: usize = 256;
 extern "C" {
     static _stack_start: u32;
     static _stack_end: u32;
+    /// Start of `.data`, the first byte of RAM the statics use.
+    static __sdata: u32;
     /// `memory.x`: the stack budget; the link fails if the statics leave less RAM than this.
     static STACK_RESERVE: u8;
 }
@@ -23,6 +25,11 @@ fn top() -> usize {
 
 fn bottom() -> usize {
     addr_of!(_stack_end) as usize
+}
+
+/// RAM taken by the statics (`.data`, `.bss`, `.uninit`), bytes.
+pub fn static_bytes() -> usize {
+    bottom() - addr_of!(__sdata) as usize
 }
 
 /// The stack budget of `memory.x` (`STACK_RESERVE`), bytes.

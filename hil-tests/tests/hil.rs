@@ -68,6 +68,24 @@ fn firmware_estimate_matches_host_f64_pipeline_and_ground_truth() {
     // and the recording re-opens
     let shown = msreg_host::link::cli::show(&record).expect("recording re-opens");
     assert!(shown.contains("updates"), "{shown}");
+    // and its defmt log reached the host decoded: boot, configuration, progress every 5 s
+    for (prefix, at_least) in [
+        ("msreg link firmware ready", 1),
+        ("configured", 1),
+        ("t ", 4),
+    ] {
+        let lines = qemu.wait_for_log(prefix, at_least, Duration::from_secs(5));
+        assert!(lines.len() >= at_least, "log lines {prefix:?}: {lines:?}");
+    }
+    assert!(qemu.wait_for_log("fault", 0, Duration::ZERO).is_empty());
+    assert_eq!(qemu.undecodable_log_frames(), Vec::<String>::new());
+    // and the whole session fit in 64 KiB of RAM (statics + painted stack peak)
+    let (statics, stack, total) = ram_after_session(&qemu);
+    assert_eq!(total, statics + stack);
+    assert!(
+        total < RAM_TARGET_BYTES,
+        "RAM {total} B >= {RAM_TARGET_BYTES} B"
+    );
 }
 
 #[test]
@@ -115,6 +133,14 @@ fn knocked_mounting_raises_the_alarm_on_the_device_within_five_seconds() {
     );
     assert_eq!(c.alarms[0].1.kind, msreg_protocol::AlarmKind::RotationStep);
     assert_eq!(last_estimate(c).health, HealthState::Alarm);
+    // and logged it
+    let logged = qemu.wait_for_log("health alarm", 1, Duration::from_secs(5));
+    assert!(
+        logged
+            .first()
+            .is_some_and(|l| l.text.contains("rotation step")),
+        "{logged:?}"
+    );
 }
 
 #[test]
@@ -185,4 +211,16 @@ fn faults_are_typed_counted_and_the_session_recovers() {
     let truth = truth_errors(&device, &data.t_imu_pose, data.time_offset_s);
     println!("device vs truth after faults: {truth:?}");
     assert!(truth.within_three_sigma, "{truth:?}");
+    // and logged the faults by name, within 64 KiB of RAM through all of it
+    let faults = qemu.wait_for_log("fault", 8, Duration::from_secs(5));
+    assert!(
+        faults.iter().any(|l| l.text.starts_with("fault crc")),
+        "{faults:?}"
+    );
+    assert_eq!(qemu.undecodable_log_frames(), Vec::<String>::new());
+    let (_, _, total) = ram_after_session(&qemu);
+    assert!(
+        total < RAM_TARGET_BYTES,
+        "RAM {total} B >= {RAM_TARGET_BYTES} B"
+    );
 }

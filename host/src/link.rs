@@ -6,13 +6,17 @@
 //! - [`client`] sends with flow control (a window of unacknowledged bytes), collects the
 //!   device's messages and records the session;
 //! - [`record`] writes and re-reads session files (JSON lines);
-//! - [`cli`] is what `msreg link replay | monitor | show` run.
+//! - [`defmt`] decodes the firmware's log (QEMU's stdout) with the firmware's ELF;
+//! - [`view`] draws the live monitor (full screen on a terminal, lines otherwise);
+//! - [`cli`] is what `msreg link replay | monitor | show | log` run.
 
 pub mod cli;
 pub mod client;
+pub mod defmt;
 pub mod port;
 pub mod record;
 pub mod stream;
+pub mod view;
 
 pub use client::{Client, ClientOptions, Collected};
 pub use stream::{build_stream, ReplayStream, StreamOptions};

@@ -4,7 +4,8 @@
 //!
 //! Prints human-readable lines and machine-readable ones for tools/firmware.sh:
 //! `BENCH <operation> <calls> <mean instructions> <max instructions>`,
-//! `STACK <operation> <bytes>` and `RATE <instructions per second of sensor data>`.
+//! `STACK <operation> <bytes>`, `RATE <instructions per second of sensor data>` and
+//! `STATES <error states of the filter>`.
 #![no_std]
 #![no_main]
 
@@ -60,6 +61,16 @@ fn main() -> ! {
     loop {
         cortex_m::asm::bkpt();
     }
+}
+
+/// The filter's error-state dimension (a type parameter of `Ekf`).
+fn error_states<T, const S: usize, const C: usize, const N: usize>(
+    _: &msreg_estimator::Ekf<T, S, C, N>,
+) -> usize
+where
+    T: msreg_estimator::Scalar,
+{
+    N
 }
 
 fn bench(clock: InstructionClock) -> bool {
@@ -146,5 +157,6 @@ fn bench(clock: InstructionClock) -> bool {
         counts.errors
     );
     hprintln!("RATE {}", rate as u64);
+    hprintln!("STATES {}", error_states(filter));
     counts.errors == 0
 }

@@ -34,6 +34,30 @@ pub fn write(data: &SimDataset) -> tempfile::TempDir {
     dir
 }
 
+/// RAM target of the link firmware (issue 5): statics + stack peak below 64 KiB.
+pub const RAM_TARGET_BYTES: u64 = 64 * 1024;
+
+/// The firmware's RAM report after the session (the line it logs on every GetStatus; the
+/// boot line is the first), as (statics, stack peak, total) bytes, printed for the record.
+pub fn ram_after_session(qemu: &Qemu) -> (u64, u64, u64) {
+    let lines = qemu.wait_for_log("ram:", 2, Duration::from_secs(5));
+    let last = lines
+        .last()
+        .expect("the firmware logs its RAM use (defmt over semihosting)");
+    let arg = |i: usize| {
+        last.args
+            .get(i)
+            .and_then(|a| a.as_u64())
+            .expect("u32 argument")
+    };
+    println!("firmware log: {last}");
+    assert!(
+        lines.len() >= 2,
+        "no RAM line after the GetStatus: {lines:?}"
+    );
+    (arg(0), arg(1), arg(2))
+}
+
 /// Boots QEMU with the link firmware.
 pub fn boot() -> Qemu {
     match Qemu::boot(Duration::from_secs(20)) {

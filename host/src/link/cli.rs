@@ -4,12 +4,13 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use clap::Subcommand;
-use msreg_protocol::{DeviceMsg, ErrorKind, Estimate, HealthState, HostMsg, Status};
-use nalgebra::{Quaternion, UnitQuaternion};
+use msreg_protocol::{DeviceMsg, ErrorKind, HealthState, HostMsg, Status};
 
 use super::client::{Client, ClientOptions, Collected};
+use super::defmt;
 use super::record::{self, Line};
 use super::stream::{build_stream, StreamOptions};
+use super::view::{rpy_deg, LiveView, Mode};
 use super::LinkError;
 use crate::calibrate::pose_imu::PoseImuInput;
 use crate::dataset::Dataset;
@@ -54,6 +55,15 @@ pub enum LinkCommand {
         /// Recording written by `replay` or `monitor`.
         file: PathBuf,
     },
+    /// Decode the firmware's defmt log (QEMU's stdout under semihosting), e.g.
+    /// `qemu-system-arm ... -serial pty -kernel ELF | msreg link log --elf ELF`.
+    Log {
+        /// The firmware ELF that produced the log (its `.defmt` symbols hold the texts).
+        #[arg(long)]
+        elf: PathBuf,
+        /// Raw log file (default: standard input, decoded as it arrives).
+        input: Option<PathBuf>,
+    },
 }
 
 /// Runs a `link` subcommand.
@@ -74,6 +84,7 @@ pub fn run(command: LinkCommand) -> anyhow::Result<()> {
                     estimate_period_ns: (estimate_period_ms * 1e6).clamp(0.0, 4.0e9) as u32,
                     ..StreamOptions::default()
                 },
+                live_view: true,
                 ..ReplayOptions::default()
             };
             let outcome = replay(&dataset, &port, Some(&record), &options)?;
@@ -98,7 +109,40 @@ pub fn run(command: LinkCommand) -> anyhow::Result<()> {
             print!("{}", show(&file)?);
             Ok(())
         }
+        LinkCommand::Log { elf, input } => log(&elf, input.as_deref()),
     }
+}
+
+/// Decodes a defmt log stream and prints one line per frame as it arrives.
+fn log(elf: &Path, input: Option<&Path>) -> anyhow::Result<()> {
+    use std::io::{Read, Write};
+    let table = defmt::Table::from_elf(elf)?;
+    let mut stream = defmt::Stream::new(table);
+    let mut source: Box<dyn Read> = match input {
+        Some(p) => {
+            Box::new(std::fs::File::open(p).map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?)
+        }
+        None => Box::new(std::io::stdin()),
+    };
+    let mut out = std::io::stdout().lock();
+    let mut buf = [0u8; 4096];
+    loop {
+        let n = match source.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(e.into()),
+        };
+        for d in stream.push(&buf[..n]) {
+            match d {
+                defmt::Decoded::Log(l) => writeln!(out, "{l}")?,
+                defmt::Decoded::Text(t) => writeln!(out, "(host) {t}")?,
+                defmt::Decoded::Bad(why) => writeln!(out, "(undecodable frame: {why})")?,
+            }
+        }
+        out.flush()?;
+    }
+    Ok(())
 }
 
 /// Options of [`replay`].
@@ -110,6 +154,8 @@ pub struct ReplayOptions {
     pub stream: StreamOptions,
     /// Client options.
     pub client: ClientOptions,
+    /// Draw the live screen while streaming when stdout is a terminal.
+    pub live_view: bool,
 }
 
 /// What a replay produced.
@@ -150,6 +196,13 @@ pub fn replay(
     client.send(&HostMsg::Config(stream.config))?;
     let started = Instant::now();
     let (frames0, bytes0) = client.sent;
+    // On a terminal the replay shows the monitor's screen while it streams.
+    let mut view = (options.live_view && Mode::detect() == Mode::Screen).then(|| {
+        LiveView::new(
+            Mode::Screen,
+            &format!("replay {} -> {port}", dataset.display()),
+        )
+    });
     for (stamp_ns, msg) in &stream.messages {
         if options.realtime {
             let due = Duration::from_nanos(stamp_ns.saturating_sub(stream.start_ns));
@@ -158,6 +211,14 @@ pub fn replay(
             }
         }
         client.send(msg)?;
+        if let Some(text) = view
+            .as_mut()
+            .and_then(|v| v.frame(&client.collected, client.now_s()))
+        {
+            use std::io::Write;
+            let mut out = std::io::stdout();
+            let _ = out.write_all(text.as_bytes()).and_then(|()| out.flush());
+        }
     }
     client.flush(Duration::from_secs(10))?;
     let elapsed_s = started.elapsed().as_secs_f64();
@@ -175,16 +236,17 @@ pub fn replay(
 }
 
 fn monitor(port: &str, duration: Option<f64>, record: &Path) -> anyhow::Result<()> {
+    use std::io::Write;
     let mut client = Client::connect(port, ClientOptions::default(), Some((record, "monitor")))?;
     client.handshake(Duration::from_secs(10))?;
     let started = Instant::now();
-    let mut shown = 0;
+    let mut view = LiveView::new(Mode::detect(), port);
+    let mut out = std::io::stdout();
     loop {
         client.pump(Duration::from_millis(100))?;
-        let c = &client.collected;
-        if c.estimates.len() + c.alarms.len() + c.errors.len() != shown {
-            shown = c.estimates.len() + c.alarms.len() + c.errors.len();
-            println!("{}", live_view(c));
+        if let Some(text) = view.frame(&client.collected, client.now_s()) {
+            out.write_all(text.as_bytes())?;
+            out.flush()?;
         }
         if duration.is_some_and(|d| started.elapsed().as_secs_f64() >= d) {
             break;
@@ -192,13 +254,6 @@ fn monitor(port: &str, duration: Option<f64>, record: &Path) -> anyhow::Result<(
     }
     client.finish()?;
     Ok(())
-}
-
-fn rpy_deg(e: &Estimate) -> [f64; 3] {
-    let [w, x, y, z] = e.extrinsic.rotation_wxyz.map(f64::from);
-    let q = UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z));
-    let (r, p, yaw) = q.euler_angles();
-    [r.to_degrees(), p.to_degrees(), yaw.to_degrees()]
 }
 
 /// A few lines a person can read at a glance: estimate, sigmas, NIS, health, faults.
