@@ -9,6 +9,7 @@ pub mod eval;
 pub mod lidar;
 pub mod link;
 pub mod ndt;
+pub mod plot;
 pub mod pointcloud;
 pub mod shared_data;
 pub mod sim;

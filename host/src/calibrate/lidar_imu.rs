@@ -44,7 +44,7 @@ use super::pose_imu::{
 use crate::dataset::{ExtrinsicEstimate, ImuNoiseYaml, ImuRecord};
 use crate::lidar::deskew::imu_time;
 use crate::lidar::{deskew_scan, PoseBuffer, ScanLoadError, ScanSource};
-use crate::ndt::{align, NdtParams, NdtTarget};
+use crate::ndt::{align, NdtParams, NdtResult, NdtTarget};
 use crate::pointcloud::{voxel_downsample, PointCloud};
 
 /// What the pipeline reads.
@@ -71,8 +71,11 @@ pub struct LidarImuOptions {
     pub ndt: NdtParams,
     /// Scans from the first this many seconds feed the hand-eye rotation init.
     pub init_duration_s: f64,
-    /// Factor on NDT's covariance.
-    pub covariance_scale: f64,
+    /// Which NDT covariance the measurement noise starts from.
+    pub ndt_covariance: NdtCovariance,
+    /// Factors on NDT's covariance, `[rotation block, translation block]` (see the module
+    /// docs: measured per-increment error variance times the autocorrelation inflation).
+    pub covariance_scale: [f64; 2],
     /// Per-axis 1-sigma rotation added to every increment, rad.
     pub rotation_floor_rad: f64,
     /// Per-axis 1-sigma translation added to every increment, m.
@@ -84,6 +87,9 @@ pub struct LidarImuOptions {
     pub initial_translation_floor_m: f64,
     /// Decay constant of the floor, in updates.
     pub anneal_updates: f64,
+    /// Adapt the factor on NDT's covariance so the NIS matches its expectation
+    /// ([`NoiseAdaptation`]); `None` keeps `covariance_scale` fixed.
+    pub adapt: Option<NoiseAdaptation>,
     /// Matches with a lower NDT fitness are skipped.
     pub min_fitness: f64,
     /// Scans with fewer points after voxel filtering are skipped.
@@ -104,16 +110,72 @@ impl Default for LidarImuOptions {
                 ..NdtParams::default()
             },
             init_duration_s: 15.0,
-            covariance_scale: 0.3,
-            rotation_floor_rad: 0.005f64.to_radians(),
-            translation_floor_m: 0.0005,
+            ndt_covariance: NdtCovariance::Hessian,
+            covariance_scale: [0.2, 0.2],
+            rotation_floor_rad: 0.001f64.to_radians(),
+            translation_floor_m: 0.0001,
             initial_rotation_floor_rad: 0.2f64.to_radians(),
             initial_translation_floor_m: 0.01,
             anneal_updates: 100.0,
+            adapt: Some(NoiseAdaptation::default()),
             min_fitness: 0.05,
             min_points: 200,
         }
     }
+}
+
+/// Covariance matching of the NDT noise scale (Mehra 1972; Myers and Tapley 1976, with a
+/// single scale factor): NDT's inverse Hessian has the right *shape* (which directions the
+/// scene constrains) but a scale set by the score's constants, the target cells' eigenvalue
+/// floor and unmodelled correlations, none of which the matcher can know. The filter
+/// measures it: the NIS of an update falls when `R` is too large and rises when too small,
+/// with expectation `dof` when consistent. Every `every` updates, after
+/// `start_after_anneals * anneal_updates` updates, the factor is multiplied by
+/// `(mean NIS/dof)^(w/2)` over the last `window` updates (each NIS/dof clipped at `clip`, so
+/// one wrong match cannot blow it up), `w` the NDT term's mean share of the diagonal of `R`
+/// (while the annealed floor dominates, the NIS says little about the NDT scale), the step
+/// limited to `[1/max_step, max_step]` and the factor to `bounds`. The exponent 1/2 halves
+/// each step: NIS is roughly proportional to `1/scale`, and damping averages the
+/// chi-square sampling noise of the window.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NoiseAdaptation {
+    /// Updates between adjustments.
+    pub every: usize,
+    /// Updates whose NIS is averaged.
+    pub window: usize,
+    /// Adaptation starts after this many `anneal_updates`.
+    pub start_after_anneals: f64,
+    /// Largest NIS/dof one update contributes.
+    pub clip: f64,
+    /// Largest factor of one adjustment.
+    pub max_step: f64,
+    /// Range of the scale factor.
+    pub bounds: [f64; 2],
+}
+
+impl Default for NoiseAdaptation {
+    fn default() -> Self {
+        Self {
+            every: 20,
+            window: 40,
+            start_after_anneals: 1.0,
+            clip: 5.0,
+            max_step: 1.4,
+            bounds: [0.01, 10.0],
+        }
+    }
+}
+
+/// The NDT covariance estimate the measurement noise is built from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NdtCovariance {
+    /// Inverse Hessian of the score (Laplace approximation).
+    Hessian,
+    /// Sandwich `H^-1 S H^-1` with per-point gradients.
+    Sandwich,
+    /// Sandwich with gradients summed per target cell.
+    Clustered,
 }
 
 /// One scan's fate, for the report.
@@ -143,6 +205,9 @@ pub struct ScanRecord {
     pub delta_translation: Option<[f64; 3]>,
     /// Measurement 1-sigma (after inflation) [rot x, y, z (rad); trans x, y, z (m)].
     pub sigma: Option<[f64; 6]>,
+    /// The NDT result behind the measurement (in-process studies of the noise model).
+    #[serde(skip)]
+    pub ndt: Option<NdtResult>,
 }
 
 impl ScanRecord {
@@ -167,6 +232,7 @@ impl ScanRecord {
             delta_rotation: None,
             delta_translation: None,
             sigma: None,
+            ndt: None,
         }
     }
 }
@@ -209,9 +275,12 @@ pub struct LidarImuReport {
     pub settled_nis_per_dof: f64,
     /// Pairs the rotation init dropped as outliers.
     pub hand_eye_outliers: usize,
-    /// The measurement noise model: `[covariance_scale, rotation floor (deg), translation
-    /// floor (m)]`.
-    pub measurement_noise: [f64; 3],
+    /// The measurement noise model: `[covariance scale rotation, covariance scale
+    /// translation, rotation floor (deg), translation floor (m)]`.
+    pub measurement_noise: [f64; 4],
+    /// Factor on the NDT covariance at the end (after adaptation; equal to the
+    /// configured rotation factor when not adapted).
+    pub final_covariance_scale: f64,
     /// Wall time per stage.
     pub stage_timing_s: StageTiming,
     /// Per scan: points, NDT fitness, NIS.
@@ -262,6 +331,11 @@ pub fn calibrate<T: Scalar>(
         .ndt
         .validate()
         .map_err(|e| PoseImuError::BadInput(e.to_string()))?;
+    if options.ndt_covariance != NdtCovariance::Hessian && !options.ndt.sandwich_covariance {
+        return Err(PoseImuError::BadInput(
+            "options: a sandwich NDT covariance needs ndt.sandwich_covariance".into(),
+        ));
+    }
     let started = Instant::now();
     let standstill = init::detect_standstill(imu, options.filter.min_standstill_s);
     let gyro_bias = standstill.map_or_else(Vector3::zeros, |s| s.gyro_mean);
@@ -295,6 +369,7 @@ pub fn calibrate<T: Scalar>(
     timing.total_filter_pass = filter_s;
     timing.filter = filter_s - timing.load - timing.deskew - timing.voxel_and_target - timing.ndt;
 
+    let final_scale = options.covariance_scale[0] * feed.adaptive_factor;
     let LidarFeed {
         mut run, records, ..
     } = feed;
@@ -318,11 +393,13 @@ pub fn calibrate<T: Scalar>(
         settled_nis_per_dof: settled_nis(&records, options),
         hand_eye_outliers: outliers,
         measurement_noise: [
-            options.covariance_scale,
+            options.covariance_scale[0],
+            options.covariance_scale[1],
             options.rotation_floor_rad.to_degrees(),
             options.translation_floor_m,
         ],
         stage_timing_s: timing,
+        final_covariance_scale: final_scale,
         scans: records,
     };
     if let Some(problem) = init_problem {
@@ -468,6 +545,10 @@ struct LidarFeed<'a> {
     first_imu_ns: u64,
     /// Relative poses formed so far (drives the floor's annealing).
     updates: usize,
+    /// Factor on `covariance_scale` from the NIS adaptation (1 until it starts).
+    adaptive_factor: f64,
+    /// NIS/dof of the updates and the NDT term's share of their `R`, in order (adaptation).
+    nis_per_dof: Vec<(f64, f64)>,
 }
 
 impl<T: Scalar> ImuHooks<T> for LidarFeed<'_> {
@@ -553,6 +634,8 @@ impl<'a> LidarFeed<'a> {
             timing: StageTiming::default(),
             first_imu_ns,
             updates: 0,
+            adaptive_factor: 1.0,
+            nis_per_dof: Vec::new(),
         }
     }
 
@@ -678,13 +761,26 @@ impl<'a> LidarFeed<'a> {
         };
         record.fitness = Some(result.fitness);
         record.iterations = Some(result.iterations);
-        let covariance = self.measurement_covariance(&result.covariance);
+        let (covariance, ndt_share) =
+            self.measurement_covariance(match self.options.ndt_covariance {
+                NdtCovariance::Hessian => &result.covariance,
+                // `calibrate` checked that `ndt.sandwich_covariance` computes these.
+                NdtCovariance::Sandwich => result
+                    .covariance_sandwich
+                    .as_ref()
+                    .unwrap_or(&result.covariance),
+                NdtCovariance::Clustered => result
+                    .covariance_clustered
+                    .as_ref()
+                    .unwrap_or(&result.covariance),
+            });
         self.updates += 1;
         let delta = result.t_target_source;
         let rv = delta.rotation.scaled_axis();
         record.delta_rotation = Some([rv.x, rv.y, rv.z]);
         record.delta_translation = Some(delta.translation.vector.into());
         record.sigma = Some(std::array::from_fn(|i| covariance[(i, i)].sqrt()));
+        record.ndt = Some(result.clone());
         let meas = RelativePose {
             stamp_from_ns: prev.ref_stamp_ns,
             stamp_to_ns: ref_stamp,
@@ -699,6 +795,7 @@ impl<'a> LidarFeed<'a> {
                 self.buffer.push(ekf.time_ns(), after);
                 self.run.record_update(ekf, ref_stamp, &report);
                 record.nis = Some(report.nis.to_f64());
+                self.adapt(report.nis.to_f64() / report.dof.max(1) as f64, ndt_share);
                 record.status = if report.accepted {
                     "matched".into()
                 } else {
@@ -717,10 +814,41 @@ impl<'a> LidarFeed<'a> {
         }
     }
 
+    /// Books one update's NIS/dof (and the NDT term's share of `R`) and, when due, adjusts
+    /// the noise scale ([`NoiseAdaptation`]).
+    fn adapt(&mut self, nis_per_dof: f64, ndt_share: f64) {
+        let Some(a) = self.options.adapt else {
+            return;
+        };
+        self.nis_per_dof.push((nis_per_dof.min(a.clip), ndt_share));
+        let start = (a.start_after_anneals * self.options.anneal_updates).ceil() as usize;
+        let n = self.nis_per_dof.len();
+        if n < start + a.window.min(a.every) || n % a.every.max(1) != 0 {
+            return;
+        }
+        let recent = &self.nis_per_dof[n - a.window.min(n - start)..];
+        let count = recent.len().max(1) as f64;
+        let mean = recent.iter().map(|(x, _)| x).sum::<f64>() / count;
+        let share = recent.iter().map(|(_, w)| w).sum::<f64>() / count;
+        if !mean.is_finite() || mean <= 0.0 || !share.is_finite() {
+            return;
+        }
+        // Only the NDT term's share of the mismatch is the scale's to correct: while the
+        // floor dominates `R`, the NIS says little about the scale.
+        let step = mean
+            .powf(0.5 * share.clamp(0.0, 1.0))
+            .clamp(1.0 / a.max_step, a.max_step);
+        let base = self.options.covariance_scale[0].max(f64::MIN_POSITIVE);
+        let scale = (base * self.adaptive_factor * step).clamp(a.bounds[0], a.bounds[1]);
+        self.adaptive_factor = scale / base;
+    }
+
     /// `R = scale * Sigma_NDT + floor`, reordered from NDT's `[t; theta]` to the filter's
     /// `[theta; t]` (both: rotation a right perturbation, translation additive in the
     /// target = `from` frame).
-    fn measurement_covariance(&self, ndt: &Matrix6<f64>) -> Matrix6<f64> {
+    ///
+    /// Also returns the NDT term's mean share of the diagonal of `R` (the adaptation's weight).
+    fn measurement_covariance(&self, ndt: &Matrix6<f64>) -> (Matrix6<f64>, f64) {
         let o = self.options;
         let decay = if o.anneal_updates > 0.0 {
             (-(self.updates as f64) / o.anneal_updates).exp()
@@ -730,13 +858,23 @@ impl<'a> LidarFeed<'a> {
         let floor = |initial: f64, last: f64| last + (initial - last).max(0.0) * decay;
         let floor_r = floor(o.initial_rotation_floor_rad, o.rotation_floor_rad);
         let floor_t = floor(o.initial_translation_floor_m, o.translation_floor_m);
-        let mut c =
-            Matrix6::from_fn(|r, col| ndt[((r + 3) % 6, (col + 3) % 6)]) * o.covariance_scale;
+        // S Sigma S with S = diag(sqrt(s_rot) I, sqrt(s_trans) I) keeps `c` positive definite.
+        let s = |i: usize| {
+            (o.covariance_scale[usize::from(i >= 3)] * self.adaptive_factor)
+                .max(0.0)
+                .sqrt()
+        };
+        let mut c = Matrix6::from_fn(|r, col| ndt[((r + 3) % 6, (col + 3) % 6)] * s(r) * s(col));
+        let ndt_diagonal = c.diagonal();
         for i in 0..3 {
             c[(i, i)] += floor_r.powi(2);
             c[(i + 3, i + 3)] += floor_t.powi(2);
         }
-        (c + c.transpose()) * 0.5
+        let share = (0..6)
+            .map(|i| ndt_diagonal[i] / c[(i, i)].max(f64::MIN_POSITIVE))
+            .sum::<f64>()
+            / 6.0;
+        ((c + c.transpose()) * 0.5, share)
     }
 
     /// Starts a new odometry chain at this scan (first scan, or after a failed match).
