@@ -32,7 +32,7 @@
 use std::time::Instant;
 
 use msreg_estimator::{propagate, Error as FilterError, PoseImuEkf, RelativePose, Scalar};
-use nalgebra::{Isometry3, Matrix6, Vector3};
+use nalgebra::{Isometry3, Matrix6, Vector3, Vector6};
 use serde::Serialize;
 
 use super::convert;
@@ -44,7 +44,7 @@ use super::pose_imu::{
 use crate::dataset::{ExtrinsicEstimate, ImuNoiseYaml, ImuRecord};
 use crate::lidar::deskew::imu_time;
 use crate::lidar::{deskew_scan, PoseBuffer, ScanLoadError, ScanSource};
-use crate::ndt::{align, NdtParams, NdtResult, NdtTarget};
+use crate::ndt::{align, LocalMap, NdtParams, NdtResult, NdtTarget};
 use crate::pointcloud::{voxel_downsample, PointCloud};
 
 /// What the pipeline reads.
@@ -94,6 +94,10 @@ pub struct LidarImuOptions {
     pub min_fitness: f64,
     /// Scans with fewer points after voxel filtering are skipped.
     pub min_points: usize,
+    /// Match each scan against a sliding map of this many recent deskewed scans
+    /// (scan-to-local-map) instead of the previous scan; 0 = scan-to-scan. The increment
+    /// fused is still `T_L(k-1)_L(k)`, from the two scans' poses in the map.
+    pub local_map_scans: usize,
 }
 
 impl Default for LidarImuOptions {
@@ -112,14 +116,15 @@ impl Default for LidarImuOptions {
             init_duration_s: 15.0,
             ndt_covariance: NdtCovariance::Hessian,
             covariance_scale: [0.2, 0.2],
-            rotation_floor_rad: 0.001f64.to_radians(),
-            translation_floor_m: 0.0001,
+            rotation_floor_rad: 0.005f64.to_radians(),
+            translation_floor_m: 0.0005,
             initial_rotation_floor_rad: 0.2f64.to_radians(),
             initial_translation_floor_m: 0.01,
             anneal_updates: 100.0,
             adapt: Some(NoiseAdaptation::default()),
             min_fitness: 0.05,
             min_points: 200,
+            local_map_scans: 0,
         }
     }
 }
@@ -151,6 +156,11 @@ pub struct NoiseAdaptation {
     pub max_step: f64,
     /// Range of the scale factor.
     pub bounds: [f64; 2],
+    /// Consecutive innovation pairs over which their lag-1 autocorrelation is measured
+    /// (0 = no correlation inflation).
+    pub correlation_window: usize,
+    /// Largest inflation for correlated errors.
+    pub max_inflation: f64,
 }
 
 impl Default for NoiseAdaptation {
@@ -162,6 +172,8 @@ impl Default for NoiseAdaptation {
             clip: 5.0,
             max_step: 1.4,
             bounds: [0.01, 10.0],
+            correlation_window: 0,
+            max_inflation: 4.0,
         }
     }
 }
@@ -278,9 +290,11 @@ pub struct LidarImuReport {
     /// The measurement noise model: `[covariance scale rotation, covariance scale
     /// translation, rotation floor (deg), translation floor (m)]`.
     pub measurement_noise: [f64; 4],
-    /// Factor on the NDT covariance at the end (after adaptation; equal to the
-    /// configured rotation factor when not adapted).
+    /// Effective factor on the NDT covariance at the end (adapted scale times the
+    /// correlation inflation; the configured rotation factor when not adapted).
     pub final_covariance_scale: f64,
+    /// The inflation for time-correlated NDT errors at the end, `(1 + rho) / (1 - rho)`.
+    pub correlation_inflation: f64,
     /// Wall time per stage.
     pub stage_timing_s: StageTiming,
     /// Per scan: points, NDT fitness, NIS.
@@ -369,7 +383,8 @@ pub fn calibrate<T: Scalar>(
     timing.total_filter_pass = filter_s;
     timing.filter = filter_s - timing.load - timing.deskew - timing.voxel_and_target - timing.ndt;
 
-    let final_scale = options.covariance_scale[0] * feed.adaptive_factor;
+    let final_scale = options.covariance_scale[0] * feed.adaptive_factor * feed.inflation;
+    let inflation = feed.inflation;
     let LidarFeed {
         mut run, records, ..
     } = feed;
@@ -400,6 +415,7 @@ pub fn calibrate<T: Scalar>(
         ],
         stage_timing_s: timing,
         final_covariance_scale: final_scale,
+        correlation_inflation: inflation,
         scans: records,
     };
     if let Some(problem) = init_problem {
@@ -527,6 +543,10 @@ struct Previous {
     /// Its IMU time when it was processed.
     imu_time_ns: u64,
     target: NdtTarget,
+    /// The voxel-filtered deskewed scan (scan-to-local-map only).
+    cloud: Option<PointCloud>,
+    /// Its pose in the local map's frame (identity at a chain's anchor).
+    t_map: Isometry3<f64>,
 }
 
 /// The LiDAR front-end of the filter loop.
@@ -549,6 +569,15 @@ struct LidarFeed<'a> {
     adaptive_factor: f64,
     /// NIS/dof of the updates and the NDT term's share of their `R`, in order (adaptation).
     nis_per_dof: Vec<(f64, f64)>,
+    /// Scan-to-local-map target (`local_map_scans > 0`), in the frame of the chain's anchor.
+    map: Option<LocalMap>,
+    /// The previous update's innovation, normalised per component by `sqrt(R_ii)` (within
+    /// an odometry chain).
+    last_innovation: Option<Vector6<f64>>,
+    /// Per consecutive pair of innovations: `(sum u_k u_k-1, sum (u_k^2 + u_k-1^2) / 2)`.
+    innovation_pairs: Vec<(f64, f64)>,
+    /// Inflation of the NDT term for time-correlated errors, `(1 + rho) / (1 - rho)`.
+    inflation: f64,
 }
 
 impl<T: Scalar> ImuHooks<T> for LidarFeed<'_> {
@@ -636,6 +665,18 @@ impl<'a> LidarFeed<'a> {
             updates: 0,
             adaptive_factor: 1.0,
             nis_per_dof: Vec::new(),
+            last_innovation: None,
+            innovation_pairs: Vec::new(),
+            inflation: 1.0,
+            map: (options.local_map_scans > 0)
+                .then(|| {
+                    LocalMap::new(
+                        options.local_map_scans,
+                        options.voxel_m,
+                        options.ndt.clone(),
+                    )
+                })
+                .and_then(Result::ok),
         }
     }
 
@@ -700,7 +741,8 @@ impl<'a> LidarFeed<'a> {
             return;
         };
         let started = Instant::now();
-        let points = voxel_downsample(&deskewed, self.options.voxel_m).positions();
+        let filtered = voxel_downsample(&deskewed, self.options.voxel_m);
+        let points = filtered.positions();
         record.points_filtered = points.len();
         let target = NdtTarget::build(&points, &self.options.ndt);
         self.timing.voxel_and_target += started.elapsed().as_secs_f64();
@@ -720,10 +762,12 @@ impl<'a> LidarFeed<'a> {
                 return;
             }
         };
-        let this = Previous {
+        let mut this = Previous {
             ref_stamp_ns: ref_stamp,
             imu_time_ns: due,
             target,
+            cloud: self.map.is_some().then_some(filtered),
+            t_map: Isometry3::identity(),
         };
         let Some(prev) = self.previous.take() else {
             self.start_chain(ekf, record, this, "anchor");
@@ -734,7 +778,24 @@ impl<'a> LidarFeed<'a> {
             None => Isometry3::identity(),
         };
         let started = Instant::now();
-        let matched = align(&prev.target, &points, &guess, &self.options.ndt);
+        let matched = match (&mut self.map, &this.cloud) {
+            (Some(map), Some(cloud)) => map.align(cloud, &(prev.t_map * guess)).map(|mut r| {
+                // T_prev_this = T_map_prev^-1 T_map_this; the covariance of `[t; theta]`
+                // moves with it: translation rotated into the previous scan's frame,
+                // rotation (a right perturbation of this scan's pose) unchanged.
+                this.t_map = r.t_target_source;
+                r.t_target_source = prev.t_map.inverse() * r.t_target_source;
+                let mut j = Matrix6::identity();
+                j.fixed_view_mut::<3, 3>(0, 0)
+                    .copy_from(prev.t_map.rotation.inverse().to_rotation_matrix().matrix());
+                r.covariance = j * r.covariance * j.transpose();
+                for c in [&mut r.covariance_sandwich, &mut r.covariance_clustered] {
+                    *c = c.map(|c| j * c * j.transpose());
+                }
+                r
+            }),
+            _ => align(&prev.target, &points, &guess, &self.options.ndt),
+        };
         self.timing.ndt += started.elapsed().as_secs_f64();
         let result = match matched {
             Ok(r) if r.converged && r.fitness >= self.options.min_fitness => r,
@@ -776,6 +837,7 @@ impl<'a> LidarFeed<'a> {
             });
         self.updates += 1;
         let delta = result.t_target_source;
+        self.book_innovation(&guess, &delta, &covariance);
         let rv = delta.rotation.scaled_axis();
         record.delta_rotation = Some([rv.x, rv.y, rv.z]);
         record.delta_translation = Some(delta.translation.vector.into());
@@ -802,6 +864,9 @@ impl<'a> LidarFeed<'a> {
                     "rejected by the gate".into()
                 };
                 self.last_end_ns = Some(ref_stamp);
+                if let (Some(map), Some(cloud)) = (&mut self.map, &this.cloud) {
+                    map.insert(cloud, &this.t_map);
+                }
                 self.previous = Some(this);
                 self.records.push(record);
             }
@@ -835,12 +900,46 @@ impl<'a> LidarFeed<'a> {
         }
         // Only the NDT term's share of the mismatch is the scale's to correct: while the
         // floor dominates `R`, the NIS says little about the scale.
-        let step = mean
+        // With the NDT term inflated by `inflation` for correlated errors, a consistent
+        // NIS/dof is about 1/inflation.
+        let step = (mean * self.inflation)
             .powf(0.5 * share.clamp(0.0, 1.0))
             .clamp(1.0 / a.max_step, a.max_step);
         let base = self.options.covariance_scale[0].max(f64::MIN_POSITIVE);
         let scale = (base * self.adaptive_factor * step).clamp(a.bounds[0], a.bounds[1]);
         self.adaptive_factor = scale / base;
+        if a.correlation_window > 0 {
+            let pairs = &self.innovation_pairs[self
+                .innovation_pairs
+                .len()
+                .saturating_sub(a.correlation_window)..];
+            let (num, den) = pairs
+                .iter()
+                .fold((0.0, 0.0), |(n, d), (x, y)| (n + x, d + y));
+            if pairs.len() * 2 >= a.correlation_window && den > 0.0 {
+                let rho = (num / den).clamp(0.0, 0.95);
+                self.inflation = ((1.0 + rho) / (1.0 - rho)).min(a.max_inflation);
+            }
+        }
+    }
+
+    /// Books the innovation `delta (-) guess` (the filter's prediction of the increment),
+    /// normalised by `sqrt(R_ii)`, for the lag-1 autocorrelation of consecutive ones.
+    fn book_innovation(
+        &mut self,
+        guess: &Isometry3<f64>,
+        delta: &Isometry3<f64>,
+        covariance: &Matrix6<f64>,
+    ) {
+        let r = (guess.rotation.inverse() * delta.rotation).scaled_axis();
+        let t = delta.translation.vector - guess.translation.vector;
+        let nu = Vector6::new(r.x, r.y, r.z, t.x, t.y, t.z);
+        let u = Vector6::from_fn(|i, _| nu[i] / covariance[(i, i)].max(f64::MIN_POSITIVE).sqrt());
+        if let Some(p) = self.last_innovation {
+            self.innovation_pairs
+                .push((u.dot(&p), 0.5 * (u.norm_squared() + p.norm_squared())));
+        }
+        self.last_innovation = Some(u);
     }
 
     /// `R = scale * Sigma_NDT + floor`, reordered from NDT's `[t; theta]` to the filter's
@@ -860,7 +959,7 @@ impl<'a> LidarFeed<'a> {
         let floor_t = floor(o.initial_translation_floor_m, o.translation_floor_m);
         // S Sigma S with S = diag(sqrt(s_rot) I, sqrt(s_trans) I) keeps `c` positive definite.
         let s = |i: usize| {
-            (o.covariance_scale[usize::from(i >= 3)] * self.adaptive_factor)
+            (o.covariance_scale[usize::from(i >= 3)] * self.adaptive_factor * self.inflation)
                 .max(0.0)
                 .sqrt()
         };
@@ -882,11 +981,18 @@ impl<'a> LidarFeed<'a> {
         &mut self,
         ekf: &mut PoseImuEkf<T>,
         mut record: ScanRecord,
-        this: Previous,
+        mut this: Previous,
         why: &str,
     ) {
         match ekf.anchor(0, this.ref_stamp_ns) {
             Ok(()) => {
+                // A new chain: the local map restarts in this scan's frame.
+                this.t_map = Isometry3::identity();
+                self.last_innovation = None;
+                if let (Some(map), Some(cloud)) = (&mut self.map, &this.cloud) {
+                    map.clear();
+                    map.insert(cloud, &this.t_map);
+                }
                 if why != "anchor" {
                     self.run.skipped.push(format!(
                         "lidar0 scan {}: {why}; odometry restarted here",
@@ -918,6 +1024,7 @@ impl<'a> LidarFeed<'a> {
             .push(format!("lidar0 scan {}: {why}", record.stamp_ns));
         record.status = why.to_string();
         self.previous = None;
+        self.last_innovation = None;
         self.last_end_ns = Some(ref_stamp);
         self.records.push(record);
     }

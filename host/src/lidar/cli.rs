@@ -61,6 +61,10 @@ pub struct CalibrateLidarImu {
     /// PNG plot of the extrinsic convergence (6 DoF and time offset, +-1 sigma bands).
     #[arg(long)]
     pub plot: Option<PathBuf>,
+    /// Match each scan against a sliding map of this many recent deskewed scans instead of
+    /// the previous scan (0 = scan-to-scan).
+    #[arg(long, default_value_t = 0)]
+    pub local_map_scans: usize,
 }
 
 /// How a calibration ended (errors aside).
@@ -129,6 +133,7 @@ pub fn calibrate(args: &CalibrateLidarImu) -> anyhow::Result<Outcome> {
     };
     let mut options = LidarImuOptions {
         deskew: !args.no_deskew,
+        local_map_scans: args.local_map_scans,
         ..LidarImuOptions::default()
     };
     options.filter.estimate_time_offset = !args.no_time_offset;

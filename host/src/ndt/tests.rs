@@ -302,7 +302,10 @@ fn sandwich_covariances_are_symmetric_positive_and_only_on_request() {
     params.sandwich_covariance = true;
     let r = align(&target, &points, &guess, &params).unwrap();
     assert_eq!(r.t_target_source, plain.t_target_source);
-    for c in [r.covariance_sandwich.unwrap(), r.covariance_clustered.unwrap()] {
+    for c in [
+        r.covariance_sandwich.unwrap(),
+        r.covariance_clustered.unwrap(),
+    ] {
         assert!((c - c.transpose()).amax() <= 1e-12 * c.amax());
         let eig = nalgebra::SymmetricEigen::new(c).eigenvalues;
         assert!(eig.min() > 0.0, "{eig}");
