@@ -2,7 +2,7 @@
 //! ground truth; prints markdown tables (docs/lidar_imu_studies.md).
 //!
 //! `cargo run --release -p msreg --example lidar_imu_studies [rings|imu|relative|outdoor|deskew ...]`
-//! (no argument: all five; `outdoor` compares the environments; `noise` and `ndt-noise` measure
+//! (no argument: all five; `outdoor` runs the outdoor-like scene; `noise` and `ndt-noise` measure
 //! the NDT covariance against the true increment errors). Env: `MSREG_SEEDS` (default 5),
 //! `MSREG_DURATION` (s, default 60),
 //! `MSREG_RING_COLUMNS` (columns of the rings study, default 1024), `MSREG_COLUMNS` (columns of
