@@ -265,7 +265,7 @@ fn env_or(name: &str, default: usize) -> usize {
 }
 
 /// The acceptance run: 60 s, Ouster-128 x 1024 (MSREG_RINGS / MSREG_COLUMNS /
-/// MSREG_SEEDS / MSREG_DURATION / MSREG_NO_DESKEW=1 override).
+/// MSREG_SEEDS / MSREG_DURATION / MSREG_NO_DESKEW=1 / MSREG_LOCAL_MAP=K override).
 #[test]
 #[ignore = "minutes of CPU: the 60 s Ouster-128 acceptance measurement"]
 fn sixty_second_ouster_128_five_seeds() {
@@ -275,6 +275,7 @@ fn sixty_second_ouster_128_five_seeds() {
     let duration = env_or("MSREG_DURATION", 60) as f64;
     let options = LidarImuOptions {
         deskew: std::env::var("MSREG_NO_DESKEW").is_err(),
+        local_map_scans: env_or("MSREG_LOCAL_MAP", 0),
         ..LidarImuOptions::default()
     };
     let mut all_ok = true;
