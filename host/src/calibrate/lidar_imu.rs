@@ -15,10 +15,11 @@
 //!    reference stamps (eq. 3.19-3.21). Deskewing to the *last* firing means the measurement
 //!    time is one the IMU stream has just reached, so the filter clones its current pose
 //!    (it cannot clone in the past).
-//! 3. **Measurement noise**: NDT's inverse-Hessian covariance reads the score as a
-//!    likelihood of independent points and is optimistic. The filter uses
-//!    `R = covariance_scale * Sigma_NDT + diag(floor^2)`; see `docs/lidar_imu.md` for the
-//!    values and the NIS measurements that chose them.
+//! 3. **Measurement noise**: NDT's inverse Hessian has the right shape but a size set by
+//!    the score's constants and the cells' eigenvalue floor (~5x too large on the
+//!    simulator). The filter uses `R = s * Sigma_NDT + diag(floor^2)` with `s` matched to
+//!    the NIS online ([`NoiseAdaptation`]) and a final floor for NDT's time-correlated
+//!    errors; `docs/lidar_imu.md` has the measurements against ground truth that chose it.
 //!    Early on the extrinsic is far from the truth (rotation from the hand-eye init, zero
 //!    translation) and a tight `R` lets the first updates jump along a wrong linearisation,
 //!    after which the gate rejects everything. The floor therefore starts at
