@@ -13,7 +13,9 @@
 # plugin header are needed (Debian ships no qemu-plugin.h package).
 set -euo pipefail
 
-packages=(rustc-web rust-web-src cargo-web lld qemu-system-arm)
+# fonts-dejavu-core: the font of the convergence plots (`--plot`; plotters renders text in pure
+# Rust with ab_glyph and reads DejaVuSans.ttf at run time, so no fontconfig/freetype build dep).
+packages=(rustc-web rust-web-src cargo-web lld qemu-system-arm fonts-dejavu-core)
 # A file per package that proves it is usable, in the order of `packages`.
 witnesses=(
   /usr/bin/rustc
@@ -21,6 +23,7 @@ witnesses=(
   /usr/bin/cargo
   /usr/bin/ld.lld
   /usr/bin/qemu-system-arm
+  /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf
 )
 
 missing=()

@@ -10,6 +10,7 @@ pub mod lidar;
 pub mod lidar_camera;
 pub mod link;
 pub mod ndt;
+pub mod plot;
 pub mod pointcloud;
 pub mod shared_data;
 pub mod sim;

@@ -137,6 +137,9 @@ struct CalibratePoseImu {
     /// Run the filter in f32, as the firmware does.
     #[arg(long)]
     f32: bool,
+    /// PNG plot of the extrinsic convergence (6 DoF and time offset, +-1 sigma bands).
+    #[arg(long)]
+    plot: Option<PathBuf>,
 }
 
 /// An error with the exit code it maps to.
@@ -274,6 +277,14 @@ fn calibrate_pose_imu(
             .with_context(|| format!("{}: cannot write report", path.display()))?;
     }
     eprintln!("msreg: wrote {}", args.output.display());
+    if let Some(path) = &args.plot {
+        let series = msreg_host::plot::extrinsic_series(&calibration.report.history, None);
+        let title = format!("T_imu_pose convergence: {}", args.dataset.display());
+        match msreg_host::plot::write_convergence_png(path, &title, &series, (1500, 1100)) {
+            Ok(()) => eprintln!("msreg: wrote {}", path.display()),
+            Err(e) => eprintln!("msreg: warning: {e}"),
+        }
+    }
     if !calibration.report.converged {
         return Err(Failure::NotConverged(calibration.report.reasons.join("; ")));
     }
@@ -338,6 +349,7 @@ fn demo(seed: u64, keep: Option<PathBuf>) -> Result<(), Failure> {
         report: Some(dir.join("report.json")),
         no_time_offset: false,
         f32: false,
+        plot: None,
     };
     let started = std::time::Instant::now();
     let outcome = calibrate_pose_imu(&args, true);

@@ -2,7 +2,8 @@
 //! in the indoor box world (VN-300-class IMU at 400 Hz, 10 Hz spinning LiDAR, 2 cm range
 //! noise, random mounting, unknown time offset estimated).
 //!
-//! The CI test runs 25 s recordings of a 32 x 512 LiDAR on 2 seeds; the issue's 60 s
+//! The CI test runs 25 s recordings of a 32 x 512 LiDAR on 5 seeds (accuracy, 3 sigma,
+//! NEES band, NIS); the issue's 60 s
 //! Ouster-128 acceptance run over 5 seeds is `#[ignore]`d (minutes of CPU):
 //! `cargo test --release -p msreg --test lidar_imu_accuracy -- --ignored --nocapture`.
 
@@ -20,6 +21,7 @@ struct Outcome {
     inside: bool,
     nees: f64,
     nis: f64,
+    scale: f64,
     ndt_rot_err_deg: f64,
     ndt_trans_err_mm: f64,
     matched: usize,
@@ -133,6 +135,7 @@ fn run(sim_config: &LidarImuSimConfig, options: &LidarImuOptions) -> Outcome {
         inside,
         nees,
         nis: c.report.settled_nis_per_dof,
+        scale: c.report.final_covariance_scale,
         ndt_rot_err_deg,
         ndt_trans_err_mm,
         matched: c.report.scans_matched,
@@ -144,7 +147,7 @@ fn run(sim_config: &LidarImuSimConfig, options: &LidarImuOptions) -> Outcome {
 fn print(o: &Outcome) {
     println!(
         "seed {:3}: rot {:.4} deg (3sd {:.4})  trans {:.2} mm (3sd {:.2})  td err {:+.3} ms  \
-         inside 3 sigma {}  NEES {:.2}  settled NIS/dof {:.2}  NDT rms err {:.4} deg / {:.2} mm  \
+         inside 3 sigma {}  NEES {:.2}  settled NIS/dof {:.2} (scale {:.3})  NDT rms err {:.4} deg / {:.2} mm  \
          matched {}  {:.1} s  converged {}",
         o.seed,
         o.rot_deg,
@@ -155,6 +158,7 @@ fn print(o: &Outcome) {
         o.inside,
         o.nees,
         o.nis,
+        o.scale,
         o.ndt_rot_err_deg,
         o.ndt_trans_err_mm,
         o.matched,
@@ -163,9 +167,43 @@ fn print(o: &Outcome) {
     );
 }
 
+/// Two-sided 95 % band of a chi-square variable with `k` dof (Wilson-Hilferty).
+fn chi_square_band(k: f64) -> (f64, f64) {
+    let quantile = |z: f64| {
+        let c = 2.0 / (9.0 * k);
+        k * (1.0 - c + z * c.sqrt()).powi(3)
+    };
+    (quantile(-1.959_964), quantile(1.959_964))
+}
+
 #[test]
-fn short_recordings_are_accurate_and_inside_three_sigma() {
-    for seed in [1, 2] {
+fn chi_square_band_matches_tables() {
+    // chi2(30): 2.5 % 16.79, 97.5 % 46.98 (Wilson-Hilferty within 0.1 %); chi2(6): 1.237,
+    // 14.45 (its lower tail 2.5 % low at so few dof).
+    let (lo, hi) = chi_square_band(30.0);
+    assert!(
+        (lo - 16.79).abs() < 0.05 && (hi - 46.98).abs() < 0.05,
+        "{lo} {hi}"
+    );
+    let (lo, hi) = chi_square_band(6.0);
+    assert!(
+        (lo / 1.237 - 1.0).abs() < 0.03 && (hi / 14.45 - 1.0).abs() < 0.01,
+        "{lo} {hi}"
+    );
+}
+
+/// Consistency of the LiDAR pipeline over 5 seeds (25 s, 32 x 512, ~1 min of CPU): every
+/// seed accurate and inside 3 sigma per axis; the summed extrinsic NEES inside the 95 %
+/// band of chi-square with 6 x 5 dof; the settled NIS/dof near 1 (the adaptive noise scale
+/// targets it, the floor holds it somewhat below; a broken adaptation lands outside).
+#[test]
+fn short_recordings_are_accurate_and_consistent_over_five_seeds() {
+    let seeds: Vec<u64> = std::env::var("MSREG_SEED_LIST")
+        .ok()
+        .map(|v| v.split(',').filter_map(|x| x.parse().ok()).collect())
+        .unwrap_or_else(|| (1..=5).collect());
+    let mut outcomes = Vec::new();
+    for &seed in &seeds {
         // 25 s is ~240 updates: anneal faster so 100 of them are past the settling point.
         let mut options = LidarImuOptions {
             anneal_updates: 45.0,
@@ -173,19 +211,50 @@ fn short_recordings_are_accurate_and_inside_three_sigma() {
         };
         if let Ok(v) = std::env::var("MSREG_NOISE") {
             let v: Vec<f64> = v.split(',').filter_map(|x| x.parse().ok()).collect();
-            options.covariance_scale = v[0];
-            options.rotation_floor_rad = v[1].to_radians();
-            options.translation_floor_m = v[2];
-            if let Some(a) = v.get(3) {
+            options.covariance_scale = [v[0], v[1]];
+            options.rotation_floor_rad = v[2].to_radians();
+            options.translation_floor_m = v[3];
+            if let Some(a) = v.get(4) {
                 options.anneal_updates = *a;
             }
+            if v.get(5).is_some_and(|x| *x == 0.0) {
+                options.adapt = None;
+            }
+        }
+        if let Ok(k) = std::env::var("MSREG_LOCAL_MAP") {
+            options.local_map_scans = k.parse().unwrap_or(0);
         }
         let o = run(&config(seed, 25.0, 32, 512), &options);
         print(&o);
+        outcomes.push(o);
+    }
+    let n = outcomes.len() as f64;
+    let nees_sum: f64 = outcomes.iter().map(|o| o.nees).sum();
+    let (lo, hi) = chi_square_band(6.0 * n);
+    let mean_nis = outcomes.iter().map(|o| o.nis).sum::<f64>() / n;
+    println!(
+        "NEES sum {nees_sum:.2} (95 % band of chi2({}) [{lo:.2}, {hi:.2}]), mean NEES {:.2}, \
+         mean settled NIS/dof {mean_nis:.2}",
+        6.0 * n,
+        nees_sum / n
+    );
+    for o in &outcomes {
+        let seed = o.seed;
         assert!(o.inside, "seed {seed}: error outside 3 sigma");
         assert!(o.rot_deg < 0.3 && o.trans_mm < 15.0, "seed {seed}");
-        assert!(o.nis > 0.3 && o.nis < 3.0, "seed {seed}: NIS/dof {}", o.nis);
+        assert!(o.converged, "seed {seed}: not converged");
     }
+    assert!(
+        (lo..=hi).contains(&nees_sum),
+        "NEES sum {nees_sum:.2} outside [{lo:.2}, {hi:.2}]"
+    );
+    // The final floor (unmodelled, time-correlated NDT errors) keeps the NIS below 1 by
+    // design (0.63-0.88 per seed measured); this bound catches a mis-scaled filter (the fixed
+    // factor 0.3 of the first version gave 0.36-0.53, a factor 10 off gives ~0.1 or ~10).
+    assert!(
+        (0.6..=1.5).contains(&mean_nis),
+        "mean settled NIS/dof {mean_nis:.2}"
+    );
 }
 
 fn env_or(name: &str, default: usize) -> usize {
@@ -196,7 +265,7 @@ fn env_or(name: &str, default: usize) -> usize {
 }
 
 /// The issue's acceptance run: 60 s, Ouster-128 x 1024 (MSREG_RINGS / MSREG_COLUMNS /
-/// MSREG_SEEDS / MSREG_DURATION / MSREG_NO_DESKEW=1 override).
+/// MSREG_SEEDS / MSREG_DURATION / MSREG_NO_DESKEW=1 / MSREG_LOCAL_MAP=K override).
 #[test]
 #[ignore = "minutes of CPU: the 60 s Ouster-128 acceptance measurement"]
 fn sixty_second_ouster_128_five_seeds() {
@@ -206,13 +275,18 @@ fn sixty_second_ouster_128_five_seeds() {
     let duration = env_or("MSREG_DURATION", 60) as f64;
     let options = LidarImuOptions {
         deskew: std::env::var("MSREG_NO_DESKEW").is_err(),
+        local_map_scans: env_or("MSREG_LOCAL_MAP", 0),
         ..LidarImuOptions::default()
     };
     let mut all_ok = true;
+    let mut nees_sum = 0.0;
     for seed in 1..=seeds {
         let o = run(&config(seed, duration, rings, columns), &options);
         print(&o);
         all_ok &= o.inside && o.rot_deg < 0.1 && o.trans_mm < 5.0;
+        nees_sum += o.nees;
     }
+    let (lo, hi) = chi_square_band(6.0 * seeds as f64);
     println!("all seeds < 0.1 deg, < 5 mm and inside 3 sigma: {all_ok}");
+    println!("NEES sum {nees_sum:.2}, 95 % band [{lo:.2}, {hi:.2}]");
 }

@@ -15,10 +15,11 @@
 //!    reference stamps (eq. 3.19-3.21). Deskewing to the *last* firing means the measurement
 //!    time is one the IMU stream has just reached, so the filter clones its current pose
 //!    (it cannot clone in the past).
-//! 3. **Measurement noise**: NDT's inverse-Hessian covariance reads the score as a
-//!    likelihood of independent points and is optimistic. The filter uses
-//!    `R = covariance_scale * Sigma_NDT + diag(floor^2)`; see `docs/lidar_imu.md` for the
-//!    values and the NIS measurements that chose them.
+//! 3. **Measurement noise**: NDT's inverse Hessian has the right shape but a size set by
+//!    the score's constants and the cells' eigenvalue floor (~5x too large on the
+//!    simulator). The filter uses `R = s * Sigma_NDT + diag(floor^2)` with `s` matched to
+//!    the NIS online ([`NoiseAdaptation`]) and a final floor for NDT's time-correlated
+//!    errors; `docs/lidar_imu.md` has the measurements against ground truth that chose it.
 //!    Early on the extrinsic is far from the truth (rotation from the hand-eye init, zero
 //!    translation) and a tight `R` lets the first updates jump along a wrong linearisation,
 //!    after which the gate rejects everything. The floor therefore starts at
@@ -32,7 +33,7 @@
 use std::time::Instant;
 
 use msreg_estimator::{propagate, Error as FilterError, PoseImuEkf, RelativePose, Scalar};
-use nalgebra::{Isometry3, Matrix6, Vector3};
+use nalgebra::{Isometry3, Matrix6, Vector3, Vector6};
 use serde::Serialize;
 
 use super::convert;
@@ -44,7 +45,7 @@ use super::pose_imu::{
 use crate::dataset::{ExtrinsicEstimate, ImuNoiseYaml, ImuRecord};
 use crate::lidar::deskew::imu_time;
 use crate::lidar::{deskew_scan, PoseBuffer, ScanLoadError, ScanSource};
-use crate::ndt::{align, NdtParams, NdtTarget};
+use crate::ndt::{align, LocalMap, NdtParams, NdtResult, NdtTarget};
 use crate::pointcloud::{voxel_downsample, PointCloud};
 
 /// What the pipeline reads.
@@ -71,8 +72,11 @@ pub struct LidarImuOptions {
     pub ndt: NdtParams,
     /// Scans from the first this many seconds feed the hand-eye rotation init.
     pub init_duration_s: f64,
-    /// Factor on NDT's covariance.
-    pub covariance_scale: f64,
+    /// Which NDT covariance the measurement noise starts from.
+    pub ndt_covariance: NdtCovariance,
+    /// Factors on NDT's covariance, `[rotation block, translation block]` (see the module
+    /// docs: measured per-increment error variance times the autocorrelation inflation).
+    pub covariance_scale: [f64; 2],
     /// Per-axis 1-sigma rotation added to every increment, rad.
     pub rotation_floor_rad: f64,
     /// Per-axis 1-sigma translation added to every increment, m.
@@ -84,10 +88,17 @@ pub struct LidarImuOptions {
     pub initial_translation_floor_m: f64,
     /// Decay constant of the floor, in updates.
     pub anneal_updates: f64,
+    /// Adapt the factor on NDT's covariance so the NIS matches its expectation
+    /// ([`NoiseAdaptation`]); `None` keeps `covariance_scale` fixed.
+    pub adapt: Option<NoiseAdaptation>,
     /// Matches with a lower NDT fitness are skipped.
     pub min_fitness: f64,
     /// Scans with fewer points after voxel filtering are skipped.
     pub min_points: usize,
+    /// Match each scan against a sliding map of this many recent deskewed scans
+    /// (scan-to-local-map) instead of the previous scan; 0 = scan-to-scan. The increment
+    /// fused is still `T_L(k-1)_L(k)`, from the two scans' poses in the map.
+    pub local_map_scans: usize,
 }
 
 impl Default for LidarImuOptions {
@@ -104,16 +115,80 @@ impl Default for LidarImuOptions {
                 ..NdtParams::default()
             },
             init_duration_s: 15.0,
-            covariance_scale: 0.3,
+            ndt_covariance: NdtCovariance::Hessian,
+            covariance_scale: [0.2, 0.2],
             rotation_floor_rad: 0.005f64.to_radians(),
             translation_floor_m: 0.0005,
             initial_rotation_floor_rad: 0.2f64.to_radians(),
             initial_translation_floor_m: 0.01,
             anneal_updates: 100.0,
+            adapt: Some(NoiseAdaptation::default()),
             min_fitness: 0.05,
             min_points: 200,
+            local_map_scans: 0,
         }
     }
+}
+
+/// Covariance matching of the NDT noise scale (Mehra 1972; Myers and Tapley 1976, with a
+/// single scale factor): NDT's inverse Hessian has the right *shape* (which directions the
+/// scene constrains) but a scale set by the score's constants, the target cells' eigenvalue
+/// floor and unmodelled correlations, none of which the matcher can know. The filter
+/// measures it: the NIS of an update falls when `R` is too large and rises when too small,
+/// with expectation `dof` when consistent. Every `every` updates, after
+/// `start_after_anneals * anneal_updates` updates, the factor is multiplied by
+/// `(mean NIS/dof)^(w/2)` over the last `window` updates (each NIS/dof clipped at `clip`, so
+/// one wrong match cannot blow it up), `w` the NDT term's mean share of the diagonal of `R`
+/// (while the annealed floor dominates, the NIS says little about the NDT scale), the step
+/// limited to `[1/max_step, max_step]` and the factor to `bounds`. The exponent 1/2 halves
+/// each step: NIS is roughly proportional to `1/scale`, and damping averages the
+/// chi-square sampling noise of the window.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NoiseAdaptation {
+    /// Updates between adjustments.
+    pub every: usize,
+    /// Updates whose NIS is averaged.
+    pub window: usize,
+    /// Adaptation starts after this many `anneal_updates`.
+    pub start_after_anneals: f64,
+    /// Largest NIS/dof one update contributes.
+    pub clip: f64,
+    /// Largest factor of one adjustment.
+    pub max_step: f64,
+    /// Range of the scale factor.
+    pub bounds: [f64; 2],
+    /// Consecutive innovation pairs over which their lag-1 autocorrelation is measured
+    /// (0 = no correlation inflation).
+    pub correlation_window: usize,
+    /// Largest inflation for correlated errors.
+    pub max_inflation: f64,
+}
+
+impl Default for NoiseAdaptation {
+    fn default() -> Self {
+        Self {
+            every: 20,
+            window: 40,
+            start_after_anneals: 1.0,
+            clip: 5.0,
+            max_step: 1.4,
+            bounds: [0.01, 10.0],
+            correlation_window: 0,
+            max_inflation: 4.0,
+        }
+    }
+}
+
+/// The NDT covariance estimate the measurement noise is built from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NdtCovariance {
+    /// Inverse Hessian of the score (Laplace approximation).
+    Hessian,
+    /// Sandwich `H^-1 S H^-1` with per-point gradients.
+    Sandwich,
+    /// Sandwich with gradients summed per target cell.
+    Clustered,
 }
 
 /// One scan's fate, for the report.
@@ -143,6 +218,9 @@ pub struct ScanRecord {
     pub delta_translation: Option<[f64; 3]>,
     /// Measurement 1-sigma (after inflation) [rot x, y, z (rad); trans x, y, z (m)].
     pub sigma: Option<[f64; 6]>,
+    /// The NDT result behind the measurement (in-process studies of the noise model).
+    #[serde(skip)]
+    pub ndt: Option<NdtResult>,
 }
 
 impl ScanRecord {
@@ -167,6 +245,7 @@ impl ScanRecord {
             delta_rotation: None,
             delta_translation: None,
             sigma: None,
+            ndt: None,
         }
     }
 }
@@ -209,9 +288,14 @@ pub struct LidarImuReport {
     pub settled_nis_per_dof: f64,
     /// Pairs the rotation init dropped as outliers.
     pub hand_eye_outliers: usize,
-    /// The measurement noise model: `[covariance_scale, rotation floor (deg), translation
-    /// floor (m)]`.
-    pub measurement_noise: [f64; 3],
+    /// The measurement noise model: `[covariance scale rotation, covariance scale
+    /// translation, rotation floor (deg), translation floor (m)]`.
+    pub measurement_noise: [f64; 4],
+    /// Effective factor on the NDT covariance at the end (adapted scale times the
+    /// correlation inflation; the configured rotation factor when not adapted).
+    pub final_covariance_scale: f64,
+    /// The inflation for time-correlated NDT errors at the end, `(1 + rho) / (1 - rho)`.
+    pub correlation_inflation: f64,
     /// Wall time per stage.
     pub stage_timing_s: StageTiming,
     /// Per scan: points, NDT fitness, NIS.
@@ -262,6 +346,11 @@ pub fn calibrate<T: Scalar>(
         .ndt
         .validate()
         .map_err(|e| PoseImuError::BadInput(e.to_string()))?;
+    if options.ndt_covariance != NdtCovariance::Hessian && !options.ndt.sandwich_covariance {
+        return Err(PoseImuError::BadInput(
+            "options: a sandwich NDT covariance needs ndt.sandwich_covariance".into(),
+        ));
+    }
     let started = Instant::now();
     let standstill = init::detect_standstill(imu, options.filter.min_standstill_s);
     let gyro_bias = standstill.map_or_else(Vector3::zeros, |s| s.gyro_mean);
@@ -295,6 +384,8 @@ pub fn calibrate<T: Scalar>(
     timing.total_filter_pass = filter_s;
     timing.filter = filter_s - timing.load - timing.deskew - timing.voxel_and_target - timing.ndt;
 
+    let final_scale = options.covariance_scale[0] * feed.adaptive_factor * feed.inflation;
+    let inflation = feed.inflation;
     let LidarFeed {
         mut run, records, ..
     } = feed;
@@ -318,11 +409,14 @@ pub fn calibrate<T: Scalar>(
         settled_nis_per_dof: settled_nis(&records, options),
         hand_eye_outliers: outliers,
         measurement_noise: [
-            options.covariance_scale,
+            options.covariance_scale[0],
+            options.covariance_scale[1],
             options.rotation_floor_rad.to_degrees(),
             options.translation_floor_m,
         ],
         stage_timing_s: timing,
+        final_covariance_scale: final_scale,
+        correlation_inflation: inflation,
         scans: records,
     };
     if let Some(problem) = init_problem {
@@ -450,6 +544,10 @@ struct Previous {
     /// Its IMU time when it was processed.
     imu_time_ns: u64,
     target: NdtTarget,
+    /// The voxel-filtered deskewed scan (scan-to-local-map only).
+    cloud: Option<PointCloud>,
+    /// Its pose in the local map's frame (identity at a chain's anchor).
+    t_map: Isometry3<f64>,
 }
 
 /// The LiDAR front-end of the filter loop.
@@ -468,6 +566,19 @@ struct LidarFeed<'a> {
     first_imu_ns: u64,
     /// Relative poses formed so far (drives the floor's annealing).
     updates: usize,
+    /// Factor on `covariance_scale` from the NIS adaptation (1 until it starts).
+    adaptive_factor: f64,
+    /// NIS/dof of the updates and the NDT term's share of their `R`, in order (adaptation).
+    nis_per_dof: Vec<(f64, f64)>,
+    /// Scan-to-local-map target (`local_map_scans > 0`), in the frame of the chain's anchor.
+    map: Option<LocalMap>,
+    /// The previous update's innovation, normalised per component by `sqrt(R_ii)` (within
+    /// an odometry chain).
+    last_innovation: Option<Vector6<f64>>,
+    /// Per consecutive pair of innovations: `(sum u_k u_k-1, sum (u_k^2 + u_k-1^2) / 2)`.
+    innovation_pairs: Vec<(f64, f64)>,
+    /// Inflation of the NDT term for time-correlated errors, `(1 + rho) / (1 - rho)`.
+    inflation: f64,
 }
 
 impl<T: Scalar> ImuHooks<T> for LidarFeed<'_> {
@@ -553,6 +664,20 @@ impl<'a> LidarFeed<'a> {
             timing: StageTiming::default(),
             first_imu_ns,
             updates: 0,
+            adaptive_factor: 1.0,
+            nis_per_dof: Vec::new(),
+            last_innovation: None,
+            innovation_pairs: Vec::new(),
+            inflation: 1.0,
+            map: (options.local_map_scans > 0)
+                .then(|| {
+                    LocalMap::new(
+                        options.local_map_scans,
+                        options.voxel_m,
+                        options.ndt.clone(),
+                    )
+                })
+                .and_then(Result::ok),
         }
     }
 
@@ -617,7 +742,8 @@ impl<'a> LidarFeed<'a> {
             return;
         };
         let started = Instant::now();
-        let points = voxel_downsample(&deskewed, self.options.voxel_m).positions();
+        let filtered = voxel_downsample(&deskewed, self.options.voxel_m);
+        let points = filtered.positions();
         record.points_filtered = points.len();
         let target = NdtTarget::build(&points, &self.options.ndt);
         self.timing.voxel_and_target += started.elapsed().as_secs_f64();
@@ -637,10 +763,12 @@ impl<'a> LidarFeed<'a> {
                 return;
             }
         };
-        let this = Previous {
+        let mut this = Previous {
             ref_stamp_ns: ref_stamp,
             imu_time_ns: due,
             target,
+            cloud: self.map.is_some().then_some(filtered),
+            t_map: Isometry3::identity(),
         };
         let Some(prev) = self.previous.take() else {
             self.start_chain(ekf, record, this, "anchor");
@@ -651,7 +779,24 @@ impl<'a> LidarFeed<'a> {
             None => Isometry3::identity(),
         };
         let started = Instant::now();
-        let matched = align(&prev.target, &points, &guess, &self.options.ndt);
+        let matched = match (&mut self.map, &this.cloud) {
+            (Some(map), Some(cloud)) => map.align(cloud, &(prev.t_map * guess)).map(|mut r| {
+                // T_prev_this = T_map_prev^-1 T_map_this; the covariance of `[t; theta]`
+                // moves with it: translation rotated into the previous scan's frame,
+                // rotation (a right perturbation of this scan's pose) unchanged.
+                this.t_map = r.t_target_source;
+                r.t_target_source = prev.t_map.inverse() * r.t_target_source;
+                let mut j = Matrix6::identity();
+                j.fixed_view_mut::<3, 3>(0, 0)
+                    .copy_from(prev.t_map.rotation.inverse().to_rotation_matrix().matrix());
+                r.covariance = j * r.covariance * j.transpose();
+                for c in [&mut r.covariance_sandwich, &mut r.covariance_clustered] {
+                    *c = c.map(|c| j * c * j.transpose());
+                }
+                r
+            }),
+            _ => align(&prev.target, &points, &guess, &self.options.ndt),
+        };
         self.timing.ndt += started.elapsed().as_secs_f64();
         let result = match matched {
             Ok(r) if r.converged && r.fitness >= self.options.min_fitness => r,
@@ -678,13 +823,27 @@ impl<'a> LidarFeed<'a> {
         };
         record.fitness = Some(result.fitness);
         record.iterations = Some(result.iterations);
-        let covariance = self.measurement_covariance(&result.covariance);
+        let (covariance, ndt_share) =
+            self.measurement_covariance(match self.options.ndt_covariance {
+                NdtCovariance::Hessian => &result.covariance,
+                // `calibrate` checked that `ndt.sandwich_covariance` computes these.
+                NdtCovariance::Sandwich => result
+                    .covariance_sandwich
+                    .as_ref()
+                    .unwrap_or(&result.covariance),
+                NdtCovariance::Clustered => result
+                    .covariance_clustered
+                    .as_ref()
+                    .unwrap_or(&result.covariance),
+            });
         self.updates += 1;
         let delta = result.t_target_source;
+        self.book_innovation(&guess, &delta, &covariance);
         let rv = delta.rotation.scaled_axis();
         record.delta_rotation = Some([rv.x, rv.y, rv.z]);
         record.delta_translation = Some(delta.translation.vector.into());
         record.sigma = Some(std::array::from_fn(|i| covariance[(i, i)].sqrt()));
+        record.ndt = Some(result.clone());
         let meas = RelativePose {
             stamp_from_ns: prev.ref_stamp_ns,
             stamp_to_ns: ref_stamp,
@@ -699,12 +858,16 @@ impl<'a> LidarFeed<'a> {
                 self.buffer.push(ekf.time_ns(), after);
                 self.run.record_update(ekf, ref_stamp, &report);
                 record.nis = Some(report.nis.to_f64());
+                self.adapt(report.nis.to_f64() / report.dof.max(1) as f64, ndt_share);
                 record.status = if report.accepted {
                     "matched".into()
                 } else {
                     "rejected by the gate".into()
                 };
                 self.last_end_ns = Some(ref_stamp);
+                if let (Some(map), Some(cloud)) = (&mut self.map, &this.cloud) {
+                    map.insert(cloud, &this.t_map);
+                }
                 self.previous = Some(this);
                 self.records.push(record);
             }
@@ -717,10 +880,75 @@ impl<'a> LidarFeed<'a> {
         }
     }
 
+    /// Books one update's NIS/dof (and the NDT term's share of `R`) and, when due, adjusts
+    /// the noise scale ([`NoiseAdaptation`]).
+    fn adapt(&mut self, nis_per_dof: f64, ndt_share: f64) {
+        let Some(a) = self.options.adapt else {
+            return;
+        };
+        self.nis_per_dof.push((nis_per_dof.min(a.clip), ndt_share));
+        let start = (a.start_after_anneals * self.options.anneal_updates).ceil() as usize;
+        let n = self.nis_per_dof.len();
+        if n < start + a.window.min(a.every) || n % a.every.max(1) != 0 {
+            return;
+        }
+        let recent = &self.nis_per_dof[n - a.window.min(n - start)..];
+        let count = recent.len().max(1) as f64;
+        let mean = recent.iter().map(|(x, _)| x).sum::<f64>() / count;
+        let share = recent.iter().map(|(_, w)| w).sum::<f64>() / count;
+        if !mean.is_finite() || mean <= 0.0 || !share.is_finite() {
+            return;
+        }
+        // Only the NDT term's share of the mismatch is the scale's to correct: while the
+        // floor dominates `R`, the NIS says little about the scale.
+        // With the NDT term inflated by `inflation` for correlated errors, a consistent
+        // NIS/dof is about 1/inflation.
+        let step = (mean * self.inflation)
+            .powf(0.5 * share.clamp(0.0, 1.0))
+            .clamp(1.0 / a.max_step, a.max_step);
+        let base = self.options.covariance_scale[0].max(f64::MIN_POSITIVE);
+        let scale = (base * self.adaptive_factor * step).clamp(a.bounds[0], a.bounds[1]);
+        self.adaptive_factor = scale / base;
+        if a.correlation_window > 0 {
+            let pairs = &self.innovation_pairs[self
+                .innovation_pairs
+                .len()
+                .saturating_sub(a.correlation_window)..];
+            let (num, den) = pairs
+                .iter()
+                .fold((0.0, 0.0), |(n, d), (x, y)| (n + x, d + y));
+            if pairs.len() * 2 >= a.correlation_window && den > 0.0 {
+                let rho = (num / den).clamp(0.0, 0.95);
+                self.inflation = ((1.0 + rho) / (1.0 - rho)).min(a.max_inflation);
+            }
+        }
+    }
+
+    /// Books the innovation `delta (-) guess` (the filter's prediction of the increment),
+    /// normalised by `sqrt(R_ii)`, for the lag-1 autocorrelation of consecutive ones.
+    fn book_innovation(
+        &mut self,
+        guess: &Isometry3<f64>,
+        delta: &Isometry3<f64>,
+        covariance: &Matrix6<f64>,
+    ) {
+        let r = (guess.rotation.inverse() * delta.rotation).scaled_axis();
+        let t = delta.translation.vector - guess.translation.vector;
+        let nu = Vector6::new(r.x, r.y, r.z, t.x, t.y, t.z);
+        let u = Vector6::from_fn(|i, _| nu[i] / covariance[(i, i)].max(f64::MIN_POSITIVE).sqrt());
+        if let Some(p) = self.last_innovation {
+            self.innovation_pairs
+                .push((u.dot(&p), 0.5 * (u.norm_squared() + p.norm_squared())));
+        }
+        self.last_innovation = Some(u);
+    }
+
     /// `R = scale * Sigma_NDT + floor`, reordered from NDT's `[t; theta]` to the filter's
     /// `[theta; t]` (both: rotation a right perturbation, translation additive in the
     /// target = `from` frame).
-    fn measurement_covariance(&self, ndt: &Matrix6<f64>) -> Matrix6<f64> {
+    ///
+    /// Also returns the NDT term's mean share of the diagonal of `R` (the adaptation's weight).
+    fn measurement_covariance(&self, ndt: &Matrix6<f64>) -> (Matrix6<f64>, f64) {
         let o = self.options;
         let decay = if o.anneal_updates > 0.0 {
             (-(self.updates as f64) / o.anneal_updates).exp()
@@ -730,13 +958,23 @@ impl<'a> LidarFeed<'a> {
         let floor = |initial: f64, last: f64| last + (initial - last).max(0.0) * decay;
         let floor_r = floor(o.initial_rotation_floor_rad, o.rotation_floor_rad);
         let floor_t = floor(o.initial_translation_floor_m, o.translation_floor_m);
-        let mut c =
-            Matrix6::from_fn(|r, col| ndt[((r + 3) % 6, (col + 3) % 6)]) * o.covariance_scale;
+        // S Sigma S with S = diag(sqrt(s_rot) I, sqrt(s_trans) I) keeps `c` positive definite.
+        let s = |i: usize| {
+            (o.covariance_scale[usize::from(i >= 3)] * self.adaptive_factor * self.inflation)
+                .max(0.0)
+                .sqrt()
+        };
+        let mut c = Matrix6::from_fn(|r, col| ndt[((r + 3) % 6, (col + 3) % 6)] * s(r) * s(col));
+        let ndt_diagonal = c.diagonal();
         for i in 0..3 {
             c[(i, i)] += floor_r.powi(2);
             c[(i + 3, i + 3)] += floor_t.powi(2);
         }
-        (c + c.transpose()) * 0.5
+        let share = (0..6)
+            .map(|i| ndt_diagonal[i] / c[(i, i)].max(f64::MIN_POSITIVE))
+            .sum::<f64>()
+            / 6.0;
+        ((c + c.transpose()) * 0.5, share)
     }
 
     /// Starts a new odometry chain at this scan (first scan, or after a failed match).
@@ -744,11 +982,18 @@ impl<'a> LidarFeed<'a> {
         &mut self,
         ekf: &mut PoseImuEkf<T>,
         mut record: ScanRecord,
-        this: Previous,
+        mut this: Previous,
         why: &str,
     ) {
         match ekf.anchor(0, this.ref_stamp_ns) {
             Ok(()) => {
+                // A new chain: the local map restarts in this scan's frame.
+                this.t_map = Isometry3::identity();
+                self.last_innovation = None;
+                if let (Some(map), Some(cloud)) = (&mut self.map, &this.cloud) {
+                    map.clear();
+                    map.insert(cloud, &this.t_map);
+                }
                 if why != "anchor" {
                     self.run.skipped.push(format!(
                         "lidar0 scan {}: {why}; odometry restarted here",
@@ -780,6 +1025,7 @@ impl<'a> LidarFeed<'a> {
             .push(format!("lidar0 scan {}: {why}", record.stamp_ns));
         record.status = why.to_string();
         self.previous = None;
+        self.last_innovation = None;
         self.last_end_ns = Some(ref_stamp);
         self.records.push(record);
     }

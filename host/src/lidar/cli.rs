@@ -58,6 +58,13 @@ pub struct CalibrateLidarImu {
     /// Keep the time offset fixed at zero.
     #[arg(long)]
     pub no_time_offset: bool,
+    /// PNG plot of the extrinsic convergence (6 DoF and time offset, +-1 sigma bands).
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+    /// Match each scan against a sliding map of this many recent deskewed scans instead of
+    /// the previous scan (0 = scan-to-scan).
+    #[arg(long, default_value_t = 0)]
+    pub local_map_scans: usize,
 }
 
 /// How a calibration ended (errors aside).
@@ -126,6 +133,7 @@ pub fn calibrate(args: &CalibrateLidarImu) -> anyhow::Result<Outcome> {
     };
     let mut options = LidarImuOptions {
         deskew: !args.no_deskew,
+        local_map_scans: args.local_map_scans,
         ..LidarImuOptions::default()
     };
     options.filter.estimate_time_offset = !args.no_time_offset;
@@ -146,13 +154,24 @@ pub fn calibrate(args: &CalibrateLidarImu) -> anyhow::Result<Outcome> {
         std::fs::write(path, json)
             .with_context(|| format!("{}: cannot write report", path.display()))?;
     }
+    if let Some(path) = &args.plot {
+        let series = crate::plot::extrinsic_series(&calibration.report.filter.history, None);
+        let title = format!("T_imu_lidar convergence: {}", args.dataset.display());
+        match crate::plot::write_convergence_png(path, &title, &series, (1500, 1100)) {
+            Ok(()) => eprintln!("msreg: wrote {}", path.display()),
+            // The calibration itself succeeded: a missing font is not bad input.
+            Err(e) => eprintln!("msreg: warning: {e}"),
+        }
+    }
     let r = &calibration.report;
     eprintln!(
-        "msreg: wrote {} ({} of {} scans matched, mean NIS/dof {:.2}, {:.1} s)",
+        "msreg: wrote {} ({} of {} scans matched, settled NIS/dof {:.2}, NDT covariance \
+         scale {:.3}, {:.1} s)",
         args.output.display(),
         r.scans_matched,
         r.scans_total,
-        r.filter.mean_nis_per_dof,
+        r.settled_nis_per_dof,
+        r.final_covariance_scale,
         r.stage_timing_s.rotation_init + r.stage_timing_s.total_filter_pass
     );
     Ok(if r.filter.converged {

@@ -188,3 +188,70 @@ fn point_terms(
         acc.h_rr += sym - Matrix3::from_diagonal_element(bq);
     }
 }
+
+/// Outer products of the per-point score gradients at a pose (the "meat" of the sandwich
+/// covariance `H^-1 S H^-1` of an M-estimator).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct GradientScatter {
+    /// `sum_i g_i g_i^T`: points independent.
+    pub(crate) per_point: Matrix6<f64>,
+    /// `sum_c (sum_{i in c} g_i)(sum_{i in c} g_i)^T` over the cells containing the points:
+    /// points scored against the same target cell share its estimated mean and covariance,
+    /// so their errors are correlated (cluster-robust sandwich).
+    pub(crate) per_cell: Matrix6<f64>,
+}
+
+/// The gradient of one point's score w.r.t. `(dt, phi)`, and the key of the cell that
+/// contains it; `None` when it touches no Gaussian.
+fn point_gradient(
+    map: &NdtMap,
+    q: &Vector3<f64>,
+    x: &Vector3<f64>,
+    inv_res: f64,
+    offsets: &[[i32; 3]],
+    gauss: GaussFit,
+) -> Option<(VoxelKey, Vector6<f64>)> {
+    let mut acc = Acc::zero();
+    point_terms(map, q, x, inv_res, offsets, gauss, false, &mut acc);
+    (acc.hits > 0).then(|| {
+        let mut g = Vector6::zeros();
+        g.fixed_rows_mut::<3>(0).copy_from(&acc.g_t);
+        g.fixed_rows_mut::<3>(3).copy_from(&acc.g_r);
+        (VoxelKey::of(x, inv_res), g)
+    })
+}
+
+/// [`GradientScatter`] of `source` moved by `pose` against `map`.
+pub(crate) fn gradient_scatter(
+    map: &NdtMap,
+    source: &[Vector3<f64>],
+    pose: &PoseMat,
+    gauss: GaussFit,
+    neighbourhood: Neighbourhood,
+) -> GradientScatter {
+    let inv_res = map.resolution().recip();
+    let offsets = neighbourhood.offsets();
+    let gradients: Vec<(VoxelKey, Vector6<f64>)> = source
+        .par_chunks(CHUNK)
+        .flat_map_iter(|chunk| {
+            chunk.iter().filter_map(|p| {
+                let q = pose.rotation * p;
+                let x = q + pose.translation;
+                point_gradient(map, &q, &x, inv_res, offsets, gauss)
+            })
+        })
+        .collect();
+    let mut per_point = Matrix6::zeros();
+    let mut cells: crate::pointcloud::VoxelMap<Vector6<f64>> = Default::default();
+    for (key, g) in &gradients {
+        per_point += g * g.transpose();
+        *cells.entry(*key).or_insert_with(Vector6::zeros) += g;
+    }
+    let per_cell = cells
+        .values()
+        .fold(Matrix6::zeros(), |s, g| s + g * g.transpose());
+    GradientScatter {
+        per_point,
+        per_cell,
+    }
+}

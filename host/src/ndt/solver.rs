@@ -8,7 +8,7 @@ use nalgebra::{
 
 use super::degeneracy::analyse;
 use super::map::{NdtMap, NdtTarget};
-use super::score::{evaluate, Evaluation, GaussFit, PoseMat};
+use super::score::{evaluate, gradient_scatter, Evaluation, GaussFit, PoseMat};
 use super::{NdtError, NdtParams, NdtResult};
 use crate::pointcloud::PointCloud;
 
@@ -75,9 +75,26 @@ pub fn align(
     let rotation = pose.rotation;
     let hessian_right = to_right_perturbation(&final_eval.hessian, &rotation);
     let degenerate = analyse(&hessian_right, params.degeneracy_ratio);
+    let covariance = floored_inverse(&hessian_right);
+    let sandwich = |s: &Matrix6<f64>| {
+        let s = to_right_perturbation(s, &rotation);
+        let c = covariance * s * covariance;
+        (c + c.transpose()) * 0.5
+    };
+    let (covariance_sandwich, covariance_clustered) = if params.sandwich_covariance {
+        let scatter = gradient_scatter(map, source, &pose, gauss, params.neighbourhood);
+        (
+            Some(sandwich(&scatter.per_point)),
+            Some(sandwich(&scatter.per_cell)),
+        )
+    } else {
+        (None, None)
+    };
     Ok(NdtResult {
         t_target_source: isometry(&pose),
-        covariance: floored_inverse(&hessian_right),
+        covariance,
+        covariance_sandwich,
+        covariance_clustered,
         fitness: final_eval.score / (gauss.d1 * source.len() as f64),
         iterations,
         converged: converged && degenerate.is_none(),

@@ -287,3 +287,29 @@ fn bad_input_is_an_error_not_a_panic() {
         Err(NdtError::InvalidParams(_))
     ));
 }
+
+#[test]
+fn sandwich_covariances_are_symmetric_positive_and_only_on_request() {
+    // Given the furnished room registered to itself from a small offset
+    let points = indoor_scan(32, 256);
+    let mut params = NdtParams::default();
+    let target = NdtTarget::build(&points, &params).unwrap();
+    let guess = pose([0.05, -0.03, 0.02], [0.01, 0.0, -0.01]);
+    // When the sandwich is not asked for, it is absent
+    let plain = align(&target, &points, &guess, &params).unwrap();
+    assert!(plain.covariance_sandwich.is_none() && plain.covariance_clustered.is_none());
+    // When asked for, both are symmetric, positive definite and the same pose comes out
+    params.sandwich_covariance = true;
+    let r = align(&target, &points, &guess, &params).unwrap();
+    assert_eq!(r.t_target_source, plain.t_target_source);
+    for c in [
+        r.covariance_sandwich.unwrap(),
+        r.covariance_clustered.unwrap(),
+    ] {
+        assert!((c - c.transpose()).amax() <= 1e-12 * c.amax());
+        let eig = nalgebra::SymmetricEigen::new(c).eigenvalues;
+        assert!(eig.min() > 0.0, "{eig}");
+        // Its size is set by the residuals: far below the prior's scale (1 m, 1 rad).
+        assert!(c.diagonal().max() < 1e-4, "{}", c.diagonal());
+    }
+}

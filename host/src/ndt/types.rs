@@ -76,6 +76,8 @@ pub struct NdtParams {
     /// Degenerate when the smallest eigenvalue of the marginal translation
     /// or rotation information is below this fraction of its largest.
     pub degeneracy_ratio: f64,
+    /// Also compute the sandwich covariances (one more pass over the source points).
+    pub sandwich_covariance: bool,
 }
 
 impl Default for NdtParams {
@@ -92,6 +94,7 @@ impl Default for NdtParams {
             max_step_fraction: 0.5,
             max_rotation_step: 0.1,
             degeneracy_ratio: 0.04,
+            sandwich_covariance: false,
         }
     }
 }
@@ -107,6 +110,14 @@ pub struct NdtResult {
     /// eigenvalues floored (so it stays finite when degenerate: read
     /// `degenerate` first). Optimistic; see the module docs.
     pub covariance: Matrix6<f64>,
+    /// Sandwich (M-estimator) covariance `H^-1 S H^-1`, `S = sum_i g_i g_i^T` over the
+    /// per-point gradients at the optimum: independent of the score's scale (d1, d2) and
+    /// set by the actual residual spread, but still reading points as independent.
+    /// Present when `NdtParams::sandwich_covariance` asked for it.
+    pub covariance_sandwich: Option<Matrix6<f64>>,
+    /// Cluster-robust sandwich: `S` summed per target cell first, since points scored
+    /// against the same cell share its (noisy) estimated Gaussian. With the above.
+    pub covariance_clustered: Option<Matrix6<f64>>,
     /// Mean normalised score per source point at the result,
     /// `sum_k sum_cells exp(-d2/2 m_k) / N` on the finest level: 0 when no
     /// point lies near a Gaussian, about 1 when every point sits on a cell
