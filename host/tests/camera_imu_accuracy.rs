@@ -7,11 +7,11 @@
 mod common;
 
 use common::{median, par_map};
+use msreg_estimator::CornerObservation;
 use msreg_host::calibrate::camera_imu::{
     self, CameraImuCalibration, CameraImuInput, CameraImuOptions, CameraUpdate, CornerFrame,
 };
 use msreg_host::sim::{simulate_camera_imu, CameraImuSim, CameraImuSimConfig};
-use msreg_estimator::CornerObservation;
 use nalgebra::{Isometry3, Vector2, Vector6};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -55,7 +55,11 @@ pub fn noisy_corner_frames(sim: &CameraImuSim, sigma_px: f64, seed: u64) -> Vec<
         .collect()
 }
 
-fn calibrate(sim: &CameraImuSim, frames: &[CornerFrame], update: CameraUpdate) -> CameraImuCalibration {
+fn calibrate(
+    sim: &CameraImuSim,
+    frames: &[CornerFrame],
+    update: CameraUpdate,
+) -> CameraImuCalibration {
     let input = CameraImuInput {
         imu: &sim.imu,
         imu_noise: &sim.imu_noise,
@@ -105,7 +109,11 @@ fn run(update: CameraUpdate, seeds: &[u64]) -> Vec<Outcome> {
         let sim = recording(seed);
         let frames = noisy_corner_frames(&sim, PIXEL_SIGMA, seed);
         let c = calibrate(&sim, &frames, update);
-        assert!(c.report.filter.converged, "seed {seed}: {:?}", c.report.filter.reasons);
+        assert!(
+            c.report.filter.converged,
+            "seed {seed}: {:?}",
+            c.report.filter.reasons
+        );
         judge(seed, &sim, &c)
     })
 }
@@ -150,7 +158,8 @@ fn motion_based_calibration_is_less_accurate_than_reprojection() {
     let motion = run(CameraUpdate::Motion, &seeds);
     let reprojection = run(CameraUpdate::Reprojection, &seeds);
     print("MoCal", &motion);
-    let mean = |v: &[Outcome], f: fn(&Outcome) -> f64| v.iter().map(f).sum::<f64>() / v.len() as f64;
+    let mean =
+        |v: &[Outcome], f: fn(&Outcome) -> f64| v.iter().map(f).sum::<f64>() / v.len() as f64;
     assert!(mean(&motion, |o| o.translation_mm) > mean(&reprojection, |o| o.translation_mm));
     assert!(mean(&motion, |o| o.rotation_deg) > mean(&reprojection, |o| o.rotation_deg));
 }
@@ -162,13 +171,30 @@ fn debug_one() {
     let frames = noisy_corner_frames(&sim, PIXEL_SIGMA, 1);
     println!("frames {} of {}", frames.len(), sim.frame_stamps.len());
     let m = calibrate(&sim, &frames, CameraUpdate::Motion);
-    println!("MoCal {:?} converged {} {:?}", judge(1, &sim, &m), m.report.filter.converged, m.report.filter.reasons);
+    println!(
+        "MoCal {:?} converged {} {:?}",
+        judge(1, &sim, &m),
+        m.report.filter.converged,
+        m.report.filter.reasons
+    );
     let c = calibrate(&sim, &frames, CameraUpdate::Reprojection);
     println!("pixel sigma {}", c.report.pixel_sigma);
     for f in c.report.frames.iter().take(30) {
         println!("{f:?}");
     }
-    println!("skipped {:?}", &c.report.filter.poses_skipped.iter().take(5).collect::<Vec<_>>());
-    println!("hand-eye {:?} truth {:?}", c.report.filter.hand_eye_rotation_vector, sim.t_cam_imu.inverse().rotation.scaled_axis());
+    println!(
+        "skipped {:?}",
+        &c.report
+            .filter
+            .poses_skipped
+            .iter()
+            .take(5)
+            .collect::<Vec<_>>()
+    );
+    println!(
+        "hand-eye {:?} truth {:?}",
+        c.report.filter.hand_eye_rotation_vector,
+        sim.t_cam_imu.inverse().rotation.scaled_axis()
+    );
     println!("est {:?}", c.t_imu_cam);
 }
