@@ -163,38 +163,3 @@ fn motion_based_calibration_is_less_accurate_than_reprojection() {
     assert!(mean(&motion, |o| o.translation_mm) > mean(&reprojection, |o| o.translation_mm));
     assert!(mean(&motion, |o| o.rotation_deg) > mean(&reprojection, |o| o.rotation_deg));
 }
-
-#[test]
-#[ignore]
-fn debug_one() {
-    let sim = recording(1);
-    let frames = noisy_corner_frames(&sim, PIXEL_SIGMA, 1);
-    println!("frames {} of {}", frames.len(), sim.frame_stamps.len());
-    let m = calibrate(&sim, &frames, CameraUpdate::Motion);
-    println!(
-        "MoCal {:?} converged {} {:?}",
-        judge(1, &sim, &m),
-        m.report.filter.converged,
-        m.report.filter.reasons
-    );
-    let c = calibrate(&sim, &frames, CameraUpdate::Reprojection);
-    println!("pixel sigma {}", c.report.pixel_sigma);
-    for f in c.report.frames.iter().take(30) {
-        println!("{f:?}");
-    }
-    println!(
-        "skipped {:?}",
-        &c.report
-            .filter
-            .poses_skipped
-            .iter()
-            .take(5)
-            .collect::<Vec<_>>()
-    );
-    println!(
-        "hand-eye {:?} truth {:?}",
-        c.report.filter.hand_eye_rotation_vector,
-        sim.t_cam_imu.inverse().rotation.scaled_axis()
-    );
-    println!("est {:?}", c.t_imu_cam);
-}

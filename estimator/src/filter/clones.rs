@@ -19,6 +19,25 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         }
     }
 
+    /// IMU time of sensor `s`'s measurement stamped `stamp_ns`, checked to be reachable by
+    /// propagation: not before the filter time, not beyond the IMU gap limit.
+    pub(super) fn reachable_imu_time(&self, s: usize, stamp_ns: u64) -> Result<u64, Error> {
+        let last = self.last_imu.ok_or(Error::NotInitialized)?;
+        let t = self.imu_time(s, stamp_ns);
+        if t < self.time_ns {
+            return Err(Error::TimeWentBackwards {
+                filter_ns: self.time_ns,
+                stamp_ns: t,
+            });
+        }
+        if t - last.stamp_ns > self.config.max_imu_gap_ns {
+            return Err(Error::ImuGap {
+                gap_ns: t - last.stamp_ns,
+            });
+        }
+        Ok(t)
+    }
+
     /// Chooses the slot for a new clone: a free one, else the oldest that no sensor anchors.
     pub(super) fn free_slot(&self) -> Result<usize, Error> {
         if let Some(i) = self.clones.iter().position(Option::is_none) {
@@ -102,19 +121,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
 
     /// Propagates to the measurement time and picks a clone slot.
     pub(super) fn prepare_clone(&mut self, s: usize, stamp_ns: u64) -> Result<usize, Error> {
-        let last = self.last_imu.ok_or(Error::NotInitialized)?;
-        let t = self.imu_time(s, stamp_ns);
-        if t < self.time_ns {
-            return Err(Error::TimeWentBackwards {
-                filter_ns: self.time_ns,
-                stamp_ns: t,
-            });
-        }
-        if t - last.stamp_ns > self.config.max_imu_gap_ns {
-            return Err(Error::ImuGap {
-                gap_ns: t - last.stamp_ns,
-            });
-        }
+        let t = self.reachable_imu_time(s, stamp_ns)?;
         let slot = self.free_slot()?;
         self.advance_to(t)?;
         Ok(slot)

@@ -41,19 +41,8 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
             return Err(Error::FrameNotInitialized);
         }
         meas.validate()?;
+        let t = self.reachable_imu_time(s, meas.stamp_ns)?;
         let last = self.last_imu.ok_or(Error::NotInitialized)?;
-        let t = self.imu_time(s, meas.stamp_ns);
-        if t < self.time_ns {
-            return Err(Error::TimeWentBackwards {
-                filter_ns: self.time_ns,
-                stamp_ns: t,
-            });
-        }
-        if t - last.stamp_ns > self.config.max_imu_gap_ns {
-            return Err(Error::ImuGap {
-                gap_ns: t - last.stamp_ns,
-            });
-        }
         let mut draft = self.clone();
         draft.advance_to(t)?;
         draft.flush_transition();
