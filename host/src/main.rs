@@ -119,6 +119,9 @@ enum Task {
     LidarImu(msreg_host::lidar::cli::CalibrateLidarImu),
     /// LiDAR-camera calibration with a plain board (PBPC-Cal or PPC-Cal), judged by MLRE.
     LidarCamera(msreg_host::lidar_camera::cli::CalibrateLidarCamera),
+    /// Camera-IMU calibration from checkerboard images: corner reprojection (RepErrCal) or
+    /// PnP relative poses (MoCal) in the EKF.
+    CameraImu(msreg_host::calibrate::camera_imu::cli::CalibrateCameraImu),
 }
 
 #[derive(Args)]
@@ -197,6 +200,14 @@ fn run(command: Command) -> Result<(), Failure> {
         } => match msreg_host::lidar_camera::cli::calibrate(&args)? {
             msreg_host::lidar_camera::cli::Outcome::Converged => Ok(()),
             msreg_host::lidar_camera::cli::Outcome::NotConverged(why) => {
+                Err(Failure::NotConverged(why))
+            }
+        },
+        Command::Calibrate {
+            task: Task::CameraImu(args),
+        } => match msreg_host::calibrate::camera_imu::cli::run(&args)? {
+            msreg_host::calibrate::camera_imu::cli::Outcome::Converged => Ok(()),
+            msreg_host::calibrate::camera_imu::cli::Outcome::NotConverged(why) => {
                 Err(Failure::NotConverged(why))
             }
         },

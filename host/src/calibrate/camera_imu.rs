@@ -11,6 +11,8 @@
 //! Both start from the hand-eye rotation of PnP rotation increments against the integrated
 //! gyro (eq. 4.5) and a zero translation (no tape measure).
 
+pub mod cli;
+
 use std::time::Instant;
 
 use msreg_estimator::camera::Camera;

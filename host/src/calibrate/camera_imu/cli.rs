@@ -1,0 +1,321 @@
+//! `msreg calibrate camera-imu <dataset>`: detects the checkerboard in every image of
+//! `cam0/`, runs RepErrCal (or MoCal) on the corners and the IMU, and writes the result
+//! YAML (`cam0`: Kalibr's `T_cam_imu`, `timeshift_cam_imu`), the JSON report, the
+//! convergence plot and the reprojection overlay of one image (the dissertation's Fig. 4.4).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{anyhow, Context};
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use msreg_estimator::CornerObservation;
+use serde::Serialize;
+
+use super::{
+    calibrate, CameraImuCalibration, CameraImuInput, CameraImuOptions, CameraImuReport,
+    CameraUpdate, CornerFrame, ReprojectionSample,
+};
+use crate::calibrate::pose_imu::PoseImuError;
+use crate::dataset::{CalibrationResult, Dataset};
+use crate::vision::frames::{CameraDataset, FrameResult};
+use crate::vision::{DetectorParams, GrayImage};
+
+/// `msreg calibrate camera-imu`.
+#[derive(Args, Debug)]
+pub struct CalibrateCameraImu {
+    /// Dataset directory (imu0/, cam0/ with camera.yaml, target.yaml).
+    pub dataset: PathBuf,
+    /// Measurement model: corner reprojection (RepErrCal) or PnP relative poses (MoCal).
+    #[arg(long, value_enum, default_value_t = CameraUpdate::Reprojection)]
+    pub update: CameraUpdate,
+    /// Result YAML.
+    #[arg(short, long, default_value = "result.yaml")]
+    pub output: PathBuf,
+    /// JSON report (detections, reprojection error per image, convergence, NIS, events).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// PNG plot of the extrinsic convergence (6 DoF and time offset, +-1 sigma bands).
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+    /// PNG of one image with its detected (green) and reprojected (red) corners and the
+    /// error vectors magnified (yellow); RepErrCal only.
+    #[arg(long)]
+    pub overlay: Option<PathBuf>,
+    /// Corner noise, 1-sigma per axis, pixels (default: estimated from the PnP residuals).
+    #[arg(long)]
+    pub pixel_sigma: Option<f64>,
+    /// Keep the time offset fixed at zero.
+    #[arg(long)]
+    pub no_time_offset: bool,
+}
+
+/// How a calibration ended (exit code 0 or 1).
+pub enum Outcome {
+    /// Result written.
+    Converged,
+    /// Ran but failed; the reason.
+    NotConverged(String),
+}
+
+/// What the detector found over the dataset.
+#[derive(Debug, Clone, Serialize)]
+pub struct DetectionSummary {
+    /// Images listed in `cam0/data.csv`.
+    pub images: usize,
+    /// Images with the full board.
+    pub detected: usize,
+    /// Rejected images per reason.
+    pub rejected: BTreeMap<String, usize>,
+    /// Wall time of detection, s.
+    pub time_s: f64,
+}
+
+/// The JSON report of the command.
+#[derive(Debug, Clone, Serialize)]
+pub struct CameraImuCliReport {
+    /// Corner detection.
+    pub detection: DetectionSummary,
+    /// The calibration.
+    #[serde(flatten)]
+    pub calibration: CameraImuReport,
+}
+
+/// Fewest images with the full board for a calibration (PnP odometry needs increments).
+const MIN_IMAGES: usize = 3;
+
+/// Length the mean error vector is drawn with in the overlay, pixels: sub-pixel errors
+/// become visible.
+const OVERLAY_MEAN_ERROR_PX: f64 = 12.0;
+
+/// Runs the command.
+pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
+    let dataset = Dataset::open(&args.dataset)?;
+    let camera_data = CameraDataset::open(&args.dataset)?;
+    if let Some(sigma) = args.pixel_sigma {
+        if !(sigma.is_finite() && sigma > 0.0) {
+            return Err(anyhow!("--pixel-sigma must be positive, got {sigma}"));
+        }
+    }
+    let started = Instant::now();
+    let detecting = progress_bar("{spinner} detecting corners [{bar:40}] {percent}% {elapsed}");
+    let results = camera_data.detect(&DetectorParams::default(), &|f| {
+        detecting.set_position((f * 1000.0) as u64)
+    })?;
+    detecting.finish_and_clear();
+    let (frames, detection) = corner_frames(&camera_data, &results, started);
+    eprintln!(
+        "msreg: board found in {} of {} images ({:.1} s)",
+        detection.detected, detection.images, detection.time_s
+    );
+    if frames.len() < MIN_IMAGES {
+        let reasons: Vec<String> = detection
+            .rejected
+            .iter()
+            .map(|(why, n)| format!("{n} x {why}"))
+            .collect();
+        return Err(anyhow!(
+            "{}: the {}x{} checkerboard of target.yaml is found in {} of {} images, at least \
+             {MIN_IMAGES} are needed (rejected: {})",
+            args.dataset.display(),
+            camera_data.target.rows,
+            camera_data.target.cols,
+            frames.len(),
+            detection.images,
+            reasons.join(", ")
+        ));
+    }
+    let mut options = CameraImuOptions {
+        update: args.update,
+        pixel_sigma: args.pixel_sigma,
+        ..CameraImuOptions::default()
+    };
+    options.prior.estimate_time_offset = !args.no_time_offset;
+    let input = CameraImuInput {
+        imu: dataset.require_imu()?,
+        imu_noise: dataset.require_imu_noise()?,
+        camera: &camera_data.camera,
+        frames: &frames,
+    };
+    let filtering = progress_bar("{spinner} filtering [{bar:40}] {percent}% {elapsed}");
+    let outcome = calibrate::<f64>(&input, &options, &mut |f| {
+        filtering.set_position((f * 1000.0) as u64)
+    });
+    filtering.finish_and_clear();
+    let calibration =
+        outcome.map_err(|PoseImuError::BadInput(m)| anyhow!("{}: {m}", args.dataset.display()))?;
+    CalibrationResult {
+        cam0: Some(calibration.estimate()),
+        ..CalibrationResult::default()
+    }
+    .write(&args.output)?;
+    let r = &calibration.report;
+    eprintln!(
+        "msreg: wrote {} ({:?}: {} images fused, mean reprojection error {:.3} px, mean NIS/dof {:.2})",
+        args.output.display(),
+        r.update,
+        r.filter.updates_accepted,
+        r.mean_reprojection_error_px,
+        r.filter.mean_nis_per_dof
+    );
+    if let Some(path) = &args.report {
+        let report = CameraImuCliReport {
+            detection,
+            calibration: calibration.report.clone(),
+        };
+        std::fs::write(path, serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("{}: cannot write report", path.display()))?;
+    }
+    if let Some(path) = &args.plot {
+        write_plot(path, &dataset, &calibration, &args.dataset);
+    }
+    if let Some(path) = &args.overlay {
+        match &calibration.sample {
+            Some(sample) => {
+                let magnification = write_overlay(path, &camera_data, sample)?;
+                eprintln!(
+                    "msreg: wrote {} (error vectors magnified {magnification}x)",
+                    path.display()
+                );
+            }
+            None => eprintln!("msreg: warning: no reprojection sample (MoCal has none)"),
+        }
+    }
+    Ok(if calibration.report.filter.converged {
+        Outcome::Converged
+    } else {
+        Outcome::NotConverged(calibration.report.filter.reasons.join("; "))
+    })
+}
+
+/// The detected corners as filter input, and the detection summary.
+fn corner_frames(
+    data: &CameraDataset,
+    results: &[FrameResult],
+    started: Instant,
+) -> (Vec<CornerFrame>, DetectionSummary) {
+    let mut rejected = BTreeMap::new();
+    let mut frames = Vec::with_capacity(results.len());
+    for result in results {
+        match &result.corners {
+            Ok(found) => frames.push(CornerFrame {
+                stamp_ns: result.stamp_ns,
+                corners: found
+                    .target_points(&data.target)
+                    .into_iter()
+                    .zip(&found.pixels)
+                    .map(|(point_in_target, pixel)| CornerObservation {
+                        point_in_target,
+                        pixel: *pixel,
+                    })
+                    .collect(),
+            }),
+            Err(why) => *rejected.entry(why.to_string()).or_insert(0) += 1,
+        }
+    }
+    let summary = DetectionSummary {
+        images: results.len(),
+        detected: frames.len(),
+        rejected,
+        time_s: started.elapsed().as_secs_f64(),
+    };
+    (frames, summary)
+}
+
+/// The convergence plot of `T_imu_cam` (the filter's state), with the truth when the
+/// dataset has it. A plotting failure (no font) is a warning: the calibration succeeded.
+fn write_plot(path: &Path, dataset: &Dataset, calibration: &CameraImuCalibration, dir: &Path) {
+    let truth = dataset
+        .groundtruth_extrinsics
+        .as_ref()
+        .and_then(|g| g.cam0.as_ref())
+        .map(|cam0| {
+            let t_imu_cam = cam0.transform.inverse();
+            (
+                t_imu_cam.rotation.scaled_axis().into(),
+                t_imu_cam.translation.vector.into(),
+                cam0.timeshift_s,
+            )
+        });
+    let series = crate::plot::extrinsic_series(&calibration.report.filter.history, truth);
+    let name = std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf());
+    let title = format!("T_imu_cam convergence: {}", name.display());
+    match crate::plot::write_convergence_png(path, &title, &series, (1500, 1100)) {
+        Ok(()) => eprintln!("msreg: wrote {}", path.display()),
+        Err(e) => eprintln!("msreg: warning: {e}"),
+    }
+}
+
+/// The sample image in colour: detected corners as green crosses, reprojected ones as red
+/// dots, and the reprojection error vectors in yellow, magnified so the mean one is about
+/// [`OVERLAY_MEAN_ERROR_PX`] long (Fig. 4.4). Returns the magnification.
+fn write_overlay(
+    path: &Path,
+    data: &CameraDataset,
+    sample: &ReprojectionSample,
+) -> anyhow::Result<f64> {
+    let Some(frame) = data.frames.iter().find(|f| f.stamp_ns == sample.stamp_ns) else {
+        return Err(anyhow!(
+            "cam0/data.csv: no image stamped {}",
+            sample.stamp_ns
+        ));
+    };
+    let grey = GrayImage::load(&frame.path)?.to_luma8();
+    let mut rgb = image::RgbImage::from_fn(grey.width(), grey.height(), |x, y| {
+        let v = grey.get_pixel(x, y).0[0] / 2 + 64;
+        image::Rgb([v, v, v])
+    });
+    let mut put = |x: f64, y: f64, colour: [u8; 3]| {
+        let (x, y) = (x.round(), y.round());
+        if x >= 0.0 && y >= 0.0 && (x as u32) < rgb.width() && (y as u32) < rgb.height() {
+            rgb.put_pixel(x as u32, y as u32, image::Rgb(colour));
+        }
+    };
+    let pairs = || sample.detected.iter().zip(&sample.reprojected);
+    let mean_error = pairs().map(|(d, r)| (r - d).norm()).sum::<f64>() / pairs().len().max(1) as f64;
+    let magnification = round_to_1_2_5((OVERLAY_MEAN_ERROR_PX / mean_error).clamp(1.0, 1000.0));
+    for (detected, reprojected) in pairs() {
+        let error = (reprojected - detected) * magnification;
+        let steps = error.norm().ceil().max(1.0) as usize;
+        for k in 0..=steps {
+            let p = detected + error * (k as f64 / steps as f64);
+            put(p.x, p.y, [255, 220, 0]);
+        }
+        for d in -4..=4 {
+            let d = f64::from(d);
+            put(detected.x + d, detected.y, [0, 230, 0]);
+            put(detected.x, detected.y + d, [0, 230, 0]);
+        }
+        for dy in -1..=1 {
+            for dx in -1..=1 {
+                put(
+                    reprojected.x + f64::from(dx),
+                    reprojected.y + f64::from(dy),
+                    [255, 40, 40],
+                );
+            }
+        }
+    }
+    rgb.save(path)
+        .with_context(|| format!("{}: cannot write overlay", path.display()))?;
+    Ok(magnification)
+}
+
+/// The largest of 1, 2, 5, 10, 20, ... not above `x` (at least 1).
+fn round_to_1_2_5(x: f64) -> f64 {
+    let decade = 10f64.powf(x.max(1.0).log10().floor());
+    [5.0, 2.0, 1.0]
+        .into_iter()
+        .map(|m| m * decade)
+        .find(|&v| v <= x)
+        .unwrap_or(decade)
+}
+
+fn progress_bar(template: &str) -> ProgressBar {
+    let bar = ProgressBar::new(1000);
+    if let Ok(style) = ProgressStyle::with_template(template) {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar
+}
