@@ -116,8 +116,12 @@ pub struct CameraImuReport {
     pub pixel_sigma: f64,
     /// Images with a PnP pose (of those given).
     pub frames_with_pose: usize,
-    /// Mean reprojection error over the accepted images, after their update, pixels.
+    /// Mean reprojection error over the accepted images, after their update, pixels
+    /// (RepErrCal; NaN for MoCal).
     pub mean_reprojection_error_px: f64,
+    /// Mean reprojection error of a second pass over all images with the extrinsic and time
+    /// offset held at the final estimate: the same metric for both models (Table 4.4).
+    pub verification_reprojection_error_px: f64,
     /// Per image (RepErrCal only).
     pub frames: Vec<FrameReprojection>,
     /// How RepErrCal was initialised (None for MoCal).
@@ -246,24 +250,52 @@ pub fn calibrate<T: Scalar>(
             pixel_sigma,
             frames_with_pose: poses.len(),
             mean_reprojection_error_px: f64::NAN,
+            verification_reprojection_error_px: f64::NAN,
             frames: Vec::new(),
             initialization: None,
             filter: motion.report,
         },
         sample: None,
     };
-    match options.update {
-        CameraUpdate::Motion => {
-            progress(1.0);
-            Ok(motion)
-        }
-        CameraUpdate::Reprojection => {
-            reprojection_calibration::<T>(input, options, &motion, pixel_sigma, started, &mut |f| {
-                progress(0.3 + 0.7 * f)
-            })
-        }
-    }
+    let mut calibration = match options.update {
+        CameraUpdate::Motion => motion,
+        CameraUpdate::Reprojection => reprojection_calibration::<T>(
+            input,
+            options,
+            &motion,
+            ExtrinsicPrior::AroundStart,
+            pixel_sigma,
+            started,
+            &mut |f| progress(0.3 + 0.6 * f),
+        )?,
+    };
+    let verification = reprojection_calibration::<T>(
+        input,
+        options,
+        &calibration,
+        ExtrinsicPrior::Held,
+        pixel_sigma,
+        Instant::now(),
+        &mut |f| progress(0.9 + 0.1 * f),
+    )?;
+    calibration.report.verification_reprojection_error_px =
+        verification.report.mean_reprojection_error_px;
+    progress(1.0);
+    Ok(calibration)
 }
+
+/// How RepErrCal's extrinsic and time-offset prior is set around its starting estimate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum ExtrinsicPrior {
+    /// The start's covariance, floored by [`REPROJECTION_PRIOR_FLOOR`]: calibrate.
+    AroundStart,
+    /// [`HELD_SIGMA`]: the extrinsic and time offset stay at the start (verification).
+    Held,
+}
+
+/// Prior 1-sigma (rad, m, s) that holds the extrinsic and time offset in the verification
+/// pass: far below what the data resolve, far above the scalar's rounding.
+const HELD_SIGMA: f64 = 1e-6;
 
 /// Smallest prior 1-sigma of RepErrCal around the MoCal estimate: wide enough that the
 /// prior carries almost none of the information (the same data produced it), narrow enough
@@ -279,6 +311,7 @@ fn reprojection_calibration<T: Scalar>(
     input: &CameraImuInput<'_>,
     options: &CameraImuOptions,
     motion: &CameraImuCalibration,
+    extrinsic_prior: ExtrinsicPrior,
     pixel_sigma: f64,
     started: Instant,
     progress: &mut dyn FnMut(f64),
@@ -294,7 +327,7 @@ fn reprojection_calibration<T: Scalar>(
         mut ekf,
         prior,
         rotation_init,
-    } = start_from_motion::<T>(input, options, standstill.as_ref(), motion)?;
+    } = start_from_motion::<T>(input, options, standstill.as_ref(), motion, extrinsic_prior)?;
     let init_s = started.elapsed().as_secs_f64();
 
     let started = Instant::now();
@@ -349,6 +382,7 @@ fn reprojection_calibration<T: Scalar>(
             pixel_sigma,
             frames_with_pose: motion.report.frames_with_pose,
             mean_reprojection_error_px: accepted.iter().sum::<f64>() / accepted.len().max(1) as f64,
+            verification_reprojection_error_px: f64::NAN,
             frames: reprojection,
             initialization: Some(Initialization {
                 method: "MoCal (motion-based EKF on PnP poses), then RepErrCal from its estimate",
@@ -376,6 +410,7 @@ fn start_from_motion<T: Scalar>(
     options: &CameraImuOptions,
     standstill: Option<&init::Standstill>,
     motion: &CameraImuCalibration,
+    extrinsic_prior: ExtrinsicPrior,
 ) -> Result<StartFromMotion<T>, PoseImuError> {
     let imu = input.imu;
     let m = &motion.report.filter;
@@ -386,11 +421,18 @@ fn start_from_motion<T: Scalar>(
         pairs: m.hand_eye_pairs,
         axis_ratio: m.hand_eye_axis_ratio,
     };
-    let (floor_r, floor_t, floor_td) = REPROJECTION_PRIOR_FLOOR;
-    let sd = |i: usize| motion.covariance[(i, i)].max(0.0).sqrt();
-    let sigma_r = (0..3).map(sd).fold(floor_r, f64::max);
-    let sigma_t = (3..6).map(sd).fold(floor_t, f64::max);
-    let sigma_td = motion.time_offset_sigma_s.max(floor_td);
+    let (sigma_r, sigma_t, sigma_td) = match extrinsic_prior {
+        ExtrinsicPrior::AroundStart => {
+            let (floor_r, floor_t, floor_td) = REPROJECTION_PRIOR_FLOOR;
+            let sd = |i: usize| motion.covariance[(i, i)].max(0.0).sqrt();
+            (
+                (0..3).map(sd).fold(floor_r, f64::max),
+                (3..6).map(sd).fold(floor_t, f64::max),
+                motion.time_offset_sigma_s.max(floor_td),
+            )
+        }
+        ExtrinsicPrior::Held => (HELD_SIGMA, HELD_SIGMA, HELD_SIGMA),
+    };
     let prior = PoseImuOptions {
         rotation_sigma_rad: sigma_r,
         translation_sigma_m: sigma_t,

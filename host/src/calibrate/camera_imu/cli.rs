@@ -19,7 +19,7 @@ use super::{
 };
 use crate::calibrate::pose_imu::PoseImuError;
 use crate::dataset::{CalibrationResult, Dataset};
-use crate::vision::frames::{CameraDataset, FrameResult};
+use crate::vision::frames::{CameraDataset, CameraInputError};
 use crate::vision::{DetectorParams, GrayImage};
 
 /// `msreg calibrate camera-imu`.
@@ -98,13 +98,10 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
             return Err(anyhow!("--pixel-sigma must be positive, got {sigma}"));
         }
     }
-    let started = Instant::now();
     let detecting = progress_bar("{spinner} detecting corners [{bar:40}] {percent}% {elapsed}");
-    let results = camera_data.detect(&DetectorParams::default(), &|f| {
-        detecting.set_position((f * 1000.0) as u64)
-    })?;
+    let (frames, detection) =
+        detect_corner_frames(&camera_data, &|f| detecting.set_position((f * 1000.0) as u64))?;
     detecting.finish_and_clear();
-    let (frames, detection) = corner_frames(&camera_data, &results, started);
     eprintln!(
         "msreg: board found in {} of {} images ({:.1} s)",
         detection.detected, detection.images, detection.time_s
@@ -152,12 +149,13 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
     .write(&args.output)?;
     let r = &calibration.report;
     eprintln!(
-        "msreg: wrote {} ({:?}: {} images fused, mean reprojection error {:.3} px, mean NIS/dof {:.2})",
+        "msreg: wrote {} ({:?}: {} images fused, mean NIS/dof {:.2}; mean reprojection error \
+         with the result held: {:.3} px)",
         args.output.display(),
         r.update,
         r.filter.updates_accepted,
-        r.mean_reprojection_error_px,
-        r.filter.mean_nis_per_dof
+        r.filter.mean_nis_per_dof,
+        r.verification_reprojection_error_px
     );
     if let Some(path) = &args.report {
         let report = CameraImuCliReport {
@@ -189,15 +187,17 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
     })
 }
 
-/// The detected corners as filter input, and the detection summary.
-fn corner_frames(
+/// Detects the checkerboard in every image of the dataset: the corners as filter input,
+/// and the detection summary. `progress` receives the fraction of images done.
+pub fn detect_corner_frames(
     data: &CameraDataset,
-    results: &[FrameResult],
-    started: Instant,
-) -> (Vec<CornerFrame>, DetectionSummary) {
+    progress: &(dyn Fn(f64) + Sync),
+) -> Result<(Vec<CornerFrame>, DetectionSummary), CameraInputError> {
+    let started = Instant::now();
+    let results = data.detect(&DetectorParams::default(), progress)?;
     let mut rejected = BTreeMap::new();
     let mut frames = Vec::with_capacity(results.len());
-    for result in results {
+    for result in &results {
         match &result.corners {
             Ok(found) => frames.push(CornerFrame {
                 stamp_ns: result.stamp_ns,
@@ -220,7 +220,7 @@ fn corner_frames(
         rejected,
         time_s: started.elapsed().as_secs_f64(),
     };
-    (frames, summary)
+    Ok((frames, summary))
 }
 
 /// The convergence plot of `T_imu_cam` (the filter's state), with the truth when the
