@@ -149,11 +149,8 @@ pub enum LidarReject {
     },
 }
 
-/// Least-squares plane through points: unit normal, offset and RMS distance.
-pub fn fit_plane(points: &[Vector3<f64>]) -> Option<(Vector3<f64>, f64, f64)> {
-    if points.len() < 3 {
-        return None;
-    }
+/// Centroid and eigen-decomposition of the scatter of `points` (at least one point).
+fn scatter(points: &[Vector3<f64>]) -> (Vector3<f64>, SymmetricEigen<f64, nalgebra::U3>) {
     let n = points.len() as f64;
     let mean = points.iter().sum::<Vector3<f64>>() / n;
     let mut cov = Matrix3::zeros();
@@ -161,21 +158,34 @@ pub fn fit_plane(points: &[Vector3<f64>]) -> Option<(Vector3<f64>, f64, f64)> {
         let d = p - mean;
         cov += d * d.transpose();
     }
-    let eig = SymmetricEigen::new(cov / n);
-    let (imin, _) = eig
-        .eigenvalues
-        .iter()
-        .enumerate()
-        .min_by(|a, b| a.1.total_cmp(b.1))?;
-    let normal = eig.eigenvectors.column(imin).into_owned();
+    (mean, SymmetricEigen::new(cov / n))
+}
+
+/// The eigenvector of the smallest (`largest = false`) or largest eigenvalue.
+fn extreme_axis(eig: &SymmetricEigen<f64, nalgebra::U3>, largest: bool) -> Option<Vector3<f64>> {
+    let values = eig.eigenvalues.iter().enumerate();
+    let (i, _) = if largest {
+        values.max_by(|a, b| a.1.total_cmp(b.1))?
+    } else {
+        values.min_by(|a, b| a.1.total_cmp(b.1))?
+    };
+    Some(eig.eigenvectors.column(i).into_owned())
+}
+
+/// Root mean square of `distance` over `points`.
+fn rms(points: &[Vector3<f64>], distance: impl Fn(&Vector3<f64>) -> f64) -> f64 {
+    (points.iter().map(|p| distance(p).powi(2)).sum::<f64>() / points.len() as f64).sqrt()
+}
+
+/// Least-squares plane through points: unit normal, offset and RMS distance.
+pub fn fit_plane(points: &[Vector3<f64>]) -> Option<(Vector3<f64>, f64, f64)> {
+    if points.len() < 3 {
+        return None;
+    }
+    let (mean, eig) = scatter(points);
+    let normal = extreme_axis(&eig, false)?;
     let offset = normal.dot(&mean);
-    let rms = (points
-        .iter()
-        .map(|p| (normal.dot(p) - offset).powi(2))
-        .sum::<f64>()
-        / n)
-        .sqrt();
-    Some((normal, offset, rms))
+    Some((normal, offset, rms(points, |p| normal.dot(p) - offset)))
 }
 
 /// Least-squares line: centroid, unit direction and RMS distance.
@@ -183,27 +193,9 @@ fn fit_line(points: &[Vector3<f64>]) -> Option<(Vector3<f64>, Vector3<f64>, f64)
     if points.len() < 2 {
         return None;
     }
-    let n = points.len() as f64;
-    let mean = points.iter().sum::<Vector3<f64>>() / n;
-    let mut cov = Matrix3::zeros();
-    for p in points {
-        let d = p - mean;
-        cov += d * d.transpose();
-    }
-    let eig = SymmetricEigen::new(cov / n);
-    let (imax, _) = eig
-        .eigenvalues
-        .iter()
-        .enumerate()
-        .max_by(|a, b| a.1.total_cmp(b.1))?;
-    let dir = eig.eigenvectors.column(imax).into_owned();
-    let rms = (points
-        .iter()
-        .map(|p| line_distance(p, &mean, &dir).powi(2))
-        .sum::<f64>()
-        / n)
-        .sqrt();
-    Some((mean, dir, rms))
+    let (mean, eig) = scatter(points);
+    let dir = extreme_axis(&eig, true)?;
+    Some((mean, dir, rms(points, |p| line_distance(p, &mean, &dir))))
 }
 
 fn line_distance(p: &Vector3<f64>, c: &Vector3<f64>, dir: &Vector3<f64>) -> f64 {
