@@ -12,7 +12,7 @@ use msreg_host::calibrate::camera_imu::{
 use msreg_host::dataset::{CalibrationResult, Dataset, ExtrinsicEstimate};
 use msreg_host::eval::{compare, SectionErrors};
 use msreg_host::sim::camera::{simulate_camera_imu, CameraImuSimConfig};
-use msreg_host::vision::CameraDataset;
+use msreg_host::vision::{CameraDataset, DetectorParams};
 
 /// Time offsets of the seeds, ms (cycled).
 const TIME_OFFSETS_MS: [f64; 5] = [5.0, -3.0, 8.0, 0.0, -6.0];
@@ -20,7 +20,12 @@ const TIME_OFFSETS_MS: [f64; 5] = [5.0, -3.0, 8.0, 0.0, -6.0];
 struct Run {
     seed: u64,
     truth: ExtrinsicEstimate,
-    results: Vec<(CameraUpdate, ExtrinsicEstimate, SectionErrors, CameraImuCalibration)>,
+    results: Vec<(
+        CameraUpdate,
+        ExtrinsicEstimate,
+        SectionErrors,
+        CameraImuCalibration,
+    )>,
     images: usize,
     detected: usize,
     detect_s: f64,
@@ -39,7 +44,8 @@ fn run(seed: u64, duration_s: f64) -> anyhow::Result<Run> {
     sim.write(dir.path(), &|_| {})?;
     let dataset = Dataset::open(dir.path())?;
     let camera_data = CameraDataset::open(dir.path())?;
-    let (frames, detection) = detect_corner_frames(&camera_data, &|_| {})?;
+    let (frames, detection) =
+        detect_corner_frames(&camera_data, &DetectorParams::default(), &|_| {})?;
     let truth = CalibrationResult::read(dir.path().join("groundtruth/extrinsics.yaml"))?
         .cam0
         .ok_or_else(|| anyhow::anyhow!("no cam0 truth"))?;
@@ -110,7 +116,12 @@ fn main() -> anyhow::Result<()> {
     for r in &runs {
         println!("| {} | truth | {} |", r.seed, pose_cells(&r.truth));
         for (update, estimate, _, _) in &r.results {
-            println!("| {} | {} | {} |", r.seed, name(*update), pose_cells(estimate));
+            println!(
+                "| {} | {} | {} |",
+                r.seed,
+                name(*update),
+                pose_cells(estimate)
+            );
         }
     }
 

@@ -25,6 +25,10 @@ pub struct DetectCheckerboardArgs {
     /// Write the CSV here instead of stdout.
     #[arg(short, long)]
     output: Option<PathBuf>,
+    /// Refine with OpenCV's fixed 23 x 23 window (`cornerSubPix` winSize 11) instead of a
+    /// window capped at half the corner spacing (docs/checkerboard.md).
+    #[arg(long)]
+    opencv_window: bool,
 }
 
 /// Runs the detector; returns how many images had a full board. Errors are bad input.
@@ -36,6 +40,11 @@ pub fn run(args: &DetectCheckerboardArgs) -> anyhow::Result<usize> {
         );
     };
     let camera = args.camera.as_deref().map(read_camera_yaml).transpose()?;
+    let params = if args.opencv_window {
+        DetectorParams::opencv_compatible()
+    } else {
+        DetectorParams::default()
+    };
     let mut csv = String::from("image,corner_id,u,v\n");
     let mut detected = 0;
     for path in &args.images {
@@ -52,7 +61,7 @@ pub fn run(args: &DetectCheckerboardArgs) -> anyhow::Result<usize> {
                 camera.resolution.1
             );
         }
-        match detect_checkerboard(&image, target.rows, target.cols, &DetectorParams::default()) {
+        match detect_checkerboard(&image, target.rows, target.cols, &params) {
             Ok(detection) => {
                 detected += 1;
                 for (id, p) in detection.corners.iter().enumerate() {

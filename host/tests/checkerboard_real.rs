@@ -328,3 +328,53 @@ fn where_default_fisheye_corners_differ_from_opencv_they_fit_the_equidistant_mod
     }
     assert!(differing >= 3, "expected the small-square images to differ");
 }
+
+/// `msreg detect checkerboard --opencv-window` selects OpenCV's window: on `left-0010`
+/// (~16 px squares) it reproduces the reference, where the default's capped window differs.
+#[test]
+fn the_cli_opencv_window_flag_reproduces_the_fisheye_reference() {
+    let Some(dir) = data_dir("checkerboard-fisheye") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let target = tmp.path().join("target.yaml");
+    std::fs::write(
+        &target,
+        "target_type: checkerboard\ntargetRows: 6\ntargetCols: 8\nrowSpacingMeters: 0.1\ncolSpacingMeters: 0.1\n",
+    )
+    .unwrap();
+    let image = dir.join("left-0010.png");
+    let reference = &reference(&dir)["left-0010.png"];
+    let rms = |extra: &[&str]| {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_msreg"))
+            .args([
+                "detect",
+                "checkerboard",
+                image.to_str().unwrap(),
+                "--target",
+            ])
+            .arg(&target)
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let found: Vec<Vector2<f64>> = String::from_utf8(out.stdout)
+            .unwrap()
+            .lines()
+            .skip(1)
+            .map(|l| {
+                let f: Vec<f64> = l.split(',').skip(2).map(|x| x.parse().unwrap()).collect();
+                Vector2::new(f[0], f[1])
+            })
+            .collect();
+        rms_to_nearest(&found, reference)
+    };
+    let (opencv, default) = (rms(&["--opencv-window"]), rms(&[]));
+    println!("left-0010 vs reference: --opencv-window {opencv:.4} px, default {default:.4} px");
+    assert!(opencv < 0.15, "{opencv}");
+    assert!(default > 0.3, "{default}");
+}

@@ -49,6 +49,10 @@ pub struct CalibrateCameraImu {
     /// Keep the time offset fixed at zero.
     #[arg(long)]
     pub no_time_offset: bool,
+    /// Refine corners with OpenCV's fixed 23 x 23 window instead of a window capped at half
+    /// the corner spacing (docs/checkerboard.md).
+    #[arg(long)]
+    pub opencv_window: bool,
 }
 
 /// How a calibration ended (exit code 0 or 1).
@@ -99,8 +103,14 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
         }
     }
     let detecting = progress_bar("{spinner} detecting corners [{bar:40}] {percent}% {elapsed}");
-    let (frames, detection) =
-        detect_corner_frames(&camera_data, &|f| detecting.set_position((f * 1000.0) as u64))?;
+    let params = if args.opencv_window {
+        DetectorParams::opencv_compatible()
+    } else {
+        DetectorParams::default()
+    };
+    let (frames, detection) = detect_corner_frames(&camera_data, &params, &|f| {
+        detecting.set_position((f * 1000.0) as u64)
+    })?;
     detecting.finish_and_clear();
     eprintln!(
         "msreg: board found in {} of {} images ({:.1} s)",
@@ -191,10 +201,11 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
 /// and the detection summary. `progress` receives the fraction of images done.
 pub fn detect_corner_frames(
     data: &CameraDataset,
+    params: &DetectorParams,
     progress: &(dyn Fn(f64) + Sync),
 ) -> Result<(Vec<CornerFrame>, DetectionSummary), CameraInputError> {
     let started = Instant::now();
-    let results = data.detect(&DetectorParams::default(), progress)?;
+    let results = data.detect(params, progress)?;
     let mut rejected = BTreeMap::new();
     let mut frames = Vec::with_capacity(results.len());
     for result in &results {
@@ -273,7 +284,8 @@ fn write_overlay(
         }
     };
     let pairs = || sample.detected.iter().zip(&sample.reprojected);
-    let mean_error = pairs().map(|(d, r)| (r - d).norm()).sum::<f64>() / pairs().len().max(1) as f64;
+    let mean_error =
+        pairs().map(|(d, r)| (r - d).norm()).sum::<f64>() / pairs().len().max(1) as f64;
     let magnification = round_to_1_2_5((OVERLAY_MEAN_ERROR_PX / mean_error).clamp(1.0, 1000.0));
     for (detected, reprojected) in pairs() {
         let error = (reprojected - detected) * magnification;
