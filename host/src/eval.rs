@@ -80,11 +80,18 @@ pub fn evaluate(result: &CalibrationResult, truth: &CalibrationResult) -> Vec<Se
         .collect()
 }
 
+/// The header line of [`table`].
+pub const TABLE_HEADER: &str =
+    "section      rot err [deg]  3-sigma [deg]  trans err [mm]  3-sigma [mm]  time err [ms]  inside 3 sigma\n";
+
 /// A plain-text table of the errors.
 pub fn table(errors: &[SectionErrors]) -> String {
-    let mut out = String::from(
-        "section      rot err [deg]  3-sigma [deg]  trans err [mm]  3-sigma [mm]  time err [ms]  inside 3 sigma\n",
-    );
+    format!("{TABLE_HEADER}{}", table_rows(errors))
+}
+
+/// The rows of [`table`], one per section, without the header.
+pub fn table_rows(errors: &[SectionErrors]) -> String {
+    let mut out = String::new();
     for e in errors {
         let s3r = 3.0 * e.sigma_rot_deg.iter().cloned().fold(0.0, f64::max);
         let s3t = 3.0 * e.sigma_trans_m.iter().cloned().fold(0.0, f64::max) * 1e3;

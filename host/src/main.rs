@@ -3,6 +3,7 @@
 //! Exit codes (CONVENTIONS.md): 0 success; 1 the calibration ran but did not converge or
 //! failed its checks (the result is still written, with the reason); 2 bad input.
 
+mod demo_cmd;
 mod detect_cmd;
 mod match_cmd;
 
@@ -12,7 +13,7 @@ use std::process::ExitCode;
 use anyhow::{anyhow, Context};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
-use msreg_host::calibrate::pose_imu::{self, PoseImuCalibration, PoseImuInput, PoseImuOptions};
+use msreg_host::calibrate::pose_imu::{self, PoseImuInput, PoseImuOptions};
 use msreg_host::dataset::{CalibrationResult, Dataset};
 use msreg_host::eval;
 use msreg_host::sim::{self, SimConfig};
@@ -50,15 +51,9 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
-    /// Simulate, calibrate and evaluate a pose-IMU dataset; prints a table.
-    Demo {
-        /// Simulation seed.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Keep the dataset and outputs in this directory (default: a temporary one).
-        #[arg(long)]
-        keep: Option<PathBuf>,
-    },
+    /// Simulate, calibrate and evaluate every pipeline (pose-IMU, camera-IMU, LiDAR-IMU,
+    /// LiDAR-camera) on short recordings; prints one table of errors against ground truth.
+    Demo(demo_cmd::DemoArgs),
     /// Talk to the firmware over a serial port: replay a dataset, monitor, show a recording.
     Link {
         #[command(subcommand)]
@@ -176,10 +171,10 @@ fn run(command: Command) -> Result<(), Failure> {
     match command {
         Command::Simulate {
             scenario: Scenario::PoseImu(args),
-        } => simulate_pose_imu(&args).map(|_| ()),
+        } => simulate_pose_imu(&args),
         Command::Calibrate {
             task: Task::PoseImu(args),
-        } => calibrate_pose_imu(&args, true).map(|_| ()),
+        } => calibrate_pose_imu(&args),
         Command::Simulate {
             scenario: Scenario::LidarImu(args),
         } => Ok(msreg_host::lidar::cli::simulate(&args)?),
@@ -216,7 +211,7 @@ fn run(command: Command) -> Result<(), Failure> {
             dataset,
             json,
         } => evaluate(&result, &dataset, json),
-        Command::Demo { seed, keep } => demo(seed, keep),
+        Command::Demo(args) => demo_cmd::run_demo(&args),
         Command::Link { command } => Ok(msreg_host::link::cli::run(command)?),
         Command::Detect {
             target: DetectTarget::Checkerboard(args),
@@ -232,7 +227,7 @@ fn run(command: Command) -> Result<(), Failure> {
     }
 }
 
-fn simulate_pose_imu(args: &SimulatePoseImu) -> Result<SimConfig, Failure> {
+fn simulate_pose_imu(args: &SimulatePoseImu) -> Result<(), Failure> {
     let mut config = SimConfig {
         seed: args.seed,
         duration_s: args.duration,
@@ -248,13 +243,10 @@ fn simulate_pose_imu(args: &SimulatePoseImu) -> Result<SimConfig, Failure> {
         data.imu.len(),
         data.pose.len()
     );
-    Ok(config)
+    Ok(())
 }
 
-fn calibrate_pose_imu(
-    args: &CalibratePoseImu,
-    show_progress: bool,
-) -> Result<PoseImuCalibration, Failure> {
+fn calibrate_pose_imu(args: &CalibratePoseImu) -> Result<(), Failure> {
     let dataset = Dataset::open(&args.dataset)?;
     let input = PoseImuInput {
         imu: dataset.require_imu()?,
@@ -266,7 +258,7 @@ fn calibrate_pose_imu(
         estimate_time_offset: !args.no_time_offset,
         ..PoseImuOptions::default()
     };
-    let bar = progress_bar(show_progress);
+    let bar = progress_bar();
     let mut progress = |f: f64| bar.set_position((f * 1000.0) as u64);
     let outcome = if args.f32 {
         pose_imu::calibrate::<f32>(&input, &options, &mut progress)
@@ -299,13 +291,10 @@ fn calibrate_pose_imu(
     if !calibration.report.converged {
         return Err(Failure::NotConverged(calibration.report.reasons.join("; ")));
     }
-    Ok(calibration)
+    Ok(())
 }
 
-fn progress_bar(visible: bool) -> ProgressBar {
-    if !visible {
-        return ProgressBar::hidden();
-    }
+fn progress_bar() -> ProgressBar {
     let bar = ProgressBar::new(1000);
     if let Ok(style) =
         ProgressStyle::with_template("{spinner} filtering [{bar:40}] {percent}% {elapsed}")
@@ -333,88 +322,4 @@ fn evaluate(result: &Path, dataset: &Path, json: bool) -> Result<(), Failure> {
         print!("{}", eval::table(&errors));
     }
     Ok(())
-}
-
-fn demo(seed: u64, keep: Option<PathBuf>) -> Result<(), Failure> {
-    let temp;
-    let dir = match keep {
-        Some(d) => d,
-        None => {
-            temp = tempfile_dir()?;
-            temp.clone()
-        }
-    };
-    let data_dir = dir.join("dataset");
-    println!("msreg demo: pose-IMU calibration on a simulated 60 s hand-held recording");
-    println!("  IMU 400 Hz (VN-300-class noise), odometry 10 Hz drifting 0.2 deg / 5 mm per increment, time offset 10 ms\n");
-    let config = simulate_pose_imu(&SimulatePoseImu {
-        out_dir: data_dir.clone(),
-        seed,
-        duration: 60.0,
-        time_offset_ms: 10.0,
-        pose_rate: 10.0,
-    })?;
-    let args = CalibratePoseImu {
-        dataset: data_dir.clone(),
-        output: dir.join("result.yaml"),
-        report: Some(dir.join("report.json")),
-        no_time_offset: false,
-        f32: false,
-        plot: None,
-    };
-    let started = std::time::Instant::now();
-    let outcome = calibrate_pose_imu(&args, true);
-    let elapsed = started.elapsed().as_secs_f64();
-    let calibration = match outcome {
-        Ok(c) => Some(c),
-        Err(Failure::NotConverged(why)) => {
-            println!("did not converge: {why}");
-            None
-        }
-        Err(e) => return Err(e),
-    };
-    let estimate = CalibrationResult::read(&args.output)?;
-    let truth = Dataset::open(&data_dir)?;
-    let truth_extrinsics = truth.require_groundtruth_extrinsics()?;
-    let errors = eval::evaluate(&estimate, truth_extrinsics);
-    for (name, section) in [
-        ("truth", &truth_extrinsics.pose0),
-        ("estimate", &estimate.pose0),
-    ] {
-        if let Some(x) = section {
-            let (r, p, y) = x.transform.rotation.euler_angles();
-            let t = x.transform.translation.vector;
-            println!(
-                "{name:<9} T_imu_pose: roll {:9.4} pitch {:8.4} yaw {:9.4} deg, xyz {:8.4} {:8.4} {:8.4} m",
-                r.to_degrees(),
-                p.to_degrees(),
-                y.to_degrees(),
-                t.x,
-                t.y,
-                t.z
-            );
-        }
-    }
-    println!();
-    print!("{}", eval::table(&errors));
-    if let Some(c) = calibration {
-        println!(
-            "\ntime offset: estimated {:.3} ms (truth {:.3} ms, 1-sigma {:.3} ms); {} updates, mean NIS/dof {:.2}; filter {:.2} s for {:.0} s of data",
-            c.time_offset_s * 1e3,
-            config.pose.time_offset_s * 1e3,
-            c.time_offset_sigma_s * 1e3,
-            c.report.updates_accepted,
-            c.report.mean_nis_per_dof,
-            elapsed,
-            config.duration_s
-        );
-    }
-    println!("dataset, result and report in {}", dir.display());
-    Ok(())
-}
-
-fn tempfile_dir() -> anyhow::Result<PathBuf> {
-    let dir = std::env::temp_dir().join(format!("msreg-demo-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).with_context(|| format!("{}: cannot create", dir.display()))?;
-    Ok(dir)
 }

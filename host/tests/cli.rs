@@ -192,10 +192,35 @@ fn demo_prints_the_table() {
     let o = msreg(&["demo", "--keep", &keep.to_string_lossy()], dir.path());
     assert!(o.status.success(), "{}", stderr(&o));
     let out = String::from_utf8_lossy(&o.stdout);
-    assert!(
-        out.contains("pose0") && out.contains("inside 3 sigma"),
-        "{out}"
-    );
+    assert!(out.contains("inside 3 sigma"), "{out}");
+    for (section, pipeline) in [
+        ("pose0", "pose-imu"),
+        ("cam0", "camera-imu"),
+        ("lidar0", "lidar-imu"),
+        ("cam0_lidar0", "lidar-camera"),
+    ] {
+        let row = out
+            .lines()
+            .find(|l| l.split_whitespace().next() == Some(section))
+            .unwrap_or_else(|| panic!("no {section} row: {out}"));
+        assert!(row.ends_with("yes"), "{row}");
+        assert!(
+            out.contains(&format!("{pipeline:<13} converged")),
+            "{pipeline}: {out}"
+        );
+        assert!(keep.join(pipeline).join("result.yaml").is_file());
+    }
+}
+
+#[test]
+fn demo_only_runs_the_named_pipelines() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let o = msreg(&["demo", "--only", "pose-imu"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("pose0") && !out.contains("lidar0"), "{out}");
+    let o = msreg(&["demo", "--only", "radar-imu"], dir.path());
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
 }
 
 #[test]
