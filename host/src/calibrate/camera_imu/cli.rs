@@ -49,6 +49,9 @@ pub struct CalibrateCameraImu {
     /// Keep the time offset fixed at zero.
     #[arg(long)]
     pub no_time_offset: bool,
+    /// Run the filter in f32, as the firmware does.
+    #[arg(long)]
+    pub f32: bool,
     /// Refine corners with OpenCV's fixed 23 x 23 window instead of a window capped at half
     /// the corner spacing (docs/checkerboard.md).
     #[arg(long)]
@@ -146,9 +149,12 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
         frames: &frames,
     };
     let filtering = progress_bar("{spinner} filtering [{bar:40}] {percent}% {elapsed}");
-    let outcome = calibrate::<f64>(&input, &options, &mut |f| {
-        filtering.set_position((f * 1000.0) as u64)
-    });
+    let mut progress = |f: f64| filtering.set_position((f * 1000.0) as u64);
+    let outcome = if args.f32 {
+        calibrate::<f32>(&input, &options, &mut progress)
+    } else {
+        calibrate::<f64>(&input, &options, &mut progress)
+    };
     filtering.finish_and_clear();
     let calibration =
         outcome.map_err(|PoseImuError::BadInput(m)| anyhow!("{}: {m}", args.dataset.display()))?;
