@@ -105,37 +105,7 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
             return Err(anyhow!("--pixel-sigma must be positive, got {sigma}"));
         }
     }
-    let detecting = progress_bar("{spinner} detecting corners [{bar:40}] {percent}% {elapsed}");
-    let params = if args.opencv_window {
-        DetectorParams::opencv_compatible()
-    } else {
-        DetectorParams::default()
-    };
-    let (frames, detection) = detect_corner_frames(&camera_data, &params, &|f| {
-        detecting.set_position((f * 1000.0) as u64)
-    })?;
-    detecting.finish_and_clear();
-    eprintln!(
-        "msreg: board found in {} of {} images ({:.1} s)",
-        detection.detected, detection.images, detection.time_s
-    );
-    if frames.len() < MIN_IMAGES {
-        let reasons: Vec<String> = detection
-            .rejected
-            .iter()
-            .map(|(why, n)| format!("{n} x {why}"))
-            .collect();
-        return Err(anyhow!(
-            "{}: the {}x{} checkerboard of target.yaml is found in {} of {} images, at least \
-             {MIN_IMAGES} are needed (rejected: {})",
-            args.dataset.display(),
-            camera_data.target.rows,
-            camera_data.target.cols,
-            frames.len(),
-            detection.images,
-            reasons.join(", ")
-        ));
-    }
+    let (frames, detection) = detect_for_calibration(args, &camera_data)?;
     let mut options = CameraImuOptions {
         update: args.update,
         pixel_sigma: args.pixel_sigma,
@@ -201,6 +171,46 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
     } else {
         Outcome::NotConverged(calibration.report.filter.reasons.join("; "))
     })
+}
+
+/// [`detect_corner_frames`] with a progress bar; fewer than [`MIN_IMAGES`] boards found is
+/// bad input, with the rejection reasons.
+fn detect_for_calibration(
+    args: &CalibrateCameraImu,
+    camera_data: &CameraDataset,
+) -> anyhow::Result<(Vec<CornerFrame>, DetectionSummary)> {
+    let detecting = progress_bar("{spinner} detecting corners [{bar:40}] {percent}% {elapsed}");
+    let params = if args.opencv_window {
+        DetectorParams::opencv_compatible()
+    } else {
+        DetectorParams::default()
+    };
+    let (frames, detection) = detect_corner_frames(camera_data, &params, &|f| {
+        detecting.set_position((f * 1000.0) as u64)
+    })?;
+    detecting.finish_and_clear();
+    eprintln!(
+        "msreg: board found in {} of {} images ({:.1} s)",
+        detection.detected, detection.images, detection.time_s
+    );
+    if frames.len() < MIN_IMAGES {
+        let reasons: Vec<String> = detection
+            .rejected
+            .iter()
+            .map(|(why, n)| format!("{n} x {why}"))
+            .collect();
+        return Err(anyhow!(
+            "{}: the {}x{} checkerboard of target.yaml is found in {} of {} images, at least \
+             {MIN_IMAGES} are needed (rejected: {})",
+            args.dataset.display(),
+            camera_data.target.rows,
+            camera_data.target.cols,
+            frames.len(),
+            detection.images,
+            reasons.join(", ")
+        ));
+    }
+    Ok((frames, detection))
 }
 
 /// Detects the checkerboard in every image of the dataset: the corners as filter input,
