@@ -97,7 +97,9 @@ pub struct LidarImuOptions {
     pub min_points: usize,
     /// Match each scan against a sliding map of this many recent deskewed scans
     /// (scan-to-local-map) instead of the previous scan; 0 = scan-to-scan. The increment
-    /// fused is still `T_L(k-1)_L(k)`, from the two scans' poses in the map.
+    /// fused is still `T_L(k-1)_L(k)`, from the two scans' poses in the map. Default 5: the
+    /// map cuts NDT's correlated errors, which scan-to-scan over-counts on long, dense
+    /// recordings (docs/lidar_imu.md).
     pub local_map_scans: usize,
 }
 
@@ -125,7 +127,7 @@ impl Default for LidarImuOptions {
             adapt: Some(NoiseAdaptation::default()),
             min_fitness: 0.05,
             min_points: 200,
-            local_map_scans: 0,
+            local_map_scans: 5,
         }
     }
 }

@@ -63,7 +63,7 @@ pub struct CalibrateLidarImu {
     pub plot: Option<PathBuf>,
     /// Match each scan against a sliding map of this many recent deskewed scans instead of
     /// the previous scan (0 = scan-to-scan).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 5)]
     pub local_map_scans: usize,
 }
 
