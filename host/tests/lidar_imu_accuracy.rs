@@ -314,7 +314,10 @@ fn default_local_map_is_accurate_and_not_overconfident_over_five_seeds() {
     let n = outcomes.len() as f64;
     for axis in 0..2 {
         let rho = outcomes.iter().map(|o| o.ndt_lag1[axis]).sum::<f64>() / n;
-        assert!(rho < 0.0, "mean lag-1 autocorrelation {rho:+.2} (axis block {axis})");
+        assert!(
+            rho < 0.0,
+            "mean lag-1 autocorrelation {rho:+.2} (axis block {axis})"
+        );
     }
 }
 
@@ -338,7 +341,10 @@ fn sixty_second_ouster_128_five_seeds() {
     let duration = env_or("MSREG_DURATION", 60) as f64;
     let options = LidarImuOptions {
         deskew: std::env::var("MSREG_NO_DESKEW").is_err(),
-        local_map_scans: env_or("MSREG_LOCAL_MAP", LidarImuOptions::default().local_map_scans),
+        local_map_scans: env_or(
+            "MSREG_LOCAL_MAP",
+            LidarImuOptions::default().local_map_scans,
+        ),
         ..LidarImuOptions::default()
     };
     let mut all_ok = true;
@@ -352,7 +358,10 @@ fn sixty_second_ouster_128_five_seeds() {
     let (lo, hi) = chi_square_band(6.0 * seeds as f64);
     println!("all seeds < 0.1 deg, < 5 mm and inside 3 sigma: {all_ok}");
     println!("NEES sum {nees_sum:.2}, 95 % band [{lo:.2}, {hi:.2}]");
-    assert!(all_ok, "a seed misses the accuracy or the 3 sigma criterion");
+    assert!(
+        all_ok,
+        "a seed misses the accuracy or the 3 sigma criterion"
+    );
     assert!(
         (lo..=hi).contains(&nees_sum),
         "NEES sum {nees_sum:.2} outside [{lo:.2}, {hi:.2}]"

@@ -10,8 +10,9 @@
 //!    `t_ref = stamp + max t_i` (its last firing) `+ t_d`:
 //!    predict (the filter holds the last IMU sample up to `t_ref`) -> **deskew** every point to
 //!    `t_ref` with the buffered filter poses and the current extrinsic (eq. 3.18) ->
-//!    voxel filter -> **NDT** against the previous deskewed scan from the IMU-predicted
-//!    relative motion -> **update** with `T_L(k-1)_L(k)` as a relative pose between the two
+//!    voxel filter -> **NDT** against a local map of the last `local_map_scans` deskewed
+//!    scans (default 5; 0: the previous scan) from the IMU-predicted relative motion ->
+//!    **update** with `T_L(k-1)_L(k)` as a relative pose between the two
 //!    reference stamps (eq. 3.19-3.21). Deskewing to the *last* firing means the measurement
 //!    time is one the IMU stream has just reached, so the filter clones its current pose
 //!    (it cannot clone in the past).
@@ -97,9 +98,10 @@ pub struct LidarImuOptions {
     pub min_points: usize,
     /// Match each scan against a sliding map of this many recent deskewed scans
     /// (scan-to-local-map) instead of the previous scan; 0 = scan-to-scan. The increment
-    /// fused is still `T_L(k-1)_L(k)`, from the two scans' poses in the map. Default 5: the
-    /// map cuts NDT's correlated errors, which scan-to-scan over-counts on long, dense
-    /// recordings (docs/lidar_imu.md).
+    /// fused is still `T_L(k-1)_L(k)`, from the two scans' poses in the map. Default 5:
+    /// scan-to-scan increments carry NDT's positively correlated errors, which the filter
+    /// over-counts on long, dense recordings (overconfident); map-based increments are
+    /// consistent there and conservative on sparse ones (docs/lidar_imu.md).
     pub local_map_scans: usize,
 }
 
