@@ -78,7 +78,9 @@ pub struct LidarImuOptions {
     /// Factors on NDT's covariance, `[rotation block, translation block]` (see the module
     /// docs: measured per-increment error variance times the autocorrelation inflation).
     pub covariance_scale: [f64; 2],
-    /// Per-axis 1-sigma rotation added to every increment, rad.
+    /// Per-axis 1-sigma rotation added to every increment, rad: stands for the part of
+    /// NDT's error that is correlated from scan to scan, which the white measurement model
+    /// cannot represent; it depends on the matching (see [`LidarImuOptions::scan_to_scan`]).
     pub rotation_floor_rad: f64,
     /// Per-axis 1-sigma translation added to every increment, m.
     pub translation_floor_m: f64,
@@ -121,8 +123,10 @@ impl Default for LidarImuOptions {
             init_duration_s: 15.0,
             ndt_covariance: NdtCovariance::Hessian,
             covariance_scale: [0.2, 0.2],
-            rotation_floor_rad: 0.005f64.to_radians(),
-            translation_floor_m: 0.0005,
+            // Half the scan-to-scan floor: map-based increments are more accurate and their
+            // errors not positively correlated (docs/lidar_imu.md).
+            rotation_floor_rad: 0.0025f64.to_radians(),
+            translation_floor_m: 0.00025,
             initial_rotation_floor_rad: 0.2f64.to_radians(),
             initial_translation_floor_m: 0.01,
             anneal_updates: 100.0,
@@ -130,6 +134,20 @@ impl Default for LidarImuOptions {
             min_fitness: 0.05,
             min_points: 200,
             local_map_scans: 5,
+        }
+    }
+}
+
+impl LidarImuOptions {
+    /// Scan-to-scan matching (`local_map_scans = 0`) with its own floor, 0.005 deg / 0.5 mm:
+    /// the size of scan-to-scan NDT's per-increment errors on dense scans, whose positive
+    /// correlation from scan to scan it stands for (docs/lidar_imu.md, noise model).
+    pub fn scan_to_scan() -> Self {
+        Self {
+            local_map_scans: 0,
+            rotation_floor_rad: 0.005f64.to_radians(),
+            translation_floor_m: 0.0005,
+            ..Self::default()
         }
     }
 }
