@@ -62,16 +62,10 @@ fn config(seed: u64, duration_s: f64, rings: usize, columns: usize) -> LidarImuS
 
 fn options(deskew: bool) -> LidarImuOptions {
     let local_map_scans = env_or("MSREG_LOCAL_MAP", 5.0) as usize;
-    let base = if local_map_scans == 0 {
-        LidarImuOptions::scan_to_scan()
-    } else {
-        LidarImuOptions::default()
-    };
     LidarImuOptions {
         deskew,
         anneal_updates: anneal_updates(env_or("MSREG_DURATION", 60.0)),
-        local_map_scans,
-        ..base
+        ..LidarImuOptions::for_local_map(local_map_scans)
     }
 }
 

@@ -252,10 +252,13 @@ fn short_recordings_are_consistent(base: LidarImuOptions) -> Vec<Outcome> {
             anneal_updates: 45.0,
             ..base.clone()
         };
-        noise_override(&mut options);
         if let Ok(k) = std::env::var("MSREG_LOCAL_MAP") {
-            options.local_map_scans = k.parse().unwrap_or(0);
+            options = LidarImuOptions {
+                anneal_updates: options.anneal_updates,
+                ..LidarImuOptions::for_local_map(k.parse().unwrap_or(0))
+            };
         }
+        noise_override(&mut options);
         let o = run(&config(seed, 25.0, 32, 512), &options);
         print(&o);
         outcomes.push(o);
@@ -346,15 +349,9 @@ fn sixty_second_ouster_128_five_seeds() {
         "MSREG_LOCAL_MAP",
         LidarImuOptions::default().local_map_scans,
     );
-    let base = if local_map_scans == 0 {
-        LidarImuOptions::scan_to_scan()
-    } else {
-        LidarImuOptions::default()
-    };
     let mut options = LidarImuOptions {
         deskew: std::env::var("MSREG_NO_DESKEW").is_err(),
-        local_map_scans,
-        ..base
+        ..LidarImuOptions::for_local_map(local_map_scans)
     };
     noise_override(&mut options);
     let mut all_ok = true;

@@ -101,9 +101,9 @@ pub struct LidarImuOptions {
     /// Match each scan against a sliding map of this many recent deskewed scans
     /// (scan-to-local-map) instead of the previous scan; 0 = scan-to-scan. The increment
     /// fused is still `T_L(k-1)_L(k)`, from the two scans' poses in the map. Default 5:
-    /// scan-to-scan increments carry NDT's positively correlated errors, which the filter
-    /// over-counts on long, dense recordings (overconfident); map-based increments are
-    /// consistent there and conservative on sparse ones (docs/lidar_imu.md).
+    /// more accurate than scan-to-scan, whose positively correlated increment errors make
+    /// the filter overconfident on long, dense recordings (docs/lidar_imu.md). The floor
+    /// depends on it: change it through [`LidarImuOptions::for_local_map`].
     pub local_map_scans: usize,
 }
 
@@ -139,6 +139,19 @@ impl Default for LidarImuOptions {
 }
 
 impl LidarImuOptions {
+    /// The defaults for matching against `local_map_scans` scans (0 = scan-to-scan), with
+    /// that mode's floor.
+    pub fn for_local_map(local_map_scans: usize) -> Self {
+        if local_map_scans == 0 {
+            Self::scan_to_scan()
+        } else {
+            Self {
+                local_map_scans,
+                ..Self::default()
+            }
+        }
+    }
+
     /// Scan-to-scan matching (`local_map_scans = 0`) with its own floor, 0.005 deg / 0.5 mm:
     /// the size of scan-to-scan NDT's per-increment errors on dense scans, whose positive
     /// correlation from scan to scan it stands for (docs/lidar_imu.md, noise model).

@@ -131,16 +131,9 @@ pub fn calibrate(args: &CalibrateLidarImu) -> anyhow::Result<Outcome> {
         imu_noise: dataset.require_imu_noise()?,
         scans: &scans,
     };
-    // The floor of the measurement noise belongs to the matching mode.
-    let base = if args.local_map_scans == 0 {
-        LidarImuOptions::scan_to_scan()
-    } else {
-        LidarImuOptions::default()
-    };
     let mut options = LidarImuOptions {
         deskew: !args.no_deskew,
-        local_map_scans: args.local_map_scans,
-        ..base
+        ..LidarImuOptions::for_local_map(args.local_map_scans)
     };
     options.filter.estimate_time_offset = !args.no_time_offset;
     let progress = bar("{spinner} calibrating [{bar:40}] {percent}% {elapsed}");
