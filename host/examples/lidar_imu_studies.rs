@@ -6,7 +6,8 @@
 //! the NDT covariance against the true increment errors). Env: `MSREG_SEEDS` (default 5),
 //! `MSREG_DURATION` (s, default 60),
 //! `MSREG_RING_COLUMNS` (columns of the rings study, default 1024), `MSREG_COLUMNS` (columns of
-//! the other studies, default 512), `MSREG_RINGS` (rings of the other studies, default 64).
+//! the other studies, default 512), `MSREG_RINGS` (rings of the other studies, default 64),
+//! `MSREG_LOCAL_MAP` (scans in the NDT local map, default 5 as the pipeline; 0 = scan-to-scan).
 
 use std::time::Instant;
 
@@ -60,10 +61,11 @@ fn config(seed: u64, duration_s: f64, rings: usize, columns: usize) -> LidarImuS
 }
 
 fn options(deskew: bool) -> LidarImuOptions {
+    let local_map_scans = env_or("MSREG_LOCAL_MAP", 5.0) as usize;
     LidarImuOptions {
         deskew,
         anneal_updates: anneal_updates(env_or("MSREG_DURATION", 60.0)),
-        ..LidarImuOptions::default()
+        ..LidarImuOptions::for_local_map(local_map_scans)
     }
 }
 

@@ -10,8 +10,9 @@
 //!    `t_ref = stamp + max t_i` (its last firing) `+ t_d`:
 //!    predict (the filter holds the last IMU sample up to `t_ref`) -> **deskew** every point to
 //!    `t_ref` with the buffered filter poses and the current extrinsic (eq. 3.18) ->
-//!    voxel filter -> **NDT** against the previous deskewed scan from the IMU-predicted
-//!    relative motion -> **update** with `T_L(k-1)_L(k)` as a relative pose between the two
+//!    voxel filter -> **NDT** against a local map of the last `local_map_scans` deskewed
+//!    scans (default 5; 0: the previous scan) from the IMU-predicted relative motion ->
+//!    **update** with `T_L(k-1)_L(k)` as a relative pose between the two
 //!    reference stamps (eq. 3.19-3.21). Deskewing to the *last* firing means the measurement
 //!    time is one the IMU stream has just reached, so the filter clones its current pose
 //!    (it cannot clone in the past).
@@ -77,7 +78,9 @@ pub struct LidarImuOptions {
     /// Factors on NDT's covariance, `[rotation block, translation block]` (see the module
     /// docs: measured per-increment error variance times the autocorrelation inflation).
     pub covariance_scale: [f64; 2],
-    /// Per-axis 1-sigma rotation added to every increment, rad.
+    /// Per-axis 1-sigma rotation added to every increment, rad: stands for the part of
+    /// NDT's error that is correlated from scan to scan, which the white measurement model
+    /// cannot represent; it depends on the matching (see [`LidarImuOptions::scan_to_scan`]).
     pub rotation_floor_rad: f64,
     /// Per-axis 1-sigma translation added to every increment, m.
     pub translation_floor_m: f64,
@@ -97,7 +100,10 @@ pub struct LidarImuOptions {
     pub min_points: usize,
     /// Match each scan against a sliding map of this many recent deskewed scans
     /// (scan-to-local-map) instead of the previous scan; 0 = scan-to-scan. The increment
-    /// fused is still `T_L(k-1)_L(k)`, from the two scans' poses in the map.
+    /// fused is still `T_L(k-1)_L(k)`, from the two scans' poses in the map. Default 5:
+    /// more accurate than scan-to-scan, whose positively correlated increment errors make
+    /// the filter overconfident on long, dense recordings (docs/lidar_imu.md). The floor
+    /// depends on it: change it through [`LidarImuOptions::for_local_map`].
     pub local_map_scans: usize,
 }
 
@@ -117,15 +123,44 @@ impl Default for LidarImuOptions {
             init_duration_s: 15.0,
             ndt_covariance: NdtCovariance::Hessian,
             covariance_scale: [0.2, 0.2],
-            rotation_floor_rad: 0.005f64.to_radians(),
-            translation_floor_m: 0.0005,
+            // Half the scan-to-scan floor: map-based increments are more accurate and their
+            // errors not positively correlated (docs/lidar_imu.md).
+            rotation_floor_rad: 0.0025f64.to_radians(),
+            translation_floor_m: 0.00025,
             initial_rotation_floor_rad: 0.2f64.to_radians(),
             initial_translation_floor_m: 0.01,
             anneal_updates: 100.0,
             adapt: Some(NoiseAdaptation::default()),
             min_fitness: 0.05,
             min_points: 200,
+            local_map_scans: 5,
+        }
+    }
+}
+
+impl LidarImuOptions {
+    /// The defaults for matching against `local_map_scans` scans (0 = scan-to-scan), with
+    /// that mode's floor.
+    pub fn for_local_map(local_map_scans: usize) -> Self {
+        if local_map_scans == 0 {
+            Self::scan_to_scan()
+        } else {
+            Self {
+                local_map_scans,
+                ..Self::default()
+            }
+        }
+    }
+
+    /// Scan-to-scan matching (`local_map_scans = 0`) with its own floor, 0.005 deg / 0.5 mm:
+    /// the size of scan-to-scan NDT's per-increment errors on dense scans, whose positive
+    /// correlation from scan to scan it stands for (docs/lidar_imu.md, noise model).
+    pub fn scan_to_scan() -> Self {
+        Self {
             local_map_scans: 0,
+            rotation_floor_rad: 0.005f64.to_radians(),
+            translation_floor_m: 0.0005,
+            ..Self::default()
         }
     }
 }

@@ -63,7 +63,7 @@ pub struct CalibrateLidarImu {
     pub plot: Option<PathBuf>,
     /// Match each scan against a sliding map of this many recent deskewed scans instead of
     /// the previous scan (0 = scan-to-scan).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 5)]
     pub local_map_scans: usize,
 }
 
@@ -133,8 +133,7 @@ pub fn calibrate(args: &CalibrateLidarImu) -> anyhow::Result<Outcome> {
     };
     let mut options = LidarImuOptions {
         deskew: !args.no_deskew,
-        local_map_scans: args.local_map_scans,
-        ..LidarImuOptions::default()
+        ..LidarImuOptions::for_local_map(args.local_map_scans)
     };
     options.filter.estimate_time_offset = !args.no_time_offset;
     let progress = bar("{spinner} calibrating [{bar:40}] {percent}% {elapsed}");
