@@ -84,12 +84,15 @@ impl Filter {
         on_ekf!(self, f => f.config())
     }
 
-    /// Propagates with one IMU sample.
+    /// Propagates with one IMU sample. Not inlined: the propagation's temporaries (~11 KB)
+    /// must not sit in the caller's frame under the updates it calls next.
+    #[inline(never)]
     pub fn propagate(&mut self, sample: &ImuSample<f32>) -> Result<(), FilterError> {
         on_ekf!(self, f => f.propagate(sample))
     }
 
-    /// Zero-velocity update with the latest sample.
+    /// Zero-velocity update with the latest sample (its own frame, as [`Filter::propagate`]).
+    #[inline(never)]
     pub fn update_zero_velocity(&mut self) -> Result<UpdateReport<f32>, FilterError> {
         on_ekf!(self, f => f.update_zero_velocity())
     }

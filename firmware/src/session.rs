@@ -30,9 +30,9 @@ use crate::filter::{pose, CameraFilter, SENSOR, TARGET};
 
 /// Pose messages that may wait for the IMU stream.
 pub const PENDING_MAX: usize = 16;
-/// Camera messages (target pose, corner sets) that may wait for the IMU stream: each is a
-/// full corner set in RAM (~1 KB), and the host sends them at most 100 ms ahead, two images
-/// at 20 Hz (docs/firmware.md).
+/// Camera messages (target pose, corner sets) that may wait for the IMU stream: each entry
+/// is a full corner set in RAM (~1 KB); the host sends them 60 ms ahead of the IMU batch at
+/// their stamp, so at 20 Hz at most three images and the target pose wait (docs/protocol.md).
 pub const CAMERA_PENDING_MAX: usize = 4;
 /// Filter time between two progress log lines.
 pub const PROGRESS_PERIOD_NS: u64 = 5_000_000_000;

@@ -20,7 +20,12 @@ const TIME_OFFSETS_MS: [f64; 5] = [5.0, -3.0, 8.0, 0.0, -6.0];
 struct Run {
     seed: u64,
     truth: ExtrinsicEstimate,
-    results: Vec<(CameraUpdate, ExtrinsicEstimate, SectionErrors, CameraImuCalibration)>,
+    results: Vec<(
+        CameraUpdate,
+        ExtrinsicEstimate,
+        SectionErrors,
+        CameraImuCalibration,
+    )>,
     images: usize,
     detected: usize,
     detect_s: f64,
@@ -110,7 +115,12 @@ fn main() -> anyhow::Result<()> {
     for r in &runs {
         println!("| {} | truth | {} |", r.seed, pose_cells(&r.truth));
         for (update, estimate, _, _) in &r.results {
-            println!("| {} | {} | {} |", r.seed, name(*update), pose_cells(estimate));
+            println!(
+                "| {} | {} | {} |",
+                r.seed,
+                name(*update),
+                pose_cells(estimate)
+            );
         }
     }
 

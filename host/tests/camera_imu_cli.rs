@@ -110,20 +110,30 @@ fn rendered_images_give_t_cam_imu_within_three_sigma() {
     assert!(e.translation_m < 0.002, "{e:?}");
     assert!(e.time_offset_s.abs() < 0.5e-3, "{e:?}");
     for i in 0..3 {
-        assert!(e.rotation_axes_deg[i].abs() < 3.0 * e.sigma_rot_deg[i], "{e:?}");
-        assert!(e.translation_axes_m[i].abs() < 3.0 * e.sigma_trans_m[i], "{e:?}");
+        assert!(
+            e.rotation_axes_deg[i].abs() < 3.0 * e.sigma_rot_deg[i],
+            "{e:?}"
+        );
+        assert!(
+            e.translation_axes_m[i].abs() < 3.0 * e.sigma_trans_m[i],
+            "{e:?}"
+        );
     }
     let report: serde_json::Value =
-        serde_json::from_str(&fs::read_to_string(out.path().join("report.json")).unwrap())
-            .unwrap();
-    let images = read_camera_csv(dataset().1.join("cam0/data.csv")).unwrap().len();
+        serde_json::from_str(&fs::read_to_string(out.path().join("report.json")).unwrap()).unwrap();
+    let images = read_camera_csv(dataset().1.join("cam0/data.csv"))
+        .unwrap()
+        .len();
     assert_eq!(report["detection"]["images"], images);
     let detected = report["detection"]["detected"].as_u64().unwrap() as usize;
     assert!(detected * 10 >= images * 9, "{detected} of {images}");
     let per_frame = report["frames"].as_array().unwrap();
     assert!(per_frame.len() * 10 >= detected * 9);
     let mean = report["mean_reprojection_error_px"].as_f64().unwrap();
-    assert!(mean > 0.0 && mean < 0.3, "mean reprojection error {mean} px");
+    assert!(
+        mean > 0.0 && mean < 0.3,
+        "mean reprojection error {mean} px"
+    );
     let overlay = image::open(out.path().join("overlay.png")).unwrap();
     assert_eq!((overlay.width(), overlay.height()), (752, 480));
 }

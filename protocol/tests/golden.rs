@@ -5,8 +5,8 @@ use msreg_protocol::{
     cobs, crc, frame, Ack, AckStatus, Anchor, Bounded, CameraDistortion, CameraProjection,
     CameraSetup, Config, Corner, CornerSet, Deframer, DeviceMsg, ErrorKind, ErrorReport,
     FrameError, Gate, Hello, HostMsg, ImuBatch, ImuNoise, ImuPrior, ImuSample, Packet, Pose,
-    Pushed, SensorSet, TargetPose, UpdateDiagnostic, UpdateKind, CORNER_SET_MAX,
-    DEVICE_FRAME_MAX, HOST_FRAME_MAX, IMU_BATCH_MAX,
+    Pushed, SensorSet, TargetPose, UpdateDiagnostic, UpdateKind, CORNER_SET_MAX, DEVICE_FRAME_MAX,
+    HOST_FRAME_MAX, IMU_BATCH_MAX,
 };
 
 fn host_frame(seq: u32, msg: &HostMsg) -> Vec<u8> {
@@ -257,7 +257,9 @@ fn corner_set_frame_has_exact_bytes() {
     let bytes = host_frame(3, &msg);
     // seq 3, variant 7, stamp 5, 2 corners of 5 f32.
     let mut body = vec![0x03, 0x07, 0x05, 0x02];
-    body.extend(le(&[0.0, 0.0, 0.0, 320.5, 240.25, 0.04, 0.08, 0.0, 350.0, 270.0]));
+    body.extend(le(&[
+        0.0, 0.0, 0.0, 320.5, 240.25, 0.04, 0.08, 0.0, 350.0, 270.0,
+    ]));
     assert_eq!(body_of(&bytes), body);
     #[rustfmt::skip]
     let expected = [
@@ -342,9 +344,7 @@ fn reprojection_diagnostic_and_new_faults_have_exact_bytes() {
         accepted: true,
     });
     // seq 4, variant 3, stamp 1, kind 2, dof 84 = 0x54, two zero f32, true.
-    let expected_body = [
-        0x04, 0x03, 0x01, 0x02, 0x54, 0, 0, 0, 0, 0, 0, 0, 0, 0x01,
-    ];
+    let expected_body = [0x04, 0x03, 0x01, 0x02, 0x54, 0, 0, 0, 0, 0, 0, 0, 0, 0x01];
     assert_eq!(body_of(&device_frame(4, &diag)), expected_body);
     for (kind, index) in [
         (ErrorKind::TargetNotInitialized, 21u8),

@@ -217,7 +217,8 @@ pub fn calibrate<T: Scalar>(
     progress: &mut dyn FnMut(f64),
 ) -> Result<CameraImuCalibration, PoseImuError> {
     let started = Instant::now();
-    let (motion, pixel_sigma) = motion_calibration::<T>(input, options, &mut |f| progress(0.3 * f))?;
+    let (motion, pixel_sigma) =
+        motion_calibration::<T>(input, options, &mut |f| progress(0.3 * f))?;
     let mut calibration = match options.update {
         CameraUpdate::Motion => motion,
         CameraUpdate::Reprojection => reprojection_calibration::<T>(

@@ -196,8 +196,8 @@ pub fn dataset_stream(dataset: &Path, options: &StreamOptions) -> Result<ReplayS
         return build_stream(&input, options);
     }
     let camera = CameraDataset::open(dataset).map_err(|e| LinkError::Dataset(e.to_string()))?;
-    let (frames, detection) = detect_corner_frames(&camera, &|_| {})
-        .map_err(|e| LinkError::Dataset(e.to_string()))?;
+    let (frames, detection) =
+        detect_corner_frames(&camera, &|_| {}).map_err(|e| LinkError::Dataset(e.to_string()))?;
     eprintln!(
         "msreg: board found in {} of {} images ({:.1} s)",
         detection.detected, detection.images, detection.time_s
@@ -219,7 +219,13 @@ pub fn replay(
     options: &ReplayOptions,
 ) -> Result<ReplayOutcome, LinkError> {
     let stream = dataset_stream(dataset, &options.stream)?;
-    replay_stream(&stream, &dataset.display().to_string(), port, record, options)
+    replay_stream(
+        &stream,
+        &dataset.display().to_string(),
+        port,
+        record,
+        options,
+    )
 }
 
 /// Sends a replay stream (handshake, configuration, messages) to the device at `port`;
@@ -237,12 +243,8 @@ pub fn replay_stream(
     let started = Instant::now();
     let (frames0, bytes0) = client.sent;
     // On a terminal the replay shows the monitor's screen while it streams.
-    let mut view = (options.live_view && Mode::detect() == Mode::Screen).then(|| {
-        LiveView::new(
-            Mode::Screen,
-            &format!("replay {source} -> {port}"),
-        )
-    });
+    let mut view = (options.live_view && Mode::detect() == Mode::Screen)
+        .then(|| LiveView::new(Mode::Screen, &format!("replay {source} -> {port}")));
     for (stamp_ns, msg) in &stream.messages {
         if options.realtime {
             let due = Duration::from_nanos(stamp_ns.saturating_sub(stream.start_ns));

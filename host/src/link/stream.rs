@@ -229,7 +229,12 @@ pub fn build_stream(
     }
     Ok(ReplayStream {
         config,
-        messages: interleave(input.imu, &measurements, options.pose_lead_ns, options.batch),
+        messages: interleave(
+            input.imu,
+            &measurements,
+            options.pose_lead_ns,
+            options.batch,
+        ),
         start_ns,
         skipped_poses: first,
     })
@@ -393,8 +398,60 @@ pub fn build_camera_stream(
     }
     Ok(ReplayStream {
         config,
-        messages: interleave(input.imu, &measurements, options.camera_lead_ns, options.batch),
+        messages: interleave(
+            input.imu,
+            &measurements,
+            options.camera_lead_ns,
+            options.batch,
+        ),
         start_ns,
         skipped_poses: skipped,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use msreg_estimator::CornerObservation;
+    use nalgebra::Vector2;
+
+    fn frame(n: usize) -> CornerFrame {
+        CornerFrame {
+            stamp_ns: 77,
+            corners: (0..n)
+                .map(|k| CornerObservation {
+                    point_in_target: Vector3::new(k as f64, 0.0, 0.0),
+                    pixel: Vector2::new(k as f64, 1.0),
+                })
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn corner_sets_split_evenly_under_the_bound_and_keep_order() {
+        for (n, parts) in [
+            (1, vec![1]),
+            (42, vec![42]),
+            (48, vec![48]),
+            (50, vec![25, 25]),
+            (144, vec![48, 48, 48]),
+            (145, vec![37, 37, 37, 34]),
+        ] {
+            let sets = corner_sets(&frame(n));
+            let mut next = 0.0;
+            let mut sizes = Vec::new();
+            for msg in &sets {
+                let HostMsg::CornerSet(set) = msg else {
+                    panic!("not a corner set: {msg:?}");
+                };
+                assert_eq!(set.stamp_ns, 77);
+                sizes.push(set.corners.len());
+                for c in set.corners.as_slice() {
+                    assert_eq!(c.point_in_target_m[0], next as f32);
+                    next += 1.0;
+                }
+            }
+            assert_eq!(sizes, parts, "{n} corners");
+        }
+    }
 }

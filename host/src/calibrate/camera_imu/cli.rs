@@ -99,8 +99,9 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
         }
     }
     let detecting = progress_bar("{spinner} detecting corners [{bar:40}] {percent}% {elapsed}");
-    let (frames, detection) =
-        detect_corner_frames(&camera_data, &|f| detecting.set_position((f * 1000.0) as u64))?;
+    let (frames, detection) = detect_corner_frames(&camera_data, &|f| {
+        detecting.set_position((f * 1000.0) as u64)
+    })?;
     detecting.finish_and_clear();
     eprintln!(
         "msreg: board found in {} of {} images ({:.1} s)",
@@ -273,7 +274,8 @@ fn write_overlay(
         }
     };
     let pairs = || sample.detected.iter().zip(&sample.reprojected);
-    let mean_error = pairs().map(|(d, r)| (r - d).norm()).sum::<f64>() / pairs().len().max(1) as f64;
+    let mean_error =
+        pairs().map(|(d, r)| (r - d).norm()).sum::<f64>() / pairs().len().max(1) as f64;
     let magnification = round_to_1_2_5((OVERLAY_MEAN_ERROR_PX / mean_error).clamp(1.0, 1000.0));
     for (detected, reprojected) in pairs() {
         let error = (reprojected - detected) * magnification;
