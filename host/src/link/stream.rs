@@ -438,7 +438,7 @@ mod tests {
             (145, vec![37, 37, 37, 34]),
         ] {
             let sets = corner_sets(&frame(n));
-            let mut next = 0.0;
+            let mut next = 0usize;
             let mut sizes = Vec::new();
             for msg in &sets {
                 let HostMsg::CornerSet(set) = msg else {
@@ -447,8 +447,8 @@ mod tests {
                 assert_eq!(set.stamp_ns, 77);
                 sizes.push(set.corners.len());
                 for c in set.corners.as_slice() {
-                    assert_eq!(c.point_in_target_m[0], next as f32);
-                    next += 1.0;
+                    assert_eq!(c.point_in_target_m[0] as usize, next);
+                    next += 1;
                 }
             }
             assert_eq!(sizes, parts, "{n} corners");
