@@ -274,14 +274,15 @@ impl Session {
         self.last_seq = Some(seq);
         self.current_seq = seq;
         self.counts.frames_ok = self.counts.frames_ok.wrapping_add(1);
-        let status = match packet.msg {
-            HostMsg::Hello(h) => self.on_hello(w, seq, &h),
-            HostMsg::Config(c) => self.on_config(w, seq, &c),
-            HostMsg::ImuBatch(b) => self.on_imu(w, seq, &b),
-            HostMsg::Anchor(a) => self.on_pose(w, seq, Pending::Anchor(a, seq)),
-            HostMsg::RelativePose(r) => self.on_pose(w, seq, Pending::Increment(r, seq)),
-            HostMsg::TargetPose(t) => self.on_camera(w, seq, CameraPending::Target(t, seq)),
-            HostMsg::CornerSet(c) => self.on_camera(w, seq, CameraPending::Corners(c, seq)),
+        // By reference: a by-value corner set would put a second copy (~1 KB) in this
+        // frame, which every handler's stack sits on.
+        let status = match &packet.msg {
+            HostMsg::Hello(h) => self.on_hello(w, seq, h),
+            HostMsg::Config(c) => self.on_config(w, seq, c),
+            HostMsg::ImuBatch(b) => self.on_imu(w, seq, b),
+            HostMsg::Anchor(a) => self.on_pose(w, seq, Pending::Anchor(*a, seq)),
+            HostMsg::RelativePose(r) => self.on_pose(w, seq, Pending::Increment(*r, seq)),
+            msg @ (HostMsg::TargetPose(_) | HostMsg::CornerSet(_)) => self.on_camera(w, seq, msg),
             HostMsg::GetStatus => {
                 let status = DeviceMsg::Status(self.status());
                 Self::tx(&mut self.tx_seq, w).send(&status);
@@ -357,12 +358,12 @@ impl Session {
     }
 
     #[inline(never)]
-    fn on_camera<W: embedded_io::Write>(
-        &mut self,
-        w: &mut W,
-        seq: u32,
-        p: CameraPending,
-    ) -> AckStatus {
+    fn on_camera<W: embedded_io::Write>(&mut self, w: &mut W, seq: u32, msg: &HostMsg) -> AckStatus {
+        let p = match msg {
+            HostMsg::TargetPose(t) => CameraPending::Target(*t, seq),
+            HostMsg::CornerSet(c) => CameraPending::Corners(*c, seq),
+            _ => return AckStatus::Rejected,
+        };
         let refused = match self.filter {
             None => Some(ErrorKind::NotConfigured),
             Some(Filter::PoseImu(_)) => Some(ErrorKind::WrongSensorSet),
@@ -461,6 +462,9 @@ impl Session {
         self.apply_due_camera(w, imu_stamp_ns);
     }
 
+    /// Not inlined: the popped entry (~1 KB) stays out of `on_imu`'s frame, below which the
+    /// pose updates run.
+    #[inline(never)]
     fn apply_due_camera<W: embedded_io::Write>(&mut self, w: &mut W, imu_stamp_ns: u64) {
         while let Some(front) = self.camera_pending.front() {
             if !self.is_due(front.stamp_ns(), imu_stamp_ns) {
