@@ -75,25 +75,34 @@ impl CameraPending {
 
     /// Every value finite, sigmas positive.
     fn check(&self) -> Result<(), ErrorKind> {
-        let finite = match self {
+        let in_range = match self {
             CameraPending::Target(t, _) => {
                 let p = &t.t_cam_target;
                 let sigmas = [t.sigma_rotation_rad, t.sigma_position_m];
-                if !p.rotation_wxyz.iter().chain(&p.translation_m).chain(&sigmas).all(|x| x.is_finite()) {
+                if !p
+                    .rotation_wxyz
+                    .iter()
+                    .chain(&p.translation_m)
+                    .chain(&sigmas)
+                    .all(|x| x.is_finite())
+                {
                     return Err(ErrorKind::NonFinite);
                 }
                 sigmas.iter().all(|s| *s > 0.0)
             }
             CameraPending::Corners(c, _) => {
                 if !c.corners.as_slice().iter().all(|k| {
-                    k.point_in_target_m.iter().chain(&k.pixel).all(|x| x.is_finite())
+                    k.point_in_target_m
+                        .iter()
+                        .chain(&k.pixel)
+                        .all(|x| x.is_finite())
                 }) {
                     return Err(ErrorKind::NonFinite);
                 }
                 !c.corners.is_empty()
             }
         };
-        if finite {
+        if in_range {
             Ok(())
         } else {
             Err(ErrorKind::OutOfRange)
@@ -358,7 +367,12 @@ impl Session {
     }
 
     #[inline(never)]
-    fn on_camera<W: embedded_io::Write>(&mut self, w: &mut W, seq: u32, msg: &HostMsg) -> AckStatus {
+    fn on_camera<W: embedded_io::Write>(
+        &mut self,
+        w: &mut W,
+        seq: u32,
+        msg: &HostMsg,
+    ) -> AckStatus {
         let p = match msg {
             HostMsg::TargetPose(t) => CameraPending::Target(*t, seq),
             HostMsg::CornerSet(c) => CameraPending::Corners(*c, seq),

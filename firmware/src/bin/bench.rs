@@ -133,7 +133,9 @@ fn bench_reprojection(clock: &InstructionClock) -> Option<Tally> {
     for (k, corner) in corners.iter_mut().enumerate() {
         let (r, c) = (k / BOARD.1, k % BOARD.1);
         corner.point_in_target = Vector3::new(r as f32 * 0.04, c as f32 * 0.04, 0.0);
-        corner.pixel = camera.project(&t_c_t.transform_point(&corner.point_in_target))?.pixel;
+        corner.pixel = camera
+            .project(&t_c_t.transform_point(&corner.point_in_target))?
+            .pixel;
     }
     let meas = CornerSet {
         stamp_ns,

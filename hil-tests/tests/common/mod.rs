@@ -22,8 +22,8 @@ pub const SHORT_S: f64 = 25.0;
 /// Largest device-vs-host difference, in host sigmas (see docs/firmware.md, "HIL").
 pub const AGREE_SIGMAS: f64 = 0.1;
 
-/// Length of the camera-IMU HIL recording, s, and its frame rate, Hz: 120 images keep the
-/// replay (about 0.2 s of QEMU time per 42-corner update) and the test under 60 s.
+/// Length of the camera-IMU HIL recording, s: with [`CAMERA_RATE_HZ`], 120 images keep the
+/// replay (~0.1 s of QEMU wall time per 42-corner update) and the test well under 60 s.
 pub const CAMERA_S: f64 = 12.0;
 /// Frame rate of the camera-IMU HIL recording, Hz.
 pub const CAMERA_RATE_HZ: f64 = 10.0;
@@ -31,7 +31,7 @@ pub const CAMERA_RATE_HZ: f64 = 10.0;
 /// Largest device-vs-host RepErrCal difference, in host sigmas (docs/firmware.md, "HIL"):
 /// the camera filter resolves the extrinsic translation to ~0.15 mm, so the f32 rounding of
 /// its sequential per-corner updates (~5,000 of them) is felt at a fraction of a sigma (the
-/// host's whole pipeline in f32, MoCal included, lands 2.4 sigma from f64: printed by the
+/// host's whole pipeline in f32, MoCal included, lands 1.2 sigma from f64: printed by the
 /// test; the device starts from the host's f64 MoCal, which keeps it closer).
 pub const CAMERA_AGREE_SIGMAS: f64 = 0.5;
 /// Largest device-vs-host RepErrCal difference in absolute terms (deg, mm): a tenth of the
