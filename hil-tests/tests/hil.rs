@@ -10,11 +10,8 @@ mod common;
 use std::time::Duration;
 
 use common::*;
-use msreg_host::calibrate::camera_imu::{self, CameraImuInput, CameraImuOptions};
-use msreg_host::dataset::Dataset;
 use msreg_host::link::cli::{replay, ReplayOptions};
 use msreg_host::sim::{simulate_camera_imu, CameraImuSimConfig, Knock, SimConfig};
-use msreg_host::vision::frames::CameraDataset;
 use msreg_protocol::{ErrorKind, HealthState, UpdateKind};
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 
@@ -250,17 +247,11 @@ fn camera_corner_sets_on_the_device_match_host_reperrcal_and_ground_truth() {
         replay(dir.path(), &qemu.pty, None, &ReplayOptions::default()).expect("replay runs");
     let replayed_s = started.elapsed().as_secs_f64() - simulated_s;
     // and the host runs RepErrCal in f64 on the same detections
-    let data = Dataset::open(dir.path()).expect("dataset opens");
-    let camera = CameraDataset::open(dir.path()).expect("camera dataset opens");
-    let (frames, _) = camera_imu::cli::detect_corner_frames(&camera, &|_| {}).expect("detection");
-    let input = CameraImuInput {
-        imu: data.require_imu().expect("imu"),
-        imu_noise: data.require_imu_noise().expect("imu noise"),
-        camera: &camera.camera,
-        frames: &frames,
-    };
-    let host = camera_imu::calibrate::<f64>(&input, &CameraImuOptions::default(), &mut |_| {})
-        .expect("host RepErrCal runs");
+    let HostCameraRun {
+        calibration: host,
+        imu_samples,
+        board_corners,
+    } = host_reperrcal(dir.path());
     println!(
         "timing: simulate + render {simulated_s:.1} s, detect + MoCal + replay {replayed_s:.1} s"
     );
@@ -269,7 +260,7 @@ fn camera_corner_sets_on_the_device_match_host_reperrcal_and_ground_truth() {
     let status = outcome.status.expect("device status");
     let c = &outcome.collected;
     println!("{}", msreg_host::link::cli::summary(c, Some(&status)));
-    assert_eq!(status.imu_samples as usize, input.imu.len());
+    assert_eq!(status.imu_samples as usize, imu_samples);
     assert_eq!(
         status.errors.iter().sum::<u32>(),
         0,
@@ -291,7 +282,6 @@ fn camera_corner_sets_on_the_device_match_host_reperrcal_and_ground_truth() {
     );
     assert_eq!(device_updates.len(), host.report.frames.len());
     assert_eq!(status.updates as usize, device_updates.len());
-    let board_corners = camera.target.rows * camera.target.cols;
     assert!(device_updates
         .iter()
         .all(|d| usize::from(d.dof) == 2 * board_corners));
@@ -314,23 +304,6 @@ fn camera_corner_sets_on_the_device_match_host_reperrcal_and_ground_truth() {
     assert!(
         cmp.rotation_deg <= CAMERA_AGREE_ABS.0 && cmp.translation_mm <= CAMERA_AGREE_ABS.1,
         "device and host differ by {cmp:?} (> {CAMERA_AGREE_ABS:?} deg, mm)"
-    );
-    // (for the record: the same pipeline in f32 on the host against f64, the scale of the
-    // f32 rounding alone)
-    let host_f32 = camera_imu::calibrate::<f32>(&input, &CameraImuOptions::default(), &mut |_| {})
-        .expect("host RepErrCal runs in f32");
-    let d = host_f32.t_imu_cam.translation.vector - host.t_imu_cam.translation.vector;
-    println!(
-        "host f32 vs host f64 RepErrCal: {:.4} deg, {:.4} mm, largest axis {:.3} sigma",
-        host_f32
-            .t_imu_cam
-            .rotation
-            .angle_to(&host.t_imu_cam.rotation)
-            .to_degrees(),
-        d.norm() * 1e3,
-        (0..3)
-            .map(|i| d[i].abs() / host.covariance[(i + 3, i + 3)].sqrt())
-            .fold(0.0, f64::max)
     );
     // and with the truth: inside 3 sigma and the issue-3 accuracy
     let truth = truth_errors(&device, &sim.t_cam_imu.inverse(), sim.config.time_offset_s);

@@ -452,3 +452,52 @@ pub fn corner_set(stamp_ns: u64, n: usize, pixel: f32) -> HostMsg {
             .collect(),
     })
 }
+
+/// The host's f64 RepErrCal on a camera dataset, from its own corner detection.
+pub struct HostCameraRun {
+    /// The calibration.
+    pub calibration: msreg_host::calibrate::camera_imu::CameraImuCalibration,
+    /// IMU samples of the dataset.
+    pub imu_samples: usize,
+    /// Inner corners of the target.
+    pub board_corners: usize,
+}
+
+/// Runs RepErrCal in f64 on `dir` as `msreg calibrate camera-imu` does; prints, for the
+/// record, how far the same pipeline in f32 ends from it (the scale of f32 rounding alone).
+pub fn host_reperrcal(dir: &Path) -> HostCameraRun {
+    use msreg_host::calibrate::camera_imu::{self, CameraImuInput, CameraImuOptions};
+    use msreg_host::vision::frames::CameraDataset;
+    let data = Dataset::open(dir).expect("dataset opens");
+    let camera = CameraDataset::open(dir).expect("camera dataset opens");
+    let (frames, _) = camera_imu::cli::detect_corner_frames(&camera, &|_| {}).expect("detection");
+    let input = CameraImuInput {
+        imu: data.require_imu().expect("imu"),
+        imu_noise: data.require_imu_noise().expect("imu noise"),
+        camera: &camera.camera,
+        frames: &frames,
+    };
+    let options = CameraImuOptions::default();
+    let host =
+        camera_imu::calibrate::<f64>(&input, &options, &mut |_| {}).expect("host RepErrCal runs");
+    let host_f32 = camera_imu::calibrate::<f32>(&input, &options, &mut |_| {})
+        .expect("host RepErrCal runs in f32");
+    let d = host_f32.t_imu_cam.translation.vector - host.t_imu_cam.translation.vector;
+    println!(
+        "host f32 vs host f64 RepErrCal: {:.4} deg, {:.4} mm, largest axis {:.3} sigma",
+        host_f32
+            .t_imu_cam
+            .rotation
+            .angle_to(&host.t_imu_cam.rotation)
+            .to_degrees(),
+        d.norm() * 1e3,
+        (0..3)
+            .map(|i| d[i].abs() / host.covariance[(i + 3, i + 3)].sqrt())
+            .fold(0.0, f64::max)
+    );
+    HostCameraRun {
+        calibration: host,
+        imu_samples: input.imu.len(),
+        board_corners: camera.target.rows * camera.target.cols,
+    }
+}
