@@ -12,9 +12,9 @@ use crate::batch::Bounded;
 pub const IMU_BATCH_MAX: usize = 16;
 
 /// Corners per [`CornerSet`]: a 6x7 or 6x8 checkerboard (Kalibr's example board and the
-/// simulator's: 42) in one frame of at most 984 bytes (`HOST_FRAME_MAX`), under a quarter of the device's
-/// 4 KiB receive ring. Larger targets (Kalibr's 6x6 aprilgrid: 144 corners) go as several
-/// sets with the same stamp (docs/protocol.md).
+/// simulator's: 42) in one frame of at most 984 bytes (`HOST_FRAME_MAX`), under a quarter of
+/// the device's 4 KiB receive ring. Larger targets (Kalibr's 6x6 aprilgrid: 144 corners) go
+/// as several sets with the same stamp (docs/protocol.md).
 pub const CORNER_SET_MAX: usize = 48;
 
 /// Host to device.
