@@ -9,8 +9,8 @@
 #                             and the stack reservation of both the self-test and `link`,
 #                             against the 1 MiB / 192 KiB budget, with the measured peaks
 #   tools/firmware.sh bench [OPT_LEVEL...]
-#                             instructions per IMU propagation and per relative-pose update
-#                             (SysTick under -icount shift=0), one row per opt-level
+#                             instructions per IMU propagation, relative-pose and 42-corner
+#                             reprojection update (SysTick under -icount shift=0), one row per opt-level
 #                             (default: the release profile's level, then "s"), then
 #                             the budget on a 168 MHz Cortex-M4F next to PX4's EKF2
 #                             (from the first opt-level's counts; BENCH_CPI_LOW/HIGH)
@@ -177,19 +177,20 @@ budget_table() {
     $1 == "RATE" { rate = $2 }
     $1 == "STATES" { states = $2 }
     function us(instr, cpi) { return instr * cpi / hz * 1e6 }
-    function row(what, instr, per_s) {
+    function row(what, instr, per_s, n) {
       if (per_s > 0)
-        printf "| %s | %d | %d | %.0f-%.0f | %d | %.1f-%.1f %% |\n", what, states, instr,
+        printf "| %s | %d | %d | %.0f-%.0f | %d | %.1f-%.1f %% |\n", what, n, instr,
           us(instr, lo), us(instr, hi), per_s, per_s * us(instr, lo) / 1e4, per_s * us(instr, hi) / 1e4
       else
-        printf "| %s | %d | %d | %.0f-%.0f | - | - |\n", what, states, instr, us(instr, lo), us(instr, hi)
+        printf "| %s | %d | %d | %.0f-%.0f | - | - |\n", what, n, instr, us(instr, lo), us(instr, hi)
     }
     END {
       printf "| filter, operation | error states | instructions | us at 168 MHz (CPI %s-%s) | calls / s | share of a 168 MHz M4F |\n", lo, hi
       print "|---|---:|---:|---:|---:|---:|"
-      row("msreg `PoseImuEkf<f32>` (opt-level " opt "): IMU propagation", mean["propagate"], 400)
-      row("msreg: relative-pose update (6-dof, Joseph form)", mean["update"], 10)
-      row("msreg: zero-velocity update (9-dof, at rest only)", mean["zero_velocity"], 0)
+      row("msreg `PoseImuEkf<f32>` (opt-level " opt "): IMU propagation", mean["propagate"], 400, states)
+      row("msreg: relative-pose update (6-dof, Joseph form)", mean["update"], 10, states)
+      row("msreg: zero-velocity update (9-dof, at rest only)", mean["zero_velocity"], 0, states)
+      row("msreg `CameraImuEkf<f32>`: reprojection update (42 corners fused one by one, 84-dof)", mean["reprojection"], 20, 28)
       printf "| **msreg: 400 Hz IMU + 10 Hz relative poses, total** | %d | %.1f M / s | | | **%.1f-%.1f %%** |\n",
         states, rate / 1e6, rate * lo / hz * 100, rate * hi / hz * 100
       printf "| PX4 EKF2: one fusion (quoted, STM32F4 at 168 MHz) | 24 | %d-%d cycles | %d-%d | 10 | %.2f-%.2f %% (fusions only) |\n",

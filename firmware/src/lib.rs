@@ -5,11 +5,12 @@
 //! trajectory sampled in `f32`, [`scenario`]), the self-test that runs the filter over it
 //! ([`selftest`]), the measuring tools (stack painting, SysTick instruction clock), and the
 //! serial link: the CMSDK UART driver ([`uart`], [`ring`]) and the protocol session
-//! ([`session`]) of the `link` binary.
+//! ([`session`]) of the `link` binary with the filters it runs ([`filter`]).
 //! Everything is `no_std` and allocation-free.
 #![no_std]
 #![warn(missing_docs)]
 
+pub mod filter;
 pub mod generator_check;
 pub mod noise;
 pub mod ring;

@@ -1,34 +1,39 @@
 //! The link session: applies decoded host packets to the f32 filter, in order, and answers
 //! through any `embedded_io::Write`. Independent of the board.
 //!
-//! Sequencing follows the host pipeline (`host/src/calibrate/pose_imu.rs`): pose messages
-//! wait in a bounded queue until the IMU stream reaches their IMU time `stamp + t_d` (with
-//! the current `t_d` estimate) and are applied just before the IMU sample that passes it;
-//! an increment without a matching anchor re-anchors at its end, as the host does.
+//! Sequencing follows the host pipelines (`host/src/calibrate/pose_imu.rs`,
+//! `camera_imu.rs`): pose messages, target poses and corner sets wait in bounded queues until
+//! the IMU stream reaches their IMU time `stamp + t_d` (with the current `t_d` estimate) and
+//! are applied just before the IMU sample that passes it; an increment without a matching
+//! anchor re-anchors at its end, as the host does; a target pose initialises the target
+//! frame `T_G_T = T_G_I T_I_C T_C_T` at the current IMU state, as the host's RepErrCal.
 //! Every refusal is counted by [`ErrorKind`] and reported; nothing resets the device.
 //! Log lines (`defmt`, typed primitive arguments only: see `msreg link log`) mark the
 //! configuration, each fault, each alarm and the progress every [`PROGRESS_PERIOD_NS`].
 
 use heapless::Deque;
-use msreg_estimator::chi2::Confidence;
 use msreg_estimator::health::{HealthEvent, NisStatus};
-use msreg_estimator::na::{Matrix6, Quaternion, UnitQuaternion, Vector3};
+use msreg_estimator::na::{Matrix6, Vector2, Vector3};
 use msreg_estimator::{
-    Error as FilterError, FilterConfig, ImuNoise, ImuSample, InitialState, Pose, PoseImuEkf,
-    RelativePose as FilterRelativePose, UpdateReport,
+    CornerObservation, Error as FilterError, ImuSample, Pose, RelativePose as FilterRelativePose,
+    UpdateReport,
 };
 use msreg_protocol::{
-    self as protocol, frame, Ack, AckStatus, AlarmKind, Anchor, Config, DeviceMsg, ErrorKind,
-    ErrorReport, Estimate, FrameError, Gate, HealthAlarm, HealthState, Hello, HostMsg, ImuBatch,
-    NisState, Packet, RelativePose, Status, UpdateDiagnostic, UpdateKind, DEVICE_FRAME_MAX,
-    HOST_FRAME_MAX,
+    self as protocol, frame, Ack, AckStatus, AlarmKind, Anchor, Config, CornerSet, DeviceMsg,
+    ErrorKind, ErrorReport, Estimate, FrameError, HealthAlarm, HealthState, Hello, HostMsg,
+    ImuBatch, NisState, Packet, RelativePose, Status, TargetPose, UpdateDiagnostic, UpdateKind,
+    CORNER_SET_MAX, DEVICE_FRAME_MAX, HOST_FRAME_MAX,
 };
 
-/// The filter of the link firmware.
-pub type Filter = PoseImuEkf<f32>;
-const SENSOR: usize = 0;
+pub use crate::filter::{new_filter, Filter};
+use crate::filter::{pose, CameraFilter, SENSOR, TARGET};
+
 /// Pose messages that may wait for the IMU stream.
 pub const PENDING_MAX: usize = 16;
+/// Camera messages (target pose, corner sets) that may wait for the IMU stream: each entry
+/// is a full corner set in RAM (~1 KB); the host sends them 60 ms ahead of the IMU batch at
+/// their stamp, so at 20 Hz at most three images and the target pose wait (docs/protocol.md).
+pub const CAMERA_PENDING_MAX: usize = 4;
 /// Filter time between two progress log lines.
 pub const PROGRESS_PERIOD_NS: u64 = 5_000_000_000;
 
@@ -43,6 +48,64 @@ impl Pending {
         match self {
             Pending::Anchor(a, _) => a.stamp_ns,
             Pending::Increment(r, _) => r.stamp_to_ns,
+        }
+    }
+}
+
+/// A camera message waiting for the IMU stream, with its frame's sequence number.
+#[derive(Clone, Copy)]
+enum CameraPending {
+    Target(TargetPose, u32),
+    Corners(CornerSet, u32),
+}
+
+impl CameraPending {
+    fn stamp_ns(&self) -> u64 {
+        match self {
+            CameraPending::Target(t, _) => t.stamp_ns,
+            CameraPending::Corners(c, _) => c.stamp_ns,
+        }
+    }
+
+    fn seq(&self) -> u32 {
+        match self {
+            CameraPending::Target(_, s) | CameraPending::Corners(_, s) => *s,
+        }
+    }
+
+    /// Every value finite, sigmas positive.
+    fn check(&self) -> Result<(), ErrorKind> {
+        let in_range = match self {
+            CameraPending::Target(t, _) => {
+                let p = &t.t_cam_target;
+                let sigmas = [t.sigma_rotation_rad, t.sigma_position_m];
+                if !p
+                    .rotation_wxyz
+                    .iter()
+                    .chain(&p.translation_m)
+                    .chain(&sigmas)
+                    .all(|x| x.is_finite())
+                {
+                    return Err(ErrorKind::NonFinite);
+                }
+                sigmas.iter().all(|s| *s > 0.0)
+            }
+            CameraPending::Corners(c, _) => {
+                if !c.corners.as_slice().iter().all(|k| {
+                    k.point_in_target_m
+                        .iter()
+                        .chain(&k.pixel)
+                        .all(|x| x.is_finite())
+                }) {
+                    return Err(ErrorKind::NonFinite);
+                }
+                !c.corners.is_empty()
+            }
+        };
+        if in_range {
+            Ok(())
+        } else {
+            Err(ErrorKind::OutOfRange)
         }
     }
 }
@@ -70,6 +133,7 @@ pub struct Session {
     filter: Option<Filter>,
     config: Option<Config>,
     pending: Deque<Pending, PENDING_MAX>,
+    camera_pending: Deque<CameraPending, CAMERA_PENDING_MAX>,
     counts: Counts,
     last_seq: Option<u32>,
     tx_seq: u32,
@@ -113,6 +177,7 @@ impl Session {
             filter: None,
             config: None,
             pending: Deque::new(),
+            camera_pending: Deque::new(),
             counts: Counts {
                 frames_ok: 0,
                 imu_samples: 0,
@@ -218,12 +283,15 @@ impl Session {
         self.last_seq = Some(seq);
         self.current_seq = seq;
         self.counts.frames_ok = self.counts.frames_ok.wrapping_add(1);
-        let status = match packet.msg {
-            HostMsg::Hello(h) => self.on_hello(w, seq, &h),
-            HostMsg::Config(c) => self.on_config(w, seq, &c),
-            HostMsg::ImuBatch(b) => self.on_imu(w, seq, &b),
-            HostMsg::Anchor(a) => self.on_pose(w, seq, Pending::Anchor(a, seq)),
-            HostMsg::RelativePose(r) => self.on_pose(w, seq, Pending::Increment(r, seq)),
+        // By reference: a by-value corner set would put a second copy (~1 KB) in this
+        // frame, which every handler's stack sits on.
+        let status = match &packet.msg {
+            HostMsg::Hello(h) => self.on_hello(w, seq, h),
+            HostMsg::Config(c) => self.on_config(w, seq, c),
+            HostMsg::ImuBatch(b) => self.on_imu(w, seq, b),
+            HostMsg::Anchor(a) => self.on_pose(w, seq, Pending::Anchor(*a, seq)),
+            HostMsg::RelativePose(r) => self.on_pose(w, seq, Pending::Increment(*r, seq)),
+            msg @ (HostMsg::TargetPose(_) | HostMsg::CornerSet(_)) => self.on_camera(w, seq, msg),
             HostMsg::GetStatus => {
                 let status = DeviceMsg::Status(self.status());
                 Self::tx(&mut self.tx_seq, w).send(&status);
@@ -253,6 +321,7 @@ impl Session {
                 self.filter = Some(f);
                 self.config = Some(*c);
                 self.pending.clear();
+                self.camera_pending.clear();
                 self.imu_index = 0;
                 self.last_estimate_ns = 0;
                 self.last_progress_ns = 0;
@@ -279,15 +348,55 @@ impl Session {
     }
 
     fn on_pose<W: embedded_io::Write>(&mut self, w: &mut W, seq: u32, p: Pending) -> AckStatus {
-        if self.filter.is_none() {
-            self.fault(w, ErrorKind::NotConfigured, seq, p.stamp_ns());
-            return AckStatus::Rejected;
+        let refused = match self.filter {
+            None => Some(ErrorKind::NotConfigured),
+            Some(Filter::CameraImu(_)) => Some(ErrorKind::WrongSensorSet),
+            Some(Filter::PoseImu(_)) => self
+                .pending
+                .push_back(p)
+                .err()
+                .map(|_| ErrorKind::QueueFull),
+        };
+        match refused {
+            Some(kind) => {
+                self.fault(w, kind, seq, p.stamp_ns());
+                AckStatus::Rejected
+            }
+            None => AckStatus::Ok,
         }
-        if self.pending.push_back(p).is_err() {
-            self.fault(w, ErrorKind::QueueFull, seq, p.stamp_ns());
-            return AckStatus::Rejected;
+    }
+
+    #[inline(never)]
+    fn on_camera<W: embedded_io::Write>(
+        &mut self,
+        w: &mut W,
+        seq: u32,
+        msg: &HostMsg,
+    ) -> AckStatus {
+        let p = match msg {
+            HostMsg::TargetPose(t) => CameraPending::Target(*t, seq),
+            HostMsg::CornerSet(c) => CameraPending::Corners(*c, seq),
+            _ => return AckStatus::Rejected,
+        };
+        let refused = match self.filter {
+            None => Some(ErrorKind::NotConfigured),
+            Some(Filter::PoseImu(_)) => Some(ErrorKind::WrongSensorSet),
+            Some(Filter::CameraImu(_)) => match p.check() {
+                Err(kind) => Some(kind),
+                Ok(()) => self
+                    .camera_pending
+                    .push_back(p)
+                    .err()
+                    .map(|_| ErrorKind::QueueFull),
+            },
+        };
+        match refused {
+            Some(kind) => {
+                self.fault(w, kind, seq, p.stamp_ns());
+                AckStatus::Rejected
+            }
+            None => AckStatus::Ok,
         }
-        AckStatus::Ok
     }
 
     #[inline(never)]
@@ -340,7 +449,7 @@ impl Session {
             return;
         }
         self.last_progress_ns = now;
-        let (sr, st) = f.extrinsic_sigma(SENSOR);
+        let (sr, st) = f.extrinsic_sigma();
         defmt::info!(
             "t {=u64} ms: {=u32} IMU samples, {=u32} updates ({=u32} accepted), sigma {=f32} deg / {=f32} mm",
             now.saturating_sub(self.progress_origin_ns) / 1_000_000,
@@ -352,14 +461,46 @@ impl Session {
         );
     }
 
-    /// Applies every pending pose whose IMU time is at or before `imu_stamp_ns`.
+    /// True when a measurement stamped `stamp_ns` (sensor clock) is due before the IMU
+    /// sample at `imu_stamp_ns`.
+    fn is_due(&self, stamp_ns: u64, imu_stamp_ns: u64) -> bool {
+        self.filter.as_ref().is_some_and(|f| {
+            let offset_ns = (f64::from(f.time_offset()) * 1e9) as i128;
+            i128::from(stamp_ns) + offset_ns <= i128::from(imu_stamp_ns)
+        })
+    }
+
+    /// Applies every pending measurement whose IMU time is at or before `imu_stamp_ns`.
     fn apply_due<W: embedded_io::Write>(&mut self, w: &mut W, imu_stamp_ns: u64) {
-        while let Some(front) = self.pending.front().copied() {
-            let Some(filter) = self.filter.as_ref() else {
+        self.apply_due_poses(w, imu_stamp_ns);
+        self.apply_due_camera(w, imu_stamp_ns);
+    }
+
+    /// Not inlined: the popped entry (~1 KB) stays out of `on_imu`'s frame, below which the
+    /// pose updates run.
+    #[inline(never)]
+    fn apply_due_camera<W: embedded_io::Write>(&mut self, w: &mut W, imu_stamp_ns: u64) {
+        while let Some(front) = self.camera_pending.front() {
+            if !self.is_due(front.stamp_ns(), imu_stamp_ns) {
+                return;
+            }
+            let Some(front) = self.camera_pending.pop_front() else {
                 return;
             };
-            let offset_ns = (f64::from(filter.time_offset(SENSOR)) * 1e9) as i128;
-            if i128::from(front.stamp_ns()) + offset_ns > i128::from(imu_stamp_ns) {
+            if self.imu_index == 0 {
+                self.fault(w, ErrorKind::NotInitialized, front.seq(), front.stamp_ns());
+                continue;
+            }
+            match &front {
+                CameraPending::Target(t, seq) => self.init_target(w, t, *seq),
+                CameraPending::Corners(c, seq) => self.corners(w, c, *seq),
+            }
+        }
+    }
+
+    fn apply_due_poses<W: embedded_io::Write>(&mut self, w: &mut W, imu_stamp_ns: u64) {
+        while let Some(front) = self.pending.front().copied() {
+            if !self.is_due(front.stamp_ns(), imu_stamp_ns) {
                 return;
             }
             self.pending.pop_front();
@@ -379,9 +520,60 @@ impl Session {
         }
     }
 
+    /// `T_G_T = T_G_I T_I_C T_C_T` at the current IMU state; the target frame's prior.
+    #[inline(never)]
+    fn init_target<W: embedded_io::Write>(&mut self, w: &mut W, t: &TargetPose, seq: u32) {
+        let Some(Filter::CameraImu(CameraFilter { ekf, .. })) = self.filter.as_mut() else {
+            return;
+        };
+        let t_g_t = ekf
+            .imu()
+            .pose()
+            .compose(&ekf.extrinsic(SENSOR))
+            .compose(&pose(&t.t_cam_target));
+        match ekf.init_frame(TARGET, t_g_t, t.sigma_rotation_rad, t.sigma_position_m) {
+            Ok(()) => defmt::info!(
+                "target initialised at {=u64} ns, {=f32} m from the camera",
+                t.stamp_ns,
+                Vector3::from(t.t_cam_target.translation_m).norm()
+            ),
+            Err(e) => self.fault(w, error_kind(&e), seq, t.stamp_ns),
+        }
+    }
+
+    /// One reprojection update with the corners of an image.
+    #[inline(never)]
+    fn corners<W: embedded_io::Write>(&mut self, w: &mut W, c: &CornerSet, seq: u32) {
+        let Some(Filter::CameraImu(CameraFilter {
+            ekf,
+            camera,
+            pixel_sigma,
+        })) = self.filter.as_mut()
+        else {
+            return;
+        };
+        let mut buffer = [CornerObservation {
+            point_in_target: Vector3::zeros(),
+            pixel: Vector2::zeros(),
+        }; CORNER_SET_MAX];
+        for (slot, k) in buffer.iter_mut().zip(c.corners.as_slice()) {
+            slot.point_in_target = Vector3::from(k.point_in_target_m);
+            slot.pixel = Vector2::from(k.pixel);
+        }
+        let meas = msreg_estimator::CornerSet {
+            stamp_ns: c.stamp_ns,
+            corners: &buffer[..c.corners.len()],
+            pixel_sigma: *pixel_sigma,
+        };
+        match ekf.update_reprojection(SENSOR, TARGET, camera, &meas) {
+            Ok(report) => self.on_report(w, &report, seq),
+            Err(e) => self.fault(w, error_kind(&e), seq, c.stamp_ns),
+        }
+    }
+
     #[inline(never)]
     fn anchor<W: embedded_io::Write>(&mut self, w: &mut W, stamp_ns: u64, seq: u32) {
-        let Some(filter) = self.filter.as_mut() else {
+        let Some(Filter::PoseImu(filter)) = self.filter.as_mut() else {
             return;
         };
         match filter.anchor(SENSOR, stamp_ns) {
@@ -392,7 +584,7 @@ impl Session {
 
     #[inline(never)]
     fn increment<W: embedded_io::Write>(&mut self, w: &mut W, r: &RelativePose, seq: u32) {
-        let Some(filter) = self.filter.as_mut() else {
+        let Some(Filter::PoseImu(filter)) = self.filter.as_mut() else {
             return;
         };
         let meas = relative_pose(r);
@@ -505,70 +697,12 @@ fn seq_of(p: &Pending) -> u32 {
     }
 }
 
-fn confidence(g: Gate) -> Confidence {
-    match g {
-        Gate::P90 => Confidence::P90,
-        Gate::P95 => Confidence::P95,
-        Gate::P99 => Confidence::P99,
-        Gate::P995 => Confidence::P995,
-        Gate::P999 => Confidence::P999,
-        Gate::P9999 => Confidence::P9999,
-        Gate::P99999 => Confidence::P99999,
-    }
-}
-
-fn pose(p: &protocol::Pose) -> Pose<f32> {
-    let [w, x, y, z] = p.rotation_wxyz;
-    Pose::new(
-        UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z)),
-        Vector3::from(p.translation_m),
-    )
-}
-
 fn wire_pose(p: &Pose<f32>) -> protocol::Pose {
     let q = p.rotation.quaternion();
     protocol::Pose {
         rotation_wxyz: [q.w, q.i, q.j, q.k],
         translation_m: p.translation.into(),
     }
-}
-
-/// A filter from a configuration.
-pub fn new_filter(c: &Config) -> Result<Filter, FilterError> {
-    let n = &c.imu_noise;
-    let mut fc = FilterConfig::new(ImuNoise {
-        gyro_noise_density: n.gyro_noise_density,
-        accel_noise_density: n.accel_noise_density,
-        gyro_random_walk: n.gyro_random_walk,
-        accel_random_walk: n.accel_random_walk,
-    });
-    fc.gate = confidence(c.gate);
-    if c.max_imu_gap_ns > 0 {
-        fc.max_imu_gap_ns = u64::from(c.max_imu_gap_ns);
-    }
-    let p = &c.imu_prior;
-    let mut init = InitialState::<f32, 1>::at_rest(Vector3::from(p.accel_mean))
-        .ok_or(FilterError::InvalidConfig)?;
-    init.imu.gyro_bias = Vector3::from(p.gyro_bias);
-    if p.sigma_orientation_rad > 0.0 {
-        init.sigma_orientation = p.sigma_orientation_rad;
-    }
-    if p.sigma_velocity_m_s > 0.0 {
-        init.sigma_velocity = p.sigma_velocity_m_s;
-    }
-    let extrinsic = pose(&c.extrinsic);
-    if !extrinsic.is_finite() {
-        return Err(FilterError::NonFinite);
-    }
-    let init = init
-        .with_extrinsic(
-            SENSOR,
-            extrinsic,
-            c.sigma_rotation_rad,
-            c.sigma_translation_m,
-        )
-        .with_time_offset(SENSOR, c.time_offset_s, c.sigma_time_offset_s);
-    Filter::new(&fc, &init)
 }
 
 fn relative_pose(r: &RelativePose) -> FilterRelativePose<f32> {
@@ -597,6 +731,9 @@ fn error_kind(e: &FilterError) -> ErrorKind {
         FilterError::SingularInnovation => ErrorKind::SingularInnovation,
         FilterError::DivergentUpdate => ErrorKind::DivergentUpdate,
         FilterError::InvalidConfig => ErrorKind::InvalidConfig,
+        FilterError::FrameNotInitialized => ErrorKind::TargetNotInitialized,
+        FilterError::NotProjectable => ErrorKind::NotProjectable,
+        FilterError::EmptyMeasurement => ErrorKind::OutOfRange,
         _ => ErrorKind::Other,
     }
 }
@@ -606,6 +743,7 @@ fn diagnostic(r: &UpdateReport<f32>) -> UpdateDiagnostic {
         stamp_ns: r.stamp_ns,
         kind: match r.kind {
             msreg_estimator::UpdateKind::ZeroVelocity => UpdateKind::ZeroVelocity,
+            msreg_estimator::UpdateKind::Reprojection => UpdateKind::Reprojection,
             _ => UpdateKind::RelativePose,
         },
         dof: r.dof as u8,
@@ -643,7 +781,7 @@ fn alarm(e: &HealthEvent<f32>) -> HealthAlarm {
 }
 
 fn estimate(f: &Filter, c: &Counts, alarm: bool, seq: u32) -> Estimate {
-    let (sr, st) = f.extrinsic_sigma(SENSOR);
+    let (sr, st) = f.extrinsic_sigma();
     let health = f.health();
     let sensor = health.sensor(SENSOR);
     let (nis_per_dof, nis_state) = sensor.map_or((0.0, NisState::Filling), |s| {
@@ -657,11 +795,11 @@ fn estimate(f: &Filter, c: &Counts, alarm: bool, seq: u32) -> Estimate {
     });
     Estimate {
         stamp_ns: f.time_ns(),
-        extrinsic: wire_pose(&f.extrinsic(SENSOR)),
+        extrinsic: wire_pose(&f.extrinsic()),
         sigma_rotation_rad: sr.into(),
         sigma_translation_m: st.into(),
-        time_offset_s: f.time_offset(SENSOR),
-        sigma_time_offset_s: f.time_offset_sigma(SENSOR),
+        time_offset_s: f.time_offset(),
+        sigma_time_offset_s: f.time_offset_sigma(),
         nis_per_dof,
         nis_state,
         health: if alarm {

@@ -11,8 +11,8 @@ use std::time::Duration;
 
 use common::*;
 use msreg_host::link::cli::{replay, ReplayOptions};
-use msreg_host::sim::{Knock, SimConfig};
-use msreg_protocol::{ErrorKind, HealthState};
+use msreg_host::sim::{simulate_camera_imu, CameraImuSimConfig, Knock, SimConfig};
+use msreg_protocol::{ErrorKind, HealthState, UpdateKind};
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 
 #[test]
@@ -223,4 +223,176 @@ fn faults_are_typed_counted_and_the_session_recovers() {
         total < RAM_TARGET_BYTES,
         "RAM {total} B >= {RAM_TARGET_BYTES} B"
     );
+}
+
+#[test]
+fn camera_corner_sets_on_the_device_match_host_reperrcal_and_ground_truth() {
+    // Given a short simulated camera-IMU recording (rendered images at 10 Hz) with a 5 ms time
+    // offset
+    let started = std::time::Instant::now();
+    let sim = simulate_camera_imu(&CameraImuSimConfig {
+        seed: 21,
+        duration_s: CAMERA_S,
+        rate_hz: CAMERA_RATE_HZ,
+        time_offset_s: 0.005,
+        ..CameraImuSimConfig::default()
+    })
+    .expect("valid simulation config");
+    let dir = tempfile::tempdir().expect("temp dir");
+    sim.write(dir.path(), &|_| {}).expect("dataset written");
+    let simulated_s = started.elapsed().as_secs_f64();
+    // When `msreg link replay` detects its corners, runs MoCal and streams it to the firmware
+    let qemu = boot();
+    let outcome =
+        replay(dir.path(), &qemu.pty, None, &ReplayOptions::default()).expect("replay runs");
+    let replayed_s = started.elapsed().as_secs_f64() - simulated_s;
+    // and the host runs RepErrCal in f64 on the same detections
+    let HostCameraRun {
+        calibration: host,
+        imu_samples,
+        board_corners,
+    } = host_reperrcal(dir.path());
+    println!(
+        "timing: simulate + render {simulated_s:.1} s, detect + MoCal + replay {replayed_s:.1} s"
+    );
+    // Then the device applied every IMU sample and fused every image the host fused, with
+    // no fault
+    let status = outcome.status.expect("device status");
+    let c = &outcome.collected;
+    println!("{}", msreg_host::link::cli::summary(c, Some(&status)));
+    assert_eq!(status.imu_samples as usize, imu_samples);
+    assert_eq!(
+        status.errors.iter().sum::<u32>(),
+        0,
+        "faults: {:?}",
+        status.errors
+    );
+    let device_updates: Vec<_> = c
+        .diagnostics
+        .iter()
+        .filter(|(_, d)| d.kind == UpdateKind::Reprojection)
+        .map(|(_, d)| d)
+        .collect();
+    let host_accepted = host.report.frames.iter().filter(|f| f.accepted).count();
+    let device_accepted = device_updates.iter().filter(|d| d.accepted).count();
+    println!(
+        "reprojection updates: device {} ({device_accepted} accepted), host {} ({host_accepted} accepted)",
+        device_updates.len(),
+        host.report.frames.len()
+    );
+    assert_eq!(device_updates.len(), host.report.frames.len());
+    assert_eq!(status.updates as usize, device_updates.len());
+    assert!(device_updates
+        .iter()
+        .all(|d| usize::from(d.dof) == 2 * board_corners));
+    // and its estimate agrees with the host's f64 RepErrCal within a fraction of its sigma
+    let device = last_estimate(c);
+    let cmp = compare_with(
+        &device,
+        &host.t_imu_cam,
+        &host.covariance,
+        host.time_offset_s,
+        host.time_offset_sigma_s,
+    );
+    println!("device vs host f64 RepErrCal: {cmp:?}");
+    assert!(
+        cmp.rotation_sigmas <= CAMERA_AGREE_SIGMAS
+            && cmp.translation_sigmas <= CAMERA_AGREE_SIGMAS
+            && cmp.time_offset_sigmas <= CAMERA_AGREE_SIGMAS,
+        "device and host differ by {cmp:?} (> {CAMERA_AGREE_SIGMAS} sigma)"
+    );
+    assert!(
+        cmp.rotation_deg <= CAMERA_AGREE_ABS.0 && cmp.translation_mm <= CAMERA_AGREE_ABS.1,
+        "device and host differ by {cmp:?} (> {CAMERA_AGREE_ABS:?} deg, mm)"
+    );
+    // and with the truth: inside 3 sigma and the issue-3 accuracy
+    let truth = truth_errors(&device, &sim.t_cam_imu.inverse(), sim.config.time_offset_s);
+    println!("device vs truth: {truth:?}");
+    assert!(truth.within_three_sigma, "{truth:?}");
+    assert!(
+        truth.rotation_deg < 0.05 && truth.translation_mm < 2.0,
+        "{truth:?}"
+    );
+    // and it logged the target initialisation, within 64 KiB of RAM
+    let logged = qemu.wait_for_log("target initialised", 1, Duration::from_secs(5));
+    assert_eq!(logged.len(), 1, "{logged:?}");
+    let (_, _, total) = ram_after_session(&qemu);
+    assert!(
+        total < RAM_TARGET_BYTES,
+        "RAM {total} B >= {RAM_TARGET_BYTES} B"
+    );
+}
+
+#[test]
+fn camera_messages_out_of_order_or_invalid_are_typed_faults() {
+    use msreg_host::link::{Client, ClientOptions};
+    use msreg_protocol::{Anchor, HostMsg, Pose, TargetPose};
+    let qemu = boot();
+    let mut client = Client::connect(&qemu.pty, ClientOptions::default(), None).expect("port");
+    client
+        .handshake(Duration::from_secs(10))
+        .expect("handshake");
+    let t0 = 1_000_000_000u64;
+    // Given no configuration, a corner set is refused as not configured
+    client.send(&corner_set(t0, 42, 300.0)).expect("send");
+    // Given a camera-IMU configuration
+    client
+        .send(&HostMsg::Config(camera_config()))
+        .expect("config sent");
+    // odometry is the wrong sensor set, a NaN pixel or an empty set are refused on arrival
+    client
+        .send(&HostMsg::Anchor(Anchor { stamp_ns: t0 }))
+        .expect("send");
+    client.send(&corner_set(t0, 42, f32::NAN)).expect("send");
+    client.send(&corner_set(t0, 0, 300.0)).expect("send");
+    // and a corner set due before any target pose is a target_not_initialized fault
+    client
+        .send(&corner_set(t0 + 50_000_000, 42, 300.0))
+        .expect("send");
+    for k in 0..40 {
+        client
+            .send(&imu_batch(t0 + k * 5_000_000, 0.0))
+            .expect("send");
+    }
+    // while a target pose then initialises the target frame
+    client
+        .send(&HostMsg::TargetPose(TargetPose {
+            stamp_ns: t0 + 250_000_000,
+            t_cam_target: Pose {
+                rotation_wxyz: [1.0, 0.0, 0.0, 0.0],
+                translation_m: [-0.1, -0.1, 0.8],
+            },
+            sigma_rotation_rad: 0.03,
+            sigma_position_m: 0.03,
+        }))
+        .expect("send");
+    for k in 40..80 {
+        client
+            .send(&imu_batch(t0 + k * 5_000_000, 0.0))
+            .expect("send");
+    }
+    client.flush(Duration::from_secs(10)).expect("flush");
+    let status = client.status(Duration::from_secs(10)).expect("status");
+    let counts = |k: ErrorKind| status.errors[k.index()];
+    println!(
+        "{}",
+        msreg_host::link::cli::summary(&client.collected, Some(&status))
+    );
+    // Then each fault is counted and reported once by its kind, and nothing reset the device
+    for kind in [
+        ErrorKind::NotConfigured,
+        ErrorKind::WrongSensorSet,
+        ErrorKind::NonFinite,
+        ErrorKind::OutOfRange,
+        ErrorKind::TargetNotInitialized,
+    ] {
+        assert_eq!(counts(kind), 1, "{}: {:?}", kind.name(), status.errors);
+        assert_eq!(client.collected.errors_of(kind), 1, "{}", kind.name());
+    }
+    assert_eq!(status.errors.iter().sum::<u32>(), 5, "{:?}", status.errors);
+    assert!(status.configured);
+    assert_eq!(status.imu_samples, 80);
+    assert_eq!(status.updates, 0);
+    let logged = qemu.wait_for_log("target initialised", 1, Duration::from_secs(5));
+    assert_eq!(logged.len(), 1, "{logged:?}");
 }

@@ -11,6 +11,12 @@ use crate::batch::Bounded;
 /// IMU samples per [`ImuBatch`].
 pub const IMU_BATCH_MAX: usize = 16;
 
+/// Corners per [`CornerSet`]: a 6x7 or 6x8 checkerboard (Kalibr's example board and the
+/// simulator's: 42) in one frame of at most 984 bytes (`HOST_FRAME_MAX`), under a quarter of
+/// the device's 4 KiB receive ring. Larger targets (Kalibr's 6x6 aprilgrid: 144 corners) go
+/// as several sets with the same stamp (docs/protocol.md).
+pub const CORNER_SET_MAX: usize = 48;
+
 /// Host to device.
 // No heap on the device: a batch is stored inline, so the enum is as large as one batch.
 #[allow(clippy::large_enum_variant)]
@@ -28,6 +34,10 @@ pub enum HostMsg {
     RelativePose(RelativePose),
     /// Asks for a [`Status`].
     GetStatus,
+    /// Initialises the target frame from the camera's pose of it in one image (camera-IMU).
+    TargetPose(TargetPose),
+    /// Target corners seen in one image (camera-IMU).
+    CornerSet(CornerSet),
 }
 
 /// Device to host.
@@ -102,10 +112,51 @@ pub enum Gate {
 }
 
 /// Which filter layout to run.
-#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq)]
 pub enum SensorSet {
     /// IMU + one pose sensor (odometry) with extrinsic and time offset.
     PoseImu,
+    /// IMU + one camera (extrinsic, time offset) and a static target seen in its images;
+    /// the extrinsic of [`Config`] is `T_imu_cam`.
+    CameraImu(CameraSetup),
+}
+
+/// Projection of a camera onto its normalised plane (Kalibr `camera_model`).
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq)]
+pub enum CameraProjection {
+    /// `pinhole`.
+    Pinhole,
+    /// `omni` (Mei's unified model).
+    Omni {
+        /// Mirror parameter.
+        xi: f32,
+    },
+}
+
+/// Lens distortion (Kalibr `distortion_model`).
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq)]
+pub enum CameraDistortion {
+    /// `none`.
+    None,
+    /// `radtan`: k1, k2, p1, p2, k3 (k3 zero for Kalibr's four coefficients).
+    RadTan([f32; 5]),
+    /// `equidistant`: k1, k2, k3, k4 (pinhole only).
+    Equidistant([f32; 4]),
+}
+
+/// A calibrated camera and its corner noise.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq)]
+pub struct CameraSetup {
+    /// Projection.
+    pub projection: CameraProjection,
+    /// `[fu, fv, cu, cv]`, pixels.
+    pub intrinsics: [f32; 4],
+    /// Distortion.
+    pub distortion: CameraDistortion,
+    /// `[width, height]`, pixels.
+    pub resolution: [u32; 2],
+    /// Corner noise, 1-sigma per axis, pixels.
+    pub pixel_sigma: f32,
 }
 
 /// IMU prior at the first sample (from the host's standstill detection).
@@ -194,6 +245,38 @@ pub struct RelativePose {
     pub sigma_translation_m: [f32; 3],
 }
 
+/// The target's pose in the camera in one image (the host's PnP), from which the device sets
+/// the static target frame `T_G_T = T_G_I T_I_C T_C_T` when the IMU stream reaches the image.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq)]
+pub struct TargetPose {
+    /// Image stamp (camera clock), ns.
+    pub stamp_ns: u64,
+    /// `T_cam_target`.
+    pub t_cam_target: Pose,
+    /// 1-sigma of the target frame's orientation, rad.
+    pub sigma_rotation_rad: f32,
+    /// 1-sigma of its position, m.
+    pub sigma_position_m: f32,
+}
+
+/// One target corner detected in an image.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq, Default)]
+pub struct Corner {
+    /// Position in the target frame `T`, m.
+    pub point_in_target_m: [f32; 3],
+    /// Detected pixel `(u, v)` (centre of the top-left pixel = (0, 0)).
+    pub pixel: [f32; 2],
+}
+
+/// Target corners detected in one image, fused as one reprojection update.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq)]
+pub struct CornerSet {
+    /// Image stamp (camera clock), ns.
+    pub stamp_ns: u64,
+    /// The corners.
+    pub corners: Bounded<Corner, CORNER_SET_MAX>,
+}
+
 /// What happened to a host frame.
 #[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum AckStatus {
@@ -276,6 +359,8 @@ pub enum UpdateKind {
     RelativePose,
     /// Zero velocity.
     ZeroVelocity,
+    /// Target-corner reprojection.
+    Reprojection,
 }
 
 /// Per-update record.
@@ -362,11 +447,17 @@ pub enum ErrorKind {
     DivergentUpdate,
     /// Any other filter error.
     Other,
+    /// Corner set before the target frame was initialised (no [`TargetPose`] applied).
+    TargetNotInitialized,
+    /// A corner falls behind the camera or outside the model's domain at the estimate.
+    NotProjectable,
+    /// Measurement of a sensor the configured [`SensorSet`] does not have.
+    WrongSensorSet,
 }
 
 impl ErrorKind {
     /// Number of kinds (length of [`Status::errors`]).
-    pub const COUNT: usize = 21;
+    pub const COUNT: usize = 24;
     /// All kinds, in index order.
     pub const ALL: [ErrorKind; Self::COUNT] = [
         Self::Framing,
@@ -390,6 +481,9 @@ impl ErrorKind {
         Self::SingularInnovation,
         Self::DivergentUpdate,
         Self::Other,
+        Self::TargetNotInitialized,
+        Self::NotProjectable,
+        Self::WrongSensorSet,
     ];
 
     /// Index into [`Status::errors`].
@@ -421,6 +515,9 @@ impl ErrorKind {
             "singular_innovation",
             "divergent_update",
             "other",
+            "target_not_initialized",
+            "not_projectable",
+            "wrong_sensor_set",
         ][self.index()]
     }
 }
@@ -453,7 +550,7 @@ pub struct Status {
     pub imu_samples: u32,
     /// Anchors set.
     pub anchors: u32,
-    /// Relative-pose updates (accepted or gated out).
+    /// Relative-pose or reprojection updates (accepted or gated out).
     pub updates: u32,
     /// Zero-velocity updates.
     pub zero_velocity_updates: u32,

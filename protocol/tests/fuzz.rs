@@ -2,8 +2,8 @@
 //! the deframer's fixed buffer, and valid packets survive the round trip.
 
 use msreg_protocol::{
-    frame, Anchor, Bounded, Deframer, DeviceMsg, HostMsg, ImuBatch, ImuSample, Pose, Pushed,
-    RelativePose, HOST_FRAME_MAX, IMU_BATCH_MAX,
+    frame, Anchor, Bounded, Corner, CornerSet, Deframer, DeviceMsg, HostMsg, ImuBatch, ImuSample,
+    Pose, Pushed, RelativePose, TargetPose, CORNER_SET_MAX, HOST_FRAME_MAX, IMU_BATCH_MAX,
 };
 use proptest::prelude::*;
 
@@ -77,10 +77,48 @@ fn relative_pose() -> impl Strategy<Value = HostMsg> {
         })
 }
 
+fn corner_set() -> impl Strategy<Value = HostMsg> {
+    (
+        any::<u64>(),
+        prop::collection::vec(
+            ([f32_any(), f32_any(), f32_any()], [f32_any(), f32_any()]),
+            0..=CORNER_SET_MAX,
+        ),
+    )
+        .prop_map(|(stamp_ns, c)| {
+            HostMsg::CornerSet(CornerSet {
+                stamp_ns,
+                corners: c
+                    .into_iter()
+                    .map(|(point_in_target_m, pixel)| Corner {
+                        point_in_target_m,
+                        pixel,
+                    })
+                    .collect(),
+            })
+        })
+}
+
+fn target_pose() -> impl Strategy<Value = HostMsg> {
+    (any::<u64>(), [f32_any(), f32_any(), f32_any(), f32_any()]).prop_map(|(stamp_ns, q)| {
+        HostMsg::TargetPose(TargetPose {
+            stamp_ns,
+            t_cam_target: Pose {
+                rotation_wxyz: q,
+                translation_m: [q[3], q[2], q[1]],
+            },
+            sigma_rotation_rad: q[0],
+            sigma_position_m: q[1],
+        })
+    })
+}
+
 fn host_msg() -> impl Strategy<Value = HostMsg> {
     prop_oneof![
         imu_batch(),
         relative_pose(),
+        corner_set(),
+        target_pose(),
         any::<u64>().prop_map(|stamp_ns| HostMsg::Anchor(Anchor { stamp_ns })),
         Just(HostMsg::GetStatus),
     ]

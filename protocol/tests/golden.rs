@@ -2,8 +2,10 @@
 //! and needs a new `VERSION`.
 
 use msreg_protocol::{
-    cobs, crc, frame, Ack, AckStatus, Anchor, Bounded, Deframer, DeviceMsg, ErrorKind, ErrorReport,
-    FrameError, Hello, HostMsg, ImuBatch, ImuSample, Packet, Pushed, DEVICE_FRAME_MAX,
+    cobs, crc, frame, Ack, AckStatus, Anchor, Bounded, CameraDistortion, CameraProjection,
+    CameraSetup, Config, Corner, CornerSet, Deframer, DeviceMsg, ErrorKind, ErrorReport,
+    FrameError, Gate, Hello, HostMsg, ImuBatch, ImuNoise, ImuPrior, ImuSample, Packet, Pose,
+    Pushed, SensorSet, TargetPose, UpdateDiagnostic, UpdateKind, CORNER_SET_MAX, DEVICE_FRAME_MAX,
     HOST_FRAME_MAX, IMU_BATCH_MAX,
 };
 
@@ -195,8 +197,178 @@ fn cobs_handles_runs_of_254_and_more_nonzero_bytes() {
     }
 }
 
+/// The body of a frame (COBS and CRC removed), to spell out its fields.
+fn body_of(frame_bytes: &[u8]) -> Vec<u8> {
+    let mut buf = frame_bytes[..frame_bytes.len() - 1].to_vec();
+    let n = cobs::decode_in_place(&mut buf).expect("COBS");
+    buf.truncate(n - 2);
+    buf
+}
+
+fn le(values: &[f32]) -> Vec<u8> {
+    values.iter().flat_map(|v| v.to_le_bytes()).collect()
+}
+
+#[test]
+fn target_pose_frame_has_exact_bytes() {
+    let msg = HostMsg::TargetPose(TargetPose {
+        stamp_ns: 1_000,
+        t_cam_target: Pose {
+            rotation_wxyz: [1.0, 0.0, 0.0, 0.0],
+            translation_m: [0.0, 0.0, 1.5],
+        },
+        sigma_rotation_rad: 0.5,
+        sigma_position_m: 0.25,
+    });
+    let bytes = host_frame(2, &msg);
+    // seq 2, variant 6, stamp 1000 = e8 07, 7 + 2 f32.
+    let mut body = vec![0x02, 0x06, 0xe8, 0x07];
+    body.extend(le(&[1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.5, 0.5, 0.25]));
+    assert_eq!(body_of(&bytes), body);
+    #[rustfmt::skip]
+    let expected = [
+        0x05, 0x02, 0x06, 0xe8, 0x07, 0x01, 0x03, 0x80, 0x3f, 0x01, 0x01, 0x01, 0x01, 0x01,
+        0x01, 0x01, 0x01, 0x01, 0x01, 0x01, 0x01, 0x01, 0x01, 0x01, 0x01, 0x01, 0x01, 0x01,
+        0x01, 0x01, 0x03, 0xc0, 0x3f, 0x01, 0x01, 0x02, 0x3f, 0x01, 0x05, 0x80, 0x3e, 0x59,
+        0x4a, 0x00,
+    ];
+    assert_eq!(bytes, expected);
+    assert_eq!(decode_host(&bytes).expect("decodes").msg, msg);
+}
+
+#[test]
+fn corner_set_frame_has_exact_bytes() {
+    let corners: Bounded<Corner, CORNER_SET_MAX> = [
+        Corner {
+            point_in_target_m: [0.0, 0.0, 0.0],
+            pixel: [320.5, 240.25],
+        },
+        Corner {
+            point_in_target_m: [0.04, 0.08, 0.0],
+            pixel: [350.0, 270.0],
+        },
+    ]
+    .into_iter()
+    .collect();
+    let msg = HostMsg::CornerSet(CornerSet {
+        stamp_ns: 5,
+        corners,
+    });
+    let bytes = host_frame(3, &msg);
+    // seq 3, variant 7, stamp 5, 2 corners of 5 f32.
+    let mut body = vec![0x03, 0x07, 0x05, 0x02];
+    body.extend(le(&[
+        0.0, 0.0, 0.0, 320.5, 240.25, 0.04, 0.08, 0.0, 350.0, 270.0,
+    ]));
+    assert_eq!(body_of(&bytes), body);
+    #[rustfmt::skip]
+    let expected = [
+        0x05, 0x03, 0x07, 0x05, 0x02, 0x01, 0x01, 0x01, 0x01, 0x01, 0x01, 0x01, 0x01, 0x01,
+        0x01, 0x01, 0x01, 0x04, 0x40, 0xa0, 0x43, 0x0c, 0x40, 0x70, 0x43, 0x0a, 0xd7, 0x23,
+        0x3d, 0x0a, 0xd7, 0xa3, 0x3d, 0x01, 0x01, 0x01, 0x01, 0x01, 0x03, 0xaf, 0x43, 0x01,
+        0x05, 0x87, 0x43, 0x71, 0x82, 0x00,
+    ];
+    assert_eq!(bytes, expected);
+    assert_eq!(decode_host(&bytes).expect("decodes").msg, msg);
+}
+
+#[test]
+fn camera_imu_config_has_exact_bytes() {
+    let camera = CameraSetup {
+        projection: CameraProjection::Omni { xi: 0.5 },
+        intrinsics: [400.0, 400.0, 376.0, 240.0],
+        distortion: CameraDistortion::RadTan([0.25, 0.0, 0.0, 0.0, 0.0]),
+        resolution: [752, 480],
+        pixel_sigma: 0.125,
+    };
+    let msg = HostMsg::Config(Config {
+        sensors: SensorSet::CameraImu(camera),
+        imu_noise: ImuNoise {
+            gyro_noise_density: 0.0,
+            accel_noise_density: 0.0,
+            gyro_random_walk: 0.0,
+            accel_random_walk: 0.0,
+        },
+        gate: Gate::P999,
+        max_imu_gap_ns: 0,
+        imu_prior: ImuPrior {
+            accel_mean: [0.0; 3],
+            gyro_bias: [0.0; 3],
+            sigma_orientation_rad: 0.0,
+            sigma_velocity_m_s: 0.0,
+        },
+        extrinsic: Pose::default(),
+        sigma_rotation_rad: 0.0,
+        sigma_translation_m: 0.0,
+        time_offset_s: 0.0,
+        sigma_time_offset_s: 0.0,
+        zero_velocity_until_ns: 0,
+        zero_velocity_every: 0,
+        estimate_period_ns: 0,
+    });
+    let bytes = host_frame(1, &msg);
+    // seq 1, variant 1 (Config), sensors variant 1 (CameraImu), projection 1 (Omni) + xi,
+    // intrinsics, distortion 1 (RadTan) + 5 f32, 752 = f0 05, 480 = e0 03, pixel sigma,
+    // then the pose-IMU fields (all zero: gate P999 = variant 4).
+    let mut body = vec![0x01, 0x01, 0x01, 0x01];
+    body.extend(le(&[0.5, 400.0, 400.0, 376.0, 240.0]));
+    body.push(0x01);
+    body.extend(le(&[0.25, 0.0, 0.0, 0.0, 0.0]));
+    body.extend([0xf0, 0x05, 0xe0, 0x03]);
+    body.extend(le(&[0.125]));
+    body.extend(le(&[0.0; 4]));
+    body.extend([0x04, 0x00]);
+    body.extend(le(&[0.0; 8]));
+    body.extend(le(&[0.0; 7]));
+    body.extend(le(&[0.0; 4]));
+    body.extend([0x00, 0x00, 0x00]);
+    assert_eq!(body_of(&bytes), body);
+    // COBS turns each zero into a block code (no block reaches 254 bytes): one leading code
+    // byte, the CRC and the delimiter are all it adds.
+    assert_eq!(bytes.len(), 1 + body.len() + 2 + 1);
+    assert_eq!(
+        crc::crc16(&body).to_le_bytes(),
+        [bytes[bytes.len() - 3], bytes[bytes.len() - 2]]
+    );
+    assert_eq!(decode_host(&bytes).expect("decodes").msg, msg);
+}
+
+#[test]
+fn reprojection_diagnostic_and_new_faults_have_exact_bytes() {
+    let diag = DeviceMsg::UpdateDiagnostic(UpdateDiagnostic {
+        stamp_ns: 1,
+        kind: UpdateKind::Reprojection,
+        dof: 84,
+        nis: 0.0,
+        threshold: 0.0,
+        accepted: true,
+    });
+    // seq 4, variant 3, stamp 1, kind 2, dof 84 = 0x54, two zero f32, true.
+    let expected_body = [0x04, 0x03, 0x01, 0x02, 0x54, 0, 0, 0, 0, 0, 0, 0, 0, 0x01];
+    assert_eq!(body_of(&device_frame(4, &diag)), expected_body);
+    for (kind, index) in [
+        (ErrorKind::TargetNotInitialized, 21u8),
+        (ErrorKind::NotProjectable, 22),
+        (ErrorKind::WrongSensorSet, 23),
+    ] {
+        let report = DeviceMsg::ErrorReport(ErrorReport {
+            kind,
+            count: 1,
+            seq: 2,
+            stamp_ns: 3,
+        });
+        assert_eq!(
+            body_of(&device_frame(5, &report)),
+            [0x05, 0x05, index, 0x01, 0x02, 0x03]
+        );
+        assert_eq!(ErrorKind::ALL[usize::from(index)], kind);
+    }
+}
+
 // Buffer sizes come from MaxSize: one full IMU batch (tag, u64 base, length, 16 x (u32
-// offset + 6 f32)) fits, and the frames stay small enough for the device's buffers.
+// offset + 6 f32)) and one full corner set (tag, u64 stamp, length, 48 x 5 f32) fit, and the
+// frames stay small enough for the device's buffers (a quarter of its 4 KiB receive ring).
 const _: () = assert!(HOST_FRAME_MAX >= 2 + 10 + 1 + IMU_BATCH_MAX * 29);
-const _: () = assert!(HOST_FRAME_MAX <= 512);
+const _: () = assert!(HOST_FRAME_MAX >= 2 + 10 + 1 + CORNER_SET_MAX * 20);
+const _: () = assert!(HOST_FRAME_MAX <= 1024);
 const _: () = assert!(DEVICE_FRAME_MAX <= 256);

@@ -1,5 +1,6 @@
 //! Instruction counts of the f32 filter on the emulated Cortex-M4F: every IMU propagation and
-//! every relative-pose update of the embedded sequence is timed with SysTick. Run under
+//! every relative-pose update of the embedded sequence is timed with SysTick, and so are
+//! reprojection updates of the camera-IMU filter with one 6x7 board's corners. Run under
 //! `qemu -icount shift=0` (tools/firmware.sh bench), where one tick is 40 instructions.
 //!
 //! Prints human-readable lines and machine-readable ones for tools/firmware.sh:
@@ -13,6 +14,12 @@ use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
 use panic_halt as _;
 
+use msreg_estimator::camera::{radtan::RadTan, Camera, Distortion, Intrinsics, Projection};
+use msreg_estimator::na::{UnitQuaternion, Vector2, Vector3};
+use msreg_estimator::{
+    CameraImuEkf, CornerObservation, CornerSet, FilterConfig, ImuNoise, ImuSample, InitialState,
+    Pose,
+};
 use msreg_firmware::scenario::{Event, Scenario, ScenarioConfig};
 use msreg_firmware::selftest::{self, Filter, RunCounts};
 use msreg_firmware::stack;
@@ -71,6 +78,79 @@ where
     T: msreg_estimator::Scalar,
 {
     N
+}
+
+/// Rows and columns of inner corners of the benchmark board (the simulator's 6x7).
+const BOARD: (usize, usize) = (6, 7);
+
+/// Reprojection updates of `CameraImuEkf<f32>` at rest, with the 42 corners of a 6x7 board
+/// 0.8 m in front of a EuRoC-like pinhole-radtan camera, at their exact projections (so
+/// every update passes the gate and the full sequential correction is counted).
+fn bench_reprojection(clock: &InstructionClock) -> Option<Tally> {
+    let noise = ImuNoise {
+        gyro_noise_density: 1.7e-4,
+        accel_noise_density: 2.0e-3,
+        gyro_random_walk: 1.9e-5,
+        accel_random_walk: 3.0e-3,
+    };
+    let gravity = Vector3::new(0.0, 0.0, 9.81);
+    let init = InitialState::<f32, 1>::at_rest(gravity)?
+        .with_extrinsic(0, Pose::identity(), 0.01, 0.01)
+        .with_time_offset(0, 0.0, 0.005);
+    let mut ekf = CameraImuEkf::<f32>::new(&FilterConfig::new(noise), &init).ok()?;
+    let stamp_ns = 1_000_000_000;
+    ekf.propagate(&ImuSample {
+        stamp_ns,
+        gyro: Vector3::zeros(),
+        accel: gravity,
+    })
+    .ok()?;
+    let camera = Camera::new(
+        Projection::Pinhole,
+        Intrinsics {
+            fu: 458.7,
+            fv: 457.3,
+            cu: 367.2,
+            cv: 248.4,
+        },
+        Distortion::RadTan(RadTan {
+            k1: -0.283,
+            k2: 0.074,
+            p1: 2.0e-4,
+            p2: 1.8e-5,
+            k3: 0.0,
+        }),
+        (752, 480),
+    )
+    .ok()?;
+    let t_c_t = Pose::new(UnitQuaternion::identity(), Vector3::new(-0.1, -0.12, 0.8));
+    let t_g_c = ekf.imu().pose().compose(&ekf.extrinsic(0));
+    ekf.init_frame(0, t_g_c.compose(&t_c_t), 0.05, 0.05).ok()?;
+    let mut corners = [CornerObservation {
+        point_in_target: Vector3::zeros(),
+        pixel: Vector2::zeros(),
+    }; BOARD.0 * BOARD.1];
+    for (k, corner) in corners.iter_mut().enumerate() {
+        let (r, c) = (k / BOARD.1, k % BOARD.1);
+        corner.point_in_target = Vector3::new(r as f32 * 0.04, c as f32 * 0.04, 0.0);
+        corner.pixel = camera
+            .project(&t_c_t.transform_point(&corner.point_in_target))?
+            .pixel;
+    }
+    let meas = CornerSet {
+        stamp_ns,
+        corners: &corners,
+        pixel_sigma: 0.1,
+    };
+    let mut tally = Tally::default();
+    for _ in 0..10 {
+        let (outcome, ticks) = clock.measure(|| ekf.update_reprojection(0, 0, &camera, &meas));
+        if !outcome.is_ok_and(|r| r.accepted) {
+            return None;
+        }
+        tally.add(ticks);
+    }
+    Some(tally)
 }
 
 fn bench(clock: InstructionClock) -> bool {
@@ -140,10 +220,16 @@ fn bench(clock: InstructionClock) -> bool {
         zero_velocity.add(ticks);
     }
 
+    let Some(reprojection) = bench_reprojection(&clock) else {
+        hprintln!("bench: reprojection update failed or was not accepted");
+        return false;
+    };
+
     propagate.print("propagate");
     update.print("update");
     anchor.print("anchor");
     zero_velocity.print("zero_velocity");
+    reprojection.print("reprojection");
     hprintln!("STACK propagate {}", stack_propagate);
     hprintln!("STACK update {}", stack_update);
     let total = (propagate.ticks + update.ticks + anchor.ticks) * INSTRUCTIONS_PER_TICK;

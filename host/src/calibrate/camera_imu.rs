@@ -90,7 +90,7 @@ impl Default for CameraImuOptions {
 /// Smallest corner noise assumed, pixels: below it detector biases dominate.
 const MIN_PIXEL_SIGMA: f64 = 0.05;
 /// Fewest corners an image needs for PnP and the update.
-const MIN_CORNERS: usize = 6;
+pub const MIN_CORNERS: usize = 6;
 
 /// Reprojection statistics of one image, after its update.
 #[derive(Debug, Clone, Serialize)]
@@ -217,46 +217,8 @@ pub fn calibrate<T: Scalar>(
     progress: &mut dyn FnMut(f64),
 ) -> Result<CameraImuCalibration, PoseImuError> {
     let started = Instant::now();
-    let poses = frame_poses(input.camera, input.frames);
-    if poses.len() < 3 {
-        return Err(PoseImuError::BadInput(format!(
-            "cam0: {} of {} images have a target pose; at least 3 are needed",
-            poses.len(),
-            input.frames.len()
-        )));
-    }
-    let pixel_sigma = options
-        .pixel_sigma
-        .unwrap_or_else(|| pixel_sigma_from_pnp(&poses));
-    let odometry: Vec<PoseRecord> = poses.iter().map(camera_in_target).collect();
-    let noise = increment_noise(&poses);
-    let motion = pose_imu::calibrate::<T>(
-        &pose_imu::PoseImuInput {
-            imu: input.imu,
-            imu_noise: input.imu_noise,
-            poses: &odometry,
-            pose_noise: &noise,
-        },
-        &options.prior,
-        &mut |f| progress(0.3 * f),
-    )?;
-    let motion = CameraImuCalibration {
-        t_imu_cam: motion.t_imu_pose,
-        time_offset_s: motion.time_offset_s,
-        time_offset_sigma_s: motion.time_offset_sigma_s,
-        covariance: motion.covariance,
-        report: CameraImuReport {
-            update: CameraUpdate::Motion,
-            pixel_sigma,
-            frames_with_pose: poses.len(),
-            mean_reprojection_error_px: f64::NAN,
-            verification_reprojection_error_px: f64::NAN,
-            frames: Vec::new(),
-            initialization: None,
-            filter: motion.report,
-        },
-        sample: None,
-    };
+    let (motion, pixel_sigma) =
+        motion_calibration::<T>(input, options, &mut |f| progress(0.3 * f))?;
     let mut calibration = match options.update {
         CameraUpdate::Motion => motion,
         CameraUpdate::Reprojection => reprojection_calibration::<T>(
@@ -282,6 +244,94 @@ pub fn calibrate<T: Scalar>(
         verification.report.mean_reprojection_error_px;
     progress(1.0);
     Ok(calibration)
+}
+
+/// Where RepErrCal starts (what `msreg link replay` sends the device): MoCal's estimate,
+/// the prior around it, and the corner noise.
+#[derive(Debug, Clone)]
+pub struct ReprojectionStart {
+    /// The MoCal calibration.
+    pub motion: CameraImuCalibration,
+    /// RepErrCal's extrinsic and time-offset prior around it.
+    pub prior: PoseImuOptions,
+    /// Corner noise, 1-sigma per axis, pixels.
+    pub pixel_sigma: f64,
+}
+
+/// MoCal on the PnP odometry in scalar type `T`, and RepErrCal's prior around its estimate.
+pub fn reprojection_start<T: Scalar>(
+    input: &CameraImuInput<'_>,
+    options: &CameraImuOptions,
+    progress: &mut dyn FnMut(f64),
+) -> Result<ReprojectionStart, PoseImuError> {
+    let (motion, pixel_sigma) = motion_calibration::<T>(input, options, progress)?;
+    let prior = reprojection_prior(options, &motion, ExtrinsicPrior::AroundStart);
+    Ok(ReprojectionStart {
+        motion,
+        prior,
+        pixel_sigma,
+    })
+}
+
+/// 1-sigma of the target frame's orientation (rad) and position (m) when it is set from one
+/// image's PnP pose at `distance_m`: the extrinsic prior's error seen at the target's
+/// distance, plus 0.02 rad for the IMU attitude and the PnP.
+pub fn target_prior_sigmas(prior: &PoseImuOptions, distance_m: f64) -> (f64, f64) {
+    let sigma_rotation = prior.rotation_sigma_rad + 0.02;
+    (
+        sigma_rotation,
+        prior.translation_sigma_m + sigma_rotation * distance_m,
+    )
+}
+
+/// MoCal (the pose-IMU pipeline on the PnP poses of the camera in the target) and the
+/// corner noise.
+fn motion_calibration<T: Scalar>(
+    input: &CameraImuInput<'_>,
+    options: &CameraImuOptions,
+    progress: &mut dyn FnMut(f64),
+) -> Result<(CameraImuCalibration, f64), PoseImuError> {
+    let poses = frame_poses(input.camera, input.frames);
+    if poses.len() < 3 {
+        return Err(PoseImuError::BadInput(format!(
+            "cam0: {} of {} images have a target pose; at least 3 are needed",
+            poses.len(),
+            input.frames.len()
+        )));
+    }
+    let pixel_sigma = options
+        .pixel_sigma
+        .unwrap_or_else(|| pixel_sigma_from_pnp(&poses));
+    let odometry: Vec<PoseRecord> = poses.iter().map(camera_in_target).collect();
+    let noise = increment_noise(&poses);
+    let motion = pose_imu::calibrate::<T>(
+        &pose_imu::PoseImuInput {
+            imu: input.imu,
+            imu_noise: input.imu_noise,
+            poses: &odometry,
+            pose_noise: &noise,
+        },
+        &options.prior,
+        progress,
+    )?;
+    let motion = CameraImuCalibration {
+        t_imu_cam: motion.t_imu_pose,
+        time_offset_s: motion.time_offset_s,
+        time_offset_sigma_s: motion.time_offset_sigma_s,
+        covariance: motion.covariance,
+        report: CameraImuReport {
+            update: CameraUpdate::Motion,
+            pixel_sigma,
+            frames_with_pose: poses.len(),
+            mean_reprojection_error_px: f64::NAN,
+            verification_reprojection_error_px: f64::NAN,
+            frames: Vec::new(),
+            initialization: None,
+            filter: motion.report,
+        },
+        sample: None,
+    };
+    Ok((motion, pixel_sigma))
 }
 
 /// How RepErrCal's extrinsic and time-offset prior is set around its starting estimate.
@@ -421,24 +471,12 @@ fn start_from_motion<T: Scalar>(
         pairs: m.hand_eye_pairs,
         axis_ratio: m.hand_eye_axis_ratio,
     };
-    let (sigma_r, sigma_t, sigma_td) = match extrinsic_prior {
-        ExtrinsicPrior::AroundStart => {
-            let (floor_r, floor_t, floor_td) = REPROJECTION_PRIOR_FLOOR;
-            let sd = |i: usize| motion.covariance[(i, i)].max(0.0).sqrt();
-            (
-                (0..3).map(sd).fold(floor_r, f64::max),
-                (3..6).map(sd).fold(floor_t, f64::max),
-                motion.time_offset_sigma_s.max(floor_td),
-            )
-        }
-        ExtrinsicPrior::Held => (HELD_SIGMA, HELD_SIGMA, HELD_SIGMA),
-    };
-    let prior = PoseImuOptions {
-        rotation_sigma_rad: sigma_r,
-        translation_sigma_m: sigma_t,
-        time_offset_sigma_s: sigma_td,
-        ..options.prior
-    };
+    let prior = reprojection_prior(options, motion, extrinsic_prior);
+    let (sigma_r, sigma_t, sigma_td) = (
+        prior.rotation_sigma_rad,
+        prior.translation_sigma_m,
+        prior.time_offset_sigma_s,
+    );
     let initial = initial_state::<T>(imu, standstill, &motion.t_imu_cam.rotation, &prior)?
         .with_extrinsic(
             0,
@@ -459,6 +497,32 @@ fn start_from_motion<T: Scalar>(
         prior,
         rotation_init,
     })
+}
+
+/// RepErrCal's extrinsic and time-offset prior around the start `motion`.
+fn reprojection_prior(
+    options: &CameraImuOptions,
+    motion: &CameraImuCalibration,
+    extrinsic_prior: ExtrinsicPrior,
+) -> PoseImuOptions {
+    let (sigma_r, sigma_t, sigma_td) = match extrinsic_prior {
+        ExtrinsicPrior::AroundStart => {
+            let (floor_r, floor_t, floor_td) = REPROJECTION_PRIOR_FLOOR;
+            let sd = |i: usize| motion.covariance[(i, i)].max(0.0).sqrt();
+            (
+                (0..3).map(sd).fold(floor_r, f64::max),
+                (3..6).map(sd).fold(floor_t, f64::max),
+                motion.time_offset_sigma_s.max(floor_td),
+            )
+        }
+        ExtrinsicPrior::Held => (HELD_SIGMA, HELD_SIGMA, HELD_SIGMA),
+    };
+    PoseImuOptions {
+        rotation_sigma_rad: sigma_r,
+        translation_sigma_m: sigma_t,
+        time_offset_sigma_s: sigma_td,
+        ..options.prior
+    }
 }
 
 /// The 4x4 matrix of `t`, row by row.
@@ -536,9 +600,8 @@ impl<T: Scalar> CornerFeed<'_, T> {
         let pnp = pnp_of(&camera, frame).map_err(|e| format!("no PnP pose for the target: {e}"))?;
         let t_g_c = convert::isometry(&ekf.imu().pose()) * convert::isometry(&ekf.extrinsic(0));
         let t_g_t = t_g_c * convert::isometry(&pnp.t_cam_target);
-        let distance = pnp.t_cam_target.translation.norm();
-        let sigma_rotation = self.prior.rotation_sigma_rad + 0.02;
-        let sigma_position = self.prior.translation_sigma_m + sigma_rotation * distance;
+        let (sigma_rotation, sigma_position) =
+            target_prior_sigmas(&self.prior, pnp.t_cam_target.translation.norm());
         ekf.init_frame(
             0,
             convert::pose::<T>(&t_g_t),
@@ -641,7 +704,8 @@ impl<T: Scalar> CornerFeed<'_, T> {
     }
 }
 
-fn pnp_of(camera: &Camera<f64>, frame: &CornerFrame) -> Result<PnpSolution, String> {
+/// PnP pose of the target in one image.
+pub fn pnp_of(camera: &Camera<f64>, frame: &CornerFrame) -> Result<PnpSolution, String> {
     let points: Vec<Vector3<f64>> = frame.corners.iter().map(|c| c.point_in_target).collect();
     let pixels: Vec<Vector2<f64>> = frame.corners.iter().map(|c| c.pixel).collect();
     solve_pnp(camera, &points, &pixels).map_err(|e| e.to_string())

@@ -9,18 +9,23 @@ use msreg_protocol::{DeviceMsg, ErrorKind, HealthState, HostMsg, Status};
 use super::client::{Client, ClientOptions, Collected};
 use super::defmt;
 use super::record::{self, Line};
-use super::stream::{build_stream, StreamOptions};
+use super::stream::{build_camera_stream, build_stream, ReplayStream, StreamOptions};
 use super::view::{rpy_deg, LiveView, Mode};
 use super::LinkError;
+use crate::calibrate::camera_imu::cli::detect_corner_frames;
+use crate::calibrate::camera_imu::{CameraImuInput, CameraImuOptions};
 use crate::calibrate::pose_imu::PoseImuInput;
 use crate::dataset::Dataset;
+use crate::vision::frames::CameraDataset;
 
 /// `msreg link ...`.
 #[derive(Debug, Subcommand)]
 pub enum LinkCommand {
-    /// Stream a dataset (IMU + odometry increments) to the firmware and record its answers.
+    /// Stream a dataset to the firmware and record its answers: IMU + odometry increments
+    /// (pose0/), or IMU + target corners (cam0/ and target.yaml, no pose0/): the corners are
+    /// detected and MoCal runs here, the device runs RepErrCal.
     Replay {
-        /// Dataset directory (imu0/, pose0/).
+        /// Dataset directory (imu0/ with pose0/, or imu0/ with cam0/ and target.yaml).
         dataset: PathBuf,
         /// Serial device (e.g. the /dev/pts/N QEMU prints).
         #[arg(long)]
@@ -175,6 +180,38 @@ pub struct ReplayOutcome {
     pub start_ns: u64,
 }
 
+/// The replay of a dataset: odometry when it has `pose0/`, else target corners of `cam0/`.
+pub fn dataset_stream(dataset: &Path, options: &StreamOptions) -> Result<ReplayStream, LinkError> {
+    let data = Dataset::open(dataset).map_err(|e| LinkError::Dataset(e.to_string()))?;
+    let missing = |e: crate::dataset::DatasetError| LinkError::Dataset(e.to_string());
+    let imu = data.require_imu().map_err(missing)?;
+    let imu_noise = data.require_imu_noise().map_err(missing)?;
+    if data.pose0.is_some() || !dataset.join("cam0").is_dir() {
+        let input = PoseImuInput {
+            imu,
+            imu_noise,
+            poses: data.require_pose0().map_err(missing)?,
+            pose_noise: data.require_pose0_sensor().map_err(missing)?,
+        };
+        return build_stream(&input, options);
+    }
+    let camera = CameraDataset::open(dataset).map_err(|e| LinkError::Dataset(e.to_string()))?;
+    let (frames, detection) =
+        detect_corner_frames(&camera, &crate::vision::DetectorParams::default(), &|_| {})
+            .map_err(|e| LinkError::Dataset(e.to_string()))?;
+    eprintln!(
+        "msreg: board found in {} of {} images ({:.1} s)",
+        detection.detected, detection.images, detection.time_s
+    );
+    let input = CameraImuInput {
+        imu,
+        imu_noise,
+        camera: &camera.camera,
+        frames: &frames,
+    };
+    build_camera_stream(&input, &CameraImuOptions::default(), options)
+}
+
 /// Replays `dataset` to the device at `port`.
 pub fn replay(
     dataset: &Path,
@@ -182,27 +219,33 @@ pub fn replay(
     record: Option<&Path>,
     options: &ReplayOptions,
 ) -> Result<ReplayOutcome, LinkError> {
-    let data = Dataset::open(dataset).map_err(|e| LinkError::Dataset(e.to_string()))?;
-    let missing = |e: crate::dataset::DatasetError| LinkError::Dataset(e.to_string());
-    let input = PoseImuInput {
-        imu: data.require_imu().map_err(missing)?,
-        imu_noise: data.require_imu_noise().map_err(missing)?,
-        poses: data.require_pose0().map_err(missing)?,
-        pose_noise: data.require_pose0_sensor().map_err(missing)?,
-    };
-    let stream = build_stream(&input, &options.stream)?;
+    let stream = dataset_stream(dataset, &options.stream)?;
+    replay_stream(
+        &stream,
+        &dataset.display().to_string(),
+        port,
+        record,
+        options,
+    )
+}
+
+/// Sends a replay stream (handshake, configuration, messages) to the device at `port`;
+/// `source` names the data on the live screen.
+pub fn replay_stream(
+    stream: &ReplayStream,
+    source: &str,
+    port: &str,
+    record: Option<&Path>,
+    options: &ReplayOptions,
+) -> Result<ReplayOutcome, LinkError> {
     let mut client = Client::connect(port, options.client, record.map(|r| (r, "replay")))?;
     client.handshake(Duration::from_secs(10))?;
     client.send(&HostMsg::Config(stream.config))?;
     let started = Instant::now();
     let (frames0, bytes0) = client.sent;
     // On a terminal the replay shows the monitor's screen while it streams.
-    let mut view = (options.live_view && Mode::detect() == Mode::Screen).then(|| {
-        LiveView::new(
-            Mode::Screen,
-            &format!("replay {} -> {port}", dataset.display()),
-        )
-    });
+    let mut view = (options.live_view && Mode::detect() == Mode::Screen)
+        .then(|| LiveView::new(Mode::Screen, &format!("replay {source} -> {port}")));
     for (stamp_ns, msg) in &stream.messages {
         if options.realtime {
             let due = Duration::from_nanos(stamp_ns.saturating_sub(stream.start_ns));

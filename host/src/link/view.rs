@@ -201,6 +201,7 @@ fn diagnostic_text(d: &UpdateDiagnostic, origin_ns: u64) -> String {
     let kind = match d.kind {
         UpdateKind::RelativePose => "relative pose",
         UpdateKind::ZeroVelocity => "zero velocity",
+        UpdateKind::Reprojection => "reprojection",
     };
     format!(
         "{kind} at t+{:.2} s: NIS {:.2} vs gate {:.2} ({} dof), {}",
