@@ -347,6 +347,23 @@ impl Session {
         }
     }
 
+    /// The ack of a queued measurement: rejected with a fault report when `refused`.
+    fn acknowledge<W: embedded_io::Write>(
+        &mut self,
+        w: &mut W,
+        refused: Option<ErrorKind>,
+        seq: u32,
+        stamp_ns: u64,
+    ) -> AckStatus {
+        match refused {
+            Some(kind) => {
+                self.fault(w, kind, seq, stamp_ns);
+                AckStatus::Rejected
+            }
+            None => AckStatus::Ok,
+        }
+    }
+
     fn on_pose<W: embedded_io::Write>(&mut self, w: &mut W, seq: u32, p: Pending) -> AckStatus {
         let refused = match self.filter {
             None => Some(ErrorKind::NotConfigured),
@@ -357,13 +374,7 @@ impl Session {
                 .err()
                 .map(|_| ErrorKind::QueueFull),
         };
-        match refused {
-            Some(kind) => {
-                self.fault(w, kind, seq, p.stamp_ns());
-                AckStatus::Rejected
-            }
-            None => AckStatus::Ok,
-        }
+        self.acknowledge(w, refused, seq, p.stamp_ns())
     }
 
     #[inline(never)]
@@ -390,13 +401,7 @@ impl Session {
                     .map(|_| ErrorKind::QueueFull),
             },
         };
-        match refused {
-            Some(kind) => {
-                self.fault(w, kind, seq, p.stamp_ns());
-                AckStatus::Rejected
-            }
-            None => AckStatus::Ok,
-        }
+        self.acknowledge(w, refused, seq, p.stamp_ns())
     }
 
     #[inline(never)]
