@@ -36,6 +36,11 @@ pub struct FilterConfig<T: Scalar> {
     pub health: HealthConfig<T>,
     /// Zero-velocity update: 1-sigma of "not moving", m/s.
     pub zero_velocity_sigma: T,
+    /// How far, ns, a measurement's IMU time `stamp + t_d` may fall behind the filter time
+    /// and still be fused, at the filter time. The estimate of `t_d` moves with every
+    /// update, so a measurement that was not yet due when an IMU sample was propagated can
+    /// be a little behind it one sample later; its `t_d` Jacobian absorbs the difference.
+    pub max_late_ns: u64,
 }
 
 impl<T: Scalar> FilterConfig<T> {
@@ -47,6 +52,7 @@ impl<T: Scalar> FilterConfig<T> {
             max_imu_gap_ns: 50_000_000,
             health: HealthConfig::default(),
             zero_velocity_sigma: T::lit(0.01),
+            max_late_ns: 1_000_000,
         }
     }
 }

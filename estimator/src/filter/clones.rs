@@ -20,10 +20,14 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     }
 
     /// IMU time of sensor `s`'s measurement stamped `stamp_ns`, checked to be reachable by
-    /// propagation: not before the filter time, not beyond the IMU gap limit.
+    /// propagation: not before the filter time (up to `max_late_ns`, then the filter time
+    /// itself), not beyond the IMU gap limit.
     pub(super) fn reachable_imu_time(&self, s: usize, stamp_ns: u64) -> Result<u64, Error> {
         let last = self.last_imu.ok_or(Error::NotInitialized)?;
         let t = self.imu_time(s, stamp_ns);
+        if t < self.time_ns && self.time_ns - t <= self.config.max_late_ns {
+            return Ok(self.time_ns);
+        }
         if t < self.time_ns {
             return Err(Error::TimeWentBackwards {
                 filter_ns: self.time_ns,

@@ -64,6 +64,25 @@ fn clone_time_offset_jacobian_matches_central_differences() {
 }
 
 #[test]
+fn slightly_late_measurement_is_fused_at_the_filter_time_and_a_late_one_is_refused() {
+    // Given a filter at T0 + 240 ms (t_d = 0)
+    let mut ekf = moving_filter(0.0);
+    let now = T0 + 240_000_000;
+    // When a measurement's IMU time is 0.6 ms behind (a t_d update moved it there)
+    ekf.anchor(0, now - 600_000).expect("within max_late_ns");
+    // Then it is cloned at the filter time
+    assert_eq!(ekf.time_ns(), now);
+    // And one 1.5 ms behind is time going backwards, the state untouched
+    let mut late = moving_filter(0.0);
+    let before = late.covariance();
+    assert!(matches!(
+        late.anchor(0, now - 1_500_000),
+        Err(Error::TimeWentBackwards { .. })
+    ));
+    assert_eq!(late.covariance(), before);
+}
+
+#[test]
 fn covariance_stays_symmetric_and_positive_through_updates() {
     let mut ekf = moving_filter(0.0);
     let t = ekf.time_ns();
