@@ -163,13 +163,17 @@ pub fn calibrate(args: &CalibrateLidarImu) -> anyhow::Result<Outcome> {
         }
     }
     let r = &calibration.report;
+    let settled = if r.settled_nis_per_dof.is_finite() {
+        format!("{:.2}", r.settled_nis_per_dof)
+    } else {
+        "n/a (recording shorter than the noise annealing)".into()
+    };
     eprintln!(
-        "msreg: wrote {} ({} of {} scans matched, settled NIS/dof {:.2}, NDT covariance \
+        "msreg: wrote {} ({} of {} scans matched, settled NIS/dof {settled}, NDT covariance \
          scale {:.3}, {:.1} s)",
         args.output.display(),
         r.scans_matched,
         r.scans_total,
-        r.settled_nis_per_dof,
         r.final_covariance_scale,
         r.stage_timing_s.rotation_init + r.stage_timing_s.total_filter_pass
     );
