@@ -289,7 +289,7 @@ fn camera_corner_sets_on_the_device_match_host_reperrcal_and_ground_truth() {
     let device = last_estimate(c);
     let cmp = compare_with(
         &device,
-        &host.t_imu_cam,
+        &host.t_imu_sensor,
         &host.covariance,
         host.time_offset_s,
         host.time_offset_sigma_s,

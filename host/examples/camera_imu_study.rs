@@ -63,7 +63,7 @@ fn run(seed: u64, duration_s: f64) -> anyhow::Result<Run> {
         };
         let c = calibrate::<f64>(&input, &options, &mut |_| {})
             .map_err(|e| anyhow::anyhow!("seed {seed}: {e:?}"))?;
-        let estimate = c.estimate();
+        let estimate = c.cam_imu_estimate();
         let errors = compare("cam0", &estimate, &truth);
         results.push((update, estimate, errors, c));
     }

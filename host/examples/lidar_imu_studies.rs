@@ -101,15 +101,15 @@ fn error(estimate: &Isometry3<f64>, truth: &Isometry3<f64>) -> Vector6<f64> {
 
 fn metrics(r: &Run) -> Metrics {
     let c = &r.calibration;
-    let e = error(&c.t_imu_lidar, &r.truth);
+    let e = error(&c.t_imu_sensor, &r.truth);
     let sd = |i: usize| c.covariance[(i, i)].sqrt();
     Metrics {
         rot_deg: c
-            .t_imu_lidar
+            .t_imu_sensor
             .rotation
             .angle_to(&r.truth.rotation)
             .to_degrees(),
-        trans_mm: (c.t_imu_lidar.translation.vector - r.truth.translation.vector).norm() * 1e3,
+        trans_mm: (c.t_imu_sensor.translation.vector - r.truth.translation.vector).norm() * 1e3,
         sigma3_rot_deg: 3.0 * (0..3).map(sd).fold(0.0, f64::max).to_degrees(),
         sigma3_trans_mm: 3.0 * (3..6).map(sd).fold(0.0, f64::max) * 1e3,
         inside: (0..6).all(|i| e[i].abs() <= 3.0 * sd(i)),
@@ -214,13 +214,13 @@ fn relative(seeds: u64, duration: f64, rings: usize, columns: usize) -> Result<(
             },
             &options(true),
         )?;
-        let d = b.calibration.t_imu_lidar.translation.vector
-            - a.calibration.t_imu_lidar.translation.vector;
+        let d = b.calibration.t_imu_sensor.translation.vector
+            - a.calibration.t_imu_sensor.translation.vector;
         let rot_change = a
             .calibration
-            .t_imu_lidar
+            .t_imu_sensor
             .rotation
-            .angle_to(&b.calibration.t_imu_lidar.rotation)
+            .angle_to(&b.calibration.t_imu_sensor.rotation)
             .to_degrees();
         let (ma, mb) = (metrics(&a), metrics(&b));
         println!(

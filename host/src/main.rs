@@ -270,7 +270,7 @@ fn calibrate_pose_imu(args: &CalibratePoseImu) -> Result<(), Failure> {
         Failure::BadInput(anyhow!("{}: {m}", args.dataset.display()))
     })?;
     let result = CalibrationResult {
-        pose0: Some(calibration.estimate()),
+        pose0: Some(calibration.imu_sensor_estimate()),
         ..CalibrationResult::default()
     };
     result.write(&args.output)?;

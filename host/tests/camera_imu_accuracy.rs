@@ -87,8 +87,8 @@ struct Outcome {
 
 fn judge(seed: u64, sim: &CameraImuSim, c: &CameraImuCalibration) -> Outcome {
     let truth: Isometry3<f64> = sim.t_cam_imu.inverse();
-    let r = (c.t_imu_cam.rotation.inverse() * truth.rotation).scaled_axis();
-    let p = truth.translation.vector - c.t_imu_cam.translation.vector;
+    let r = (c.t_imu_sensor.rotation.inverse() * truth.rotation).scaled_axis();
+    let p = truth.translation.vector - c.t_imu_sensor.translation.vector;
     let e = Vector6::new(r.x, r.y, r.z, p.x, p.y, p.z);
     let info = c.covariance.try_inverse().expect("covariance invertible");
     let td_error = c.time_offset_s - sim.config.time_offset_s;

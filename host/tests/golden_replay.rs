@@ -26,8 +26,8 @@ fn replay() -> Value {
     config.pose.time_offset_s = 0.008;
     let data = common::simulate(&config);
     let c = common::calibrate::<f64>(&data, &PoseImuOptions::default());
-    let q = c.t_imu_pose.rotation.quaternion();
-    let t = c.t_imu_pose.translation.vector;
+    let q = c.t_imu_sensor.rotation.quaternion();
+    let t = c.t_imu_sensor.translation.vector;
     json!({
         "q_wxyz": [q.w, q.i, q.j, q.k],
         "p": [t.x, t.y, t.z],

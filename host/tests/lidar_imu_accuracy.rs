@@ -134,7 +134,7 @@ fn run(sim_config: &LidarImuSimConfig, options: &LidarImuOptions) -> Outcome {
     let started = std::time::Instant::now();
     let c = lidar_imu::calibrate::<f64>(&input, options, &mut |_| {}).expect("calibration runs");
     let seconds = started.elapsed().as_secs_f64();
-    let e = error(&c.t_imu_lidar, &sim.t_imu_lidar);
+    let e = error(&c.t_imu_sensor, &sim.t_imu_lidar);
     let sd = |i: usize| c.covariance[(i, i)].sqrt();
     let inside = (0..6).all(|i| e[i].abs() <= 3.0 * sd(i));
     let nees = c
@@ -145,11 +145,11 @@ fn run(sim_config: &LidarImuSimConfig, options: &LidarImuOptions) -> Outcome {
     Outcome {
         seed: sim_config.seed,
         rot_deg: c
-            .t_imu_lidar
+            .t_imu_sensor
             .rotation
             .angle_to(&sim.t_imu_lidar.rotation)
             .to_degrees(),
-        trans_mm: (c.t_imu_lidar.translation.vector - sim.t_imu_lidar.translation.vector).norm()
+        trans_mm: (c.t_imu_sensor.translation.vector - sim.t_imu_lidar.translation.vector).norm()
             * 1e3,
         td_err_ms: (c.time_offset_s - sim.config.lidar.time_offset_s) * 1e3,
         sigma_rot_deg: (0..3).map(sd).fold(0.0, f64::max).to_degrees(),

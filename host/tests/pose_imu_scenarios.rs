@@ -27,12 +27,12 @@ fn f32_filter_ends_within_0_02_deg_and_1_mm_of_f64() {
         let c64 = calibrate::<f64>(&data, &PoseImuOptions::default());
         let c32 = calibrate::<f32>(&data, &PoseImuOptions::default());
         let d_rot = c64
-            .t_imu_pose
+            .t_imu_sensor
             .rotation
-            .angle_to(&c32.t_imu_pose.rotation)
+            .angle_to(&c32.t_imu_sensor.rotation)
             .to_degrees();
         let d_trans =
-            (c64.t_imu_pose.translation.vector - c32.t_imu_pose.translation.vector).norm();
+            (c64.t_imu_sensor.translation.vector - c32.t_imu_sensor.translation.vector).norm();
         println!(
             "seed {seed}: f32 - f64: {d_rot:.5} deg, {:.3} mm, {:.4} ms",
             d_trans * 1e3,
@@ -65,11 +65,11 @@ fn result_does_not_depend_on_odometry_origin_or_absolute_stamps() {
     let a = calibrate::<f64>(&data, &PoseImuOptions::default());
     let b = calibrate::<f64>(&moved, &PoseImuOptions::default());
     let d_rot = a
-        .t_imu_pose
+        .t_imu_sensor
         .rotation
-        .angle_to(&b.t_imu_pose.rotation)
+        .angle_to(&b.t_imu_sensor.rotation)
         .to_degrees();
-    let d_trans = (a.t_imu_pose.translation.vector - b.t_imu_pose.translation.vector).norm();
+    let d_trans = (a.t_imu_sensor.translation.vector - b.t_imu_sensor.translation.vector).norm();
     let d_time = (a.time_offset_s - b.time_offset_s).abs();
     println!(
         "origin/stamp change moved the result by {d_rot:.2e} deg, {d_trans:.2e} m, {d_time:.2e} s"
@@ -94,9 +94,9 @@ fn assert_scenario(name: &str, edit: impl Fn(&mut SimConfig)) {
         println!(
             "{name} seed {seed}: rot {rot:.4} deg (3 sigma {:.4}), trans {:.2} mm (3 sigma {:.2}), time {:.3} ms, \
              NIS/dof {:.2}, rejected {}, skipped {}",
-            3.0 * r.estimate().sigma_rot_deg.amax(),
+            3.0 * r.imu_sensor_estimate().sigma_rot_deg.amax(),
             trans * 1e3,
-            3e3 * r.estimate().sigma_trans_m.amax(),
+            3e3 * r.imu_sensor_estimate().sigma_trans_m.amax(),
             dt * 1e3,
             r.report.mean_nis_per_dof,
             r.report.updates_rejected,

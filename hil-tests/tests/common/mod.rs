@@ -137,7 +137,7 @@ pub struct Agreement {
 pub fn compare(device: &Estimate, host: &PoseImuCalibration) -> Agreement {
     compare_with(
         device,
-        &host.t_imu_pose,
+        &host.t_imu_sensor,
         &host.covariance,
         host.time_offset_s,
         host.time_offset_sigma_s,
@@ -487,13 +487,13 @@ pub fn host_reperrcal(dir: &Path) -> HostCameraRun {
         camera_imu::calibrate::<f64>(&input, &options, &mut |_| {}).expect("host RepErrCal runs");
     let host_f32 = camera_imu::calibrate::<f32>(&input, &options, &mut |_| {})
         .expect("host RepErrCal runs in f32");
-    let d = host_f32.t_imu_cam.translation.vector - host.t_imu_cam.translation.vector;
+    let d = host_f32.t_imu_sensor.translation.vector - host.t_imu_sensor.translation.vector;
     println!(
         "host f32 vs host f64 RepErrCal: {:.4} deg, {:.4} mm, largest axis {:.3} sigma",
         host_f32
-            .t_imu_cam
+            .t_imu_sensor
             .rotation
-            .angle_to(&host.t_imu_cam.rotation)
+            .angle_to(&host.t_imu_sensor.rotation)
             .to_degrees(),
         d.norm() * 1e3,
         (0..3)

@@ -23,6 +23,7 @@ use nalgebra::{Isometry3, Matrix6, Vector2, Vector3};
 use serde::Serialize;
 
 use super::convert;
+use super::extrinsic::ImuExtrinsicCalibration;
 use super::init;
 use super::pose_imu::{
     self, drive_imu, finish, initial_state, ImuHooks, PoseImuError, PoseImuOptions, PoseImuReport,
@@ -126,6 +127,10 @@ pub struct CameraImuReport {
     pub frames: Vec<FrameReprojection>,
     /// How RepErrCal was initialised (None for MoCal).
     pub initialization: Option<Initialization>,
+    /// One image's corners with their final reprojection (RepErrCal; the dissertation's
+    /// Fig. 4.4); not in the JSON.
+    #[serde(skip)]
+    pub sample: Option<ReprojectionSample>,
     /// Filter report: convergence, NIS, excitation, health events, history.
     #[serde(flatten)]
     pub filter: PoseImuReport,
@@ -148,23 +153,10 @@ pub struct Initialization {
     pub prior_sigma_time_offset_s: f64,
 }
 
-/// The outcome: `T_I_C` with its covariance, the time offset, and the report.
-#[derive(Debug, Clone)]
-pub struct CameraImuCalibration {
-    /// `T_imu_cam` (the filter's state; the result file stores its inverse `T_cam_imu`).
-    pub t_imu_cam: Isometry3<f64>,
-    /// Time offset `t_d` (= Kalibr's `timeshift_cam_imu`), s.
-    pub time_offset_s: f64,
-    /// 1-sigma of the time offset, s.
-    pub time_offset_sigma_s: f64,
-    /// Covariance of the `T_imu_cam` error `[dtheta (right perturbation); dp]`.
-    pub covariance: Matrix6<f64>,
-    /// The report.
-    pub report: CameraImuReport,
-    /// One image's corners with their final reprojection (RepErrCal; the dissertation's
-    /// Fig. 4.4).
-    pub sample: Option<ReprojectionSample>,
-}
+/// The outcome: `T_imu_cam` (the filter's state; the result file stores its inverse
+/// `T_cam_imu`) with its covariance, the time offset `t_d` (= Kalibr's
+/// `timeshift_cam_imu`), and the report.
+pub type CameraImuCalibration = ImuExtrinsicCalibration<CameraImuReport>;
 
 /// Detected corners of one image and where the filter reprojects them after its update.
 #[derive(Debug, Clone, PartialEq)]
@@ -178,9 +170,10 @@ pub struct ReprojectionSample {
 }
 
 impl CameraImuCalibration {
-    /// The `cam0` section of the result file: `T_cam_imu` with its sigmas.
-    pub fn estimate(&self) -> ExtrinsicEstimate {
-        let (t_cam_imu, covariance) = invert_with_covariance(&self.t_imu_cam, &self.covariance);
+    /// The `cam0` section of the result file: `T_cam_imu` (the inverse of the filter's
+    /// `T_imu_cam`) with its sigmas.
+    pub fn cam_imu_estimate(&self) -> ExtrinsicEstimate {
+        let (t_cam_imu, covariance) = invert_with_covariance(&self.t_imu_sensor, &self.covariance);
         ExtrinsicEstimate::from_covariance(t_cam_imu, self.time_offset_s, &covariance)
     }
 }
@@ -314,23 +307,17 @@ fn motion_calibration<T: Scalar>(
         &options.prior,
         progress,
     )?;
-    let motion = CameraImuCalibration {
-        t_imu_cam: motion.t_imu_pose,
-        time_offset_s: motion.time_offset_s,
-        time_offset_sigma_s: motion.time_offset_sigma_s,
-        covariance: motion.covariance,
-        report: CameraImuReport {
-            update: CameraUpdate::Motion,
-            pixel_sigma,
-            frames_with_pose: poses.len(),
-            mean_reprojection_error_px: f64::NAN,
-            verification_reprojection_error_px: f64::NAN,
-            frames: Vec::new(),
-            initialization: None,
-            filter: motion.report,
-        },
+    let motion = motion.map_report(|filter| CameraImuReport {
+        update: CameraUpdate::Motion,
+        pixel_sigma,
+        frames_with_pose: poses.len(),
+        mean_reprojection_error_px: f64::NAN,
+        verification_reprojection_error_px: f64::NAN,
+        frames: Vec::new(),
+        initialization: None,
         sample: None,
-    };
+        filter,
+    });
     Ok((motion, pixel_sigma))
 }
 
@@ -422,30 +409,26 @@ fn reprojection_calibration<T: Scalar>(
         .filter(|f| f.accepted)
         .map(|f| f.mean_error_px)
         .collect();
-    Ok(CameraImuCalibration {
-        t_imu_cam: calibration.t_imu_pose,
-        time_offset_s: calibration.time_offset_s,
-        time_offset_sigma_s: calibration.time_offset_sigma_s,
-        covariance: calibration.covariance,
-        report: CameraImuReport {
-            update: CameraUpdate::Reprojection,
-            pixel_sigma,
-            frames_with_pose: motion.report.frames_with_pose,
-            mean_reprojection_error_px: accepted.iter().sum::<f64>() / accepted.len().max(1) as f64,
-            verification_reprojection_error_px: f64::NAN,
-            frames: reprojection,
-            initialization: Some(Initialization {
-                method: "MoCal (motion-based EKF on PnP poses), then RepErrCal from its estimate",
-                t_imu_cam: rows(&motion.t_imu_cam),
-                time_offset_s: motion.time_offset_s,
-                prior_sigma_rot_deg: prior.rotation_sigma_rad.to_degrees(),
-                prior_sigma_trans_m: prior.translation_sigma_m,
-                prior_sigma_time_offset_s: prior.time_offset_sigma_s,
-            }),
-            filter: calibration.report,
-        },
+    let frames_with_pose = motion.report.frames_with_pose;
+    let initialization = Initialization {
+        method: "MoCal (motion-based EKF on PnP poses), then RepErrCal from its estimate",
+        t_imu_cam: rows(&motion.t_imu_sensor),
+        time_offset_s: motion.time_offset_s,
+        prior_sigma_rot_deg: prior.rotation_sigma_rad.to_degrees(),
+        prior_sigma_trans_m: prior.translation_sigma_m,
+        prior_sigma_time_offset_s: prior.time_offset_sigma_s,
+    };
+    Ok(calibration.map_report(|filter| CameraImuReport {
+        update: CameraUpdate::Reprojection,
+        pixel_sigma,
+        frames_with_pose,
+        mean_reprojection_error_px: accepted.iter().sum::<f64>() / accepted.len().max(1) as f64,
+        verification_reprojection_error_px: f64::NAN,
+        frames: reprojection,
+        initialization: Some(initialization),
         sample,
-    })
+        filter,
+    }))
 }
 
 /// The RepErrCal filter at the MoCal estimate, with its prior.
@@ -477,10 +460,10 @@ fn start_from_motion<T: Scalar>(
         prior.translation_sigma_m,
         prior.time_offset_sigma_s,
     );
-    let initial = initial_state::<T>(imu, standstill, &motion.t_imu_cam.rotation, &prior)?
+    let initial = initial_state::<T>(imu, standstill, &motion.t_imu_sensor.rotation, &prior)?
         .with_extrinsic(
             0,
-            convert::pose::<T>(&motion.t_imu_cam),
+            convert::pose::<T>(&motion.t_imu_sensor),
             T::lit(sigma_r),
             T::lit(sigma_t),
         );

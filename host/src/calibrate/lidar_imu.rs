@@ -38,12 +38,13 @@ use nalgebra::{Isometry3, Matrix6, Vector3, Vector6};
 use serde::Serialize;
 
 use super::convert;
+use super::extrinsic::ImuExtrinsicCalibration;
 use super::init::{self, RotationInit};
 use super::pose_imu::{
     drive_imu, finish, start_filter, FilterStart, ImuHooks, PoseImuError, PoseImuOptions,
     PoseImuReport, Run, Timing,
 };
-use crate::dataset::{ExtrinsicEstimate, ImuNoiseYaml, ImuRecord};
+use crate::dataset::{ImuNoiseYaml, ImuRecord};
 use crate::lidar::deskew::imu_time;
 use crate::lidar::{deskew_scan, PoseBuffer, ScanLoadError, ScanSource};
 use crate::ndt::{align, LocalMap, NdtParams, NdtResult, NdtTarget};
@@ -337,27 +338,8 @@ pub struct LidarImuReport {
     pub scans: Vec<ScanRecord>,
 }
 
-/// The outcome.
-#[derive(Debug, Clone)]
-pub struct LidarImuCalibration {
-    /// `T_imu_lidar`.
-    pub t_imu_lidar: Isometry3<f64>,
-    /// Time offset `t_d`, s.
-    pub time_offset_s: f64,
-    /// 1-sigma of the time offset, s.
-    pub time_offset_sigma_s: f64,
-    /// Covariance of the extrinsic error `[dtheta (right perturbation); dp]`.
-    pub covariance: Matrix6<f64>,
-    /// The report.
-    pub report: LidarImuReport,
-}
-
-impl LidarImuCalibration {
-    /// The `lidar0` section of the result file.
-    pub fn estimate(&self) -> ExtrinsicEstimate {
-        ExtrinsicEstimate::from_covariance(self.t_imu_lidar, self.time_offset_s, &self.covariance)
-    }
-}
+/// The outcome: `T_imu_lidar` with its covariance, the time offset, and the report.
+pub type LidarImuCalibration = ImuExtrinsicCalibration<LidarImuReport>;
 
 /// Runs the calibration with the filter in scalar type `T`.
 pub fn calibrate<T: Scalar>(
@@ -435,8 +417,8 @@ pub fn calibrate<T: Scalar>(
             filter: filter_s,
         },
     );
-    let mut report = LidarImuReport {
-        filter: pose.report,
+    let mut calibration = pose.map_report(|filter| LidarImuReport {
+        filter,
         deskew: options.deskew,
         scans_total: input.scans.len(),
         scans_matched: records.iter().filter(|r| r.status == "matched").count(),
@@ -453,18 +435,12 @@ pub fn calibrate<T: Scalar>(
         final_covariance_scale: final_scale,
         correlation_inflation: inflation,
         scans: records,
-    };
+    });
     if let Some(problem) = init_problem {
-        report.filter.reasons.insert(0, problem);
-        report.filter.converged = false;
+        calibration.report.filter.reasons.insert(0, problem);
+        calibration.report.filter.converged = false;
     }
-    Ok(LidarImuCalibration {
-        t_imu_lidar: pose.t_imu_pose,
-        time_offset_s: pose.time_offset_s,
-        time_offset_sigma_s: pose.time_offset_sigma_s,
-        covariance: pose.covariance,
-        report,
-    })
+    Ok(calibration)
 }
 
 /// Mean NIS/dof of the matched scans after `3 * anneal_updates` updates.

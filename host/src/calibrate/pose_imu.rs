@@ -16,8 +16,9 @@ use nalgebra::{Isometry3, Matrix6, Vector3};
 use serde::Serialize;
 
 use super::convert;
+use super::extrinsic::ImuExtrinsicCalibration;
 use super::init::{self, Standstill};
-use crate::dataset::{ExtrinsicEstimate, ImuNoiseYaml, ImuRecord, PoseRecord, PoseSensorYaml};
+use crate::dataset::{ImuNoiseYaml, ImuRecord, PoseRecord, PoseSensorYaml};
 
 /// What the pipeline reads.
 #[derive(Debug, Clone, Copy)]
@@ -147,27 +148,8 @@ pub struct Timing {
     pub filter: f64,
 }
 
-/// The outcome: the estimate with its covariance, and the report.
-#[derive(Debug, Clone)]
-pub struct PoseImuCalibration {
-    /// `T_imu_pose`.
-    pub t_imu_pose: Isometry3<f64>,
-    /// Time offset `t_d`, s.
-    pub time_offset_s: f64,
-    /// 1-sigma of the time offset, s.
-    pub time_offset_sigma_s: f64,
-    /// Covariance of the extrinsic error `[dtheta (right perturbation); dp]`.
-    pub covariance: Matrix6<f64>,
-    /// The report.
-    pub report: PoseImuReport,
-}
-
-impl PoseImuCalibration {
-    /// The `pose0` section of the result file.
-    pub fn estimate(&self) -> ExtrinsicEstimate {
-        ExtrinsicEstimate::from_covariance(self.t_imu_pose, self.time_offset_s, &self.covariance)
-    }
-}
+/// The outcome: `T_imu_pose` with its covariance, the time offset, and the report.
+pub type PoseImuCalibration = ImuExtrinsicCalibration<PoseImuReport>;
 
 /// Runs the calibration with the filter in scalar type `T`; `progress` gets the fraction
 /// of the recording processed.
@@ -673,7 +655,7 @@ pub(crate) fn finish<T: Scalar, const S: usize, const C: usize, const N: usize, 
         history: run.history,
     };
     PoseImuCalibration {
-        t_imu_pose: convert::isometry(&ekf.extrinsic(0)),
+        t_imu_sensor: convert::isometry(&ekf.extrinsic(0)),
         time_offset_s: ekf.time_offset(0).to_f64(),
         time_offset_sigma_s: ekf.time_offset_sigma(0).to_f64(),
         covariance,

@@ -144,7 +144,7 @@ pub fn calibrate(args: &CalibrateLidarImu) -> anyhow::Result<Outcome> {
     let calibration =
         outcome.map_err(|PoseImuError::BadInput(m)| anyhow!("{}: {m}", args.dataset.display()))?;
     CalibrationResult {
-        lidar0: Some(calibration.estimate()),
+        lidar0: Some(calibration.imu_sensor_estimate()),
         ..CalibrationResult::default()
     }
     .write(&args.output)?;

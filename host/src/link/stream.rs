@@ -319,7 +319,7 @@ pub fn camera_config(
     };
     Config {
         sensors: SensorSet::CameraImu(camera_setup(input.camera, start.pixel_sigma)),
-        extrinsic: wire_pose(&start.motion.t_imu_cam),
+        extrinsic: wire_pose(&start.motion.t_imu_sensor),
         sigma_rotation_rad: prior.rotation_sigma_rad as f32,
         sigma_translation_m: prior.translation_sigma_m as f32,
         time_offset_s: time_offset_s as f32,

@@ -31,7 +31,7 @@ pub fn extrinsic_error(estimate: &Isometry3<f64>, truth: &Isometry3<f64>) -> Vec
 
 /// Normalised estimation error squared of the extrinsic.
 pub fn nees(c: &PoseImuCalibration, truth: &Isometry3<f64>) -> f64 {
-    let e = extrinsic_error(&c.t_imu_pose, truth);
+    let e = extrinsic_error(&c.t_imu_sensor, truth);
     let info = c
         .covariance
         .try_inverse()
@@ -41,18 +41,21 @@ pub fn nees(c: &PoseImuCalibration, truth: &Isometry3<f64>) -> f64 {
 
 /// Every axis inside 3 sigma.
 pub fn inside_three_sigma(c: &PoseImuCalibration, truth: &Isometry3<f64>) -> bool {
-    let e = extrinsic_error(&c.t_imu_pose, truth);
+    let e = extrinsic_error(&c.t_imu_sensor, truth);
     (0..6).all(|i| e[i].abs() <= 3.0 * c.covariance[(i, i)].sqrt())
 }
 
 /// Rotation error angle, deg.
 pub fn rotation_error_deg(c: &PoseImuCalibration, truth: &Isometry3<f64>) -> f64 {
-    c.t_imu_pose.rotation.angle_to(&truth.rotation).to_degrees()
+    c.t_imu_sensor
+        .rotation
+        .angle_to(&truth.rotation)
+        .to_degrees()
 }
 
 /// Translation error norm, m.
 pub fn translation_error_m(c: &PoseImuCalibration, truth: &Isometry3<f64>) -> f64 {
-    (c.t_imu_pose.translation.vector - truth.translation.vector).norm()
+    (c.t_imu_sensor.translation.vector - truth.translation.vector).norm()
 }
 
 /// Median of a slice.

@@ -129,7 +129,7 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
     let calibration =
         outcome.map_err(|PoseImuError::BadInput(m)| anyhow!("{}: {m}", args.dataset.display()))?;
     CalibrationResult {
-        cam0: Some(calibration.estimate()),
+        cam0: Some(calibration.cam_imu_estimate()),
         ..CalibrationResult::default()
     }
     .write(&args.output)?;
@@ -155,7 +155,7 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
         write_plot(path, &dataset, &calibration, &args.dataset);
     }
     if let Some(path) = &args.overlay {
-        match &calibration.sample {
+        match &calibration.report.sample {
             Some(sample) => {
                 let magnification = write_overlay(path, &camera_data, sample)?;
                 eprintln!(
