@@ -4,6 +4,7 @@
 
 pub mod calibrate;
 pub mod camera_yaml;
+pub mod command;
 pub mod dataset;
 pub mod eval;
 pub mod lidar;

@@ -12,8 +12,8 @@ use std::process::ExitCode;
 
 use anyhow::{anyhow, Context};
 use clap::{Args, Parser, Subcommand};
-use indicatif::{ProgressBar, ProgressStyle};
 use msreg_host::calibrate::pose_imu::{self, PoseImuInput, PoseImuOptions};
+use msreg_host::command::Outcome;
 use msreg_host::dataset::{CalibrationResult, Dataset};
 use msreg_host::eval;
 use msreg_host::sim::{self, SimConfig};
@@ -183,29 +183,16 @@ fn run(command: Command) -> Result<(), Failure> {
         } => Ok(msreg_host::sim::camera_cli::simulate(&args)?),
         Command::Calibrate {
             task: Task::LidarImu(args),
-        } => match msreg_host::lidar::cli::calibrate(&args)? {
-            msreg_host::lidar::cli::Outcome::Converged => Ok(()),
-            msreg_host::lidar::cli::Outcome::NotConverged(why) => Err(Failure::NotConverged(why)),
-        },
+        } => exit_code_of(msreg_host::lidar::cli::calibrate(&args)?),
         Command::Simulate {
             scenario: Scenario::LidarCamera(args),
         } => Ok(msreg_host::lidar_camera::cli::simulate(&args)?),
         Command::Calibrate {
             task: Task::LidarCamera(args),
-        } => match msreg_host::lidar_camera::cli::calibrate(&args)? {
-            msreg_host::lidar_camera::cli::Outcome::Converged => Ok(()),
-            msreg_host::lidar_camera::cli::Outcome::NotConverged(why) => {
-                Err(Failure::NotConverged(why))
-            }
-        },
+        } => exit_code_of(msreg_host::lidar_camera::cli::calibrate(&args)?),
         Command::Calibrate {
             task: Task::CameraImu(args),
-        } => match msreg_host::calibrate::camera_imu::cli::run(&args)? {
-            msreg_host::calibrate::camera_imu::cli::Outcome::Converged => Ok(()),
-            msreg_host::calibrate::camera_imu::cli::Outcome::NotConverged(why) => {
-                Err(Failure::NotConverged(why))
-            }
-        },
+        } => exit_code_of(msreg_host::calibrate::camera_imu::cli::run(&args)?),
         Command::Eval {
             result,
             dataset,
@@ -224,6 +211,14 @@ fn run(command: Command) -> Result<(), Failure> {
                 "NDT did not converge or the geometry is degenerate".into(),
             )),
         },
+    }
+}
+
+/// Exit code 0 or 1 of a calibration that ran.
+fn exit_code_of(outcome: Outcome) -> Result<(), Failure> {
+    match outcome {
+        Outcome::Converged => Ok(()),
+        Outcome::NotConverged(why) => Err(Failure::NotConverged(why)),
     }
 }
 
@@ -294,14 +289,8 @@ fn calibrate_pose_imu(args: &CalibratePoseImu) -> Result<(), Failure> {
     Ok(())
 }
 
-fn progress_bar() -> ProgressBar {
-    let bar = ProgressBar::new(1000);
-    if let Ok(style) =
-        ProgressStyle::with_template("{spinner} filtering [{bar:40}] {percent}% {elapsed}")
-    {
-        bar.set_style(style.progress_chars("=> "));
-    }
-    bar
+fn progress_bar() -> indicatif::ProgressBar {
+    msreg_host::command::progress_bar(1000, "{spinner} filtering [{bar:40}] {percent}% {elapsed}")
 }
 
 fn evaluate(result: &Path, dataset: &Path, json: bool) -> Result<(), Failure> {

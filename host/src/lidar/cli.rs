@@ -5,10 +5,11 @@ use std::path::PathBuf;
 
 use anyhow::{anyhow, Context};
 use clap::Args;
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::ProgressBar;
 
 use crate::calibrate::lidar_imu::{self, LidarImuInput, LidarImuOptions};
 use crate::calibrate::pose_imu::PoseImuError;
+use crate::command::{progress_bar, Outcome};
 use crate::dataset::{CalibrationResult, Dataset};
 use crate::lidar::FileScans;
 use crate::sim::{simulate_lidar_imu, Environment, LidarImuSimConfig, LidarSimConfig};
@@ -67,21 +68,8 @@ pub struct CalibrateLidarImu {
     pub local_map_scans: usize,
 }
 
-/// How a calibration ended (errors aside).
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum Outcome {
-    /// All checks passed.
-    Converged,
-    /// The result was written but a check failed (the reasons).
-    NotConverged(String),
-}
-
 fn bar(template: &str) -> ProgressBar {
-    let bar = ProgressBar::new(1000);
-    if let Ok(style) = ProgressStyle::with_template(template) {
-        bar.set_style(style.progress_chars("=> "));
-    }
-    bar
+    progress_bar(1000, template)
 }
 
 /// Simulates and writes a LiDAR-IMU dataset.
@@ -177,9 +165,5 @@ pub fn calibrate(args: &CalibrateLidarImu) -> anyhow::Result<Outcome> {
         r.final_covariance_scale,
         r.stage_timing_s.rotation_init + r.stage_timing_s.total_filter_pass
     );
-    Ok(if r.filter.converged {
-        Outcome::Converged
-    } else {
-        Outcome::NotConverged(r.filter.reasons.join("; "))
-    })
+    Ok(Outcome::of(r.filter.converged, &r.filter.reasons))
 }

@@ -6,7 +6,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use anyhow::{anyhow, Context};
 use clap::{Args, ValueEnum};
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::ProgressBar;
 use msreg_estimator::camera::Camera;
 use msreg_estimator::Pose;
 use nalgebra::{Isometry3, Translation3};
@@ -17,6 +17,7 @@ use super::pipeline::{
     Method, RejectedFrame, Solution, SolveError, SolverRun,
 };
 use super::sim::{simulate_lidar_camera, LidarCameraSimConfig, LidarModel};
+use crate::command::{progress_bar, Outcome};
 use crate::dataset::{CalibrationResult, ExtrinsicEstimate};
 use crate::vision::GrayImage;
 
@@ -76,14 +77,6 @@ pub struct CalibrateLidarCamera {
     pub overlay: Option<PathBuf>,
 }
 
-/// How a calibration ended (exit code 0 or 1).
-pub enum Outcome {
-    /// Result written.
-    Converged,
-    /// Ran but failed; the reason.
-    NotConverged(String),
-}
-
 /// Writes a simulated dataset.
 pub fn simulate(args: &SimulateLidarCamera) -> anyhow::Result<()> {
     let config = LidarCameraSimConfig {
@@ -113,13 +106,10 @@ pub fn simulate(args: &SimulateLidarCamera) -> anyhow::Result<()> {
 }
 
 fn bar(len: u64, what: &str) -> ProgressBar {
-    let bar = ProgressBar::new(len);
-    if let Ok(style) = ProgressStyle::with_template(&format!(
-        "{{spinner}} {what} [{{bar:40}}] {{pos}}/{{len}} {{elapsed}}"
-    )) {
-        bar.set_style(style.progress_chars("=> "));
-    }
-    bar
+    progress_bar(
+        len,
+        &format!("{{spinner}} {what} [{{bar:40}}] {{pos}}/{{len}} {{elapsed}}"),
+    )
 }
 
 /// The JSON report.

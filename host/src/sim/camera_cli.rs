@@ -3,9 +3,9 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
+use crate::command::progress_bar;
 use anyhow::anyhow;
 use clap::{Args, ValueEnum};
-use indicatif::{ProgressBar, ProgressStyle};
 
 use super::camera::{simulate_camera_imu, CameraImuSimConfig, CameraModelChoice};
 
@@ -70,12 +70,10 @@ pub fn simulate(args: &SimulateCameraImu) -> anyhow::Result<()> {
     }
     let started = Instant::now();
     let sim = simulate_camera_imu(&config).map_err(|e| anyhow!("simulate: {e}"))?;
-    let bar = ProgressBar::new(1000);
-    if let Ok(style) =
-        ProgressStyle::with_template("{spinner} rendering images [{bar:40}] {percent}% {elapsed}")
-    {
-        bar.set_style(style.progress_chars("=> "));
-    }
+    let bar = progress_bar(
+        1000,
+        "{spinner} rendering images [{bar:40}] {percent}% {elapsed}",
+    );
     sim.write(&args.out_dir, &|f| bar.set_position((f * 1000.0) as u64))?;
     bar.finish_and_clear();
     eprintln!(

@@ -9,7 +9,6 @@ use std::time::Instant;
 
 use anyhow::{anyhow, Context};
 use clap::Args;
-use indicatif::{ProgressBar, ProgressStyle};
 use msreg_estimator::CornerObservation;
 use serde::Serialize;
 
@@ -18,6 +17,7 @@ use super::{
     CameraUpdate, CornerFrame, ReprojectionSample,
 };
 use crate::calibrate::pose_imu::PoseImuError;
+use crate::command::{progress_bar, Outcome};
 use crate::dataset::{CalibrationResult, Dataset};
 use crate::vision::frames::{CameraDataset, CameraInputError};
 use crate::vision::{DetectorParams, GrayImage};
@@ -56,14 +56,6 @@ pub struct CalibrateCameraImu {
     /// the corner spacing (docs/checkerboard.md).
     #[arg(long)]
     pub opencv_window: bool,
-}
-
-/// How a calibration ended (exit code 0 or 1).
-pub enum Outcome {
-    /// Result written.
-    Converged,
-    /// Ran but failed; the reason.
-    NotConverged(String),
 }
 
 /// What the detector found over the dataset.
@@ -118,7 +110,7 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
         camera: &camera_data.camera,
         frames: &frames,
     };
-    let filtering = progress_bar("{spinner} filtering [{bar:40}] {percent}% {elapsed}");
+    let filtering = progress_bar(1000, "{spinner} filtering [{bar:40}] {percent}% {elapsed}");
     let mut progress = |f: f64| filtering.set_position((f * 1000.0) as u64);
     let outcome = if args.f32 {
         calibrate::<f32>(&input, &options, &mut progress)
@@ -166,11 +158,8 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
             None => eprintln!("msreg: warning: no reprojection sample (MoCal has none)"),
         }
     }
-    Ok(if calibration.report.filter.converged {
-        Outcome::Converged
-    } else {
-        Outcome::NotConverged(calibration.report.filter.reasons.join("; "))
-    })
+    let filter = &calibration.report.filter;
+    Ok(Outcome::of(filter.converged, &filter.reasons))
 }
 
 /// [`detect_corner_frames`] with a progress bar; fewer than [`MIN_IMAGES`] boards found is
@@ -179,7 +168,10 @@ fn detect_for_calibration(
     args: &CalibrateCameraImu,
     camera_data: &CameraDataset,
 ) -> anyhow::Result<(Vec<CornerFrame>, DetectionSummary)> {
-    let detecting = progress_bar("{spinner} detecting corners [{bar:40}] {percent}% {elapsed}");
+    let detecting = progress_bar(
+        1000,
+        "{spinner} detecting corners [{bar:40}] {percent}% {elapsed}",
+    );
     let params = if args.opencv_window {
         DetectorParams::opencv_compatible()
     } else {
@@ -338,12 +330,4 @@ fn round_to_1_2_5(x: f64) -> f64 {
         .map(|m| m * decade)
         .find(|&v| v <= x)
         .unwrap_or(decade)
-}
-
-fn progress_bar(template: &str) -> ProgressBar {
-    let bar = ProgressBar::new(1000);
-    if let Ok(style) = ProgressStyle::with_template(template) {
-        bar.set_style(style.progress_chars("=> "));
-    }
-    bar
 }
