@@ -17,6 +17,14 @@ pub enum Error {
         /// The offending stamp, ns.
         stamp_ns: u64,
     },
+    /// The measurement's IMU time lies beyond the newest IMU sample: feed IMU samples until
+    /// one is at or after it (see `Ekf::is_due`).
+    NotYetDue {
+        /// The measurement's IMU time, ns.
+        imu_time_ns: u64,
+        /// The newest IMU stamp, ns.
+        horizon_ns: u64,
+    },
     /// Two consecutive IMU samples are further apart than `FilterConfig::max_imu_gap_ns`.
     ImuGap {
         /// Length of the gap, ns.
@@ -60,6 +68,13 @@ impl fmt::Display for Error {
             } => write!(
                 f,
                 "time went backwards: stamp {stamp_ns} ns is before filter time {filter_ns} ns"
+            ),
+            Error::NotYetDue {
+                imu_time_ns,
+                horizon_ns,
+            } => write!(
+                f,
+                "not yet due: IMU time {imu_time_ns} ns is after the newest IMU sample {horizon_ns} ns"
             ),
             Error::ImuGap { gap_ns } => write!(f, "gap of {gap_ns} ns in the IMU stream"),
             Error::NotInitialized => write!(f, "no IMU sample received yet"),

@@ -63,7 +63,15 @@ impl<T: Scalar> FilterConfig<T> {
 pub struct Ekf<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize = 0> {
     config: FilterConfig<T>,
     time_ns: u64,
-    last_imu: Option<ImuSample<T>>,
+    /// The IMU reading at `time_ns`: a received sample, or interpolated between two.
+    imu_now: Option<ImuSample<T>>,
+    /// The newest sample, ahead of `time_ns` (the one-sample look-ahead): the signal is known
+    /// up to its stamp, so measurements up to there can be fused. `None` until a second
+    /// sample has arrived.
+    imu_ahead: Option<ImuSample<T>>,
+    /// Spacing of the last two samples received, ns (0 before the second): the period one
+    /// reading's white noise refers to.
+    imu_period_ns: u64,
     imu: ImuState<T>,
     sensors: [SensorState<T>; S],
     prior_sigma: [[T; 7]; S],
@@ -117,7 +125,9 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         Ok(Self {
             config: *config,
             time_ns: 0,
-            last_imu: None,
+            imu_now: None,
+            imu_ahead: None,
+            imu_period_ns: 0,
             imu: init.imu,
             sensors: core::array::from_fn(|s| init.sensors[s].state),
             prior_sigma,
@@ -247,52 +257,111 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
 
     // ----- propagation -------------------------------------------------------------------
 
-    /// Feeds one IMU sample: propagates to its stamp with the previous sample held, then holds
-    /// this one. The first sample only sets the filter time.
+    /// Feeds one IMU sample (an instantaneous reading at its stamp). The filter keeps it as its
+    /// look-ahead and propagates to the previous sample's stamp, over the straight line
+    /// between the two readings: after sample `k + 1` the filter stands at `t_k` and any
+    /// measurement with an IMU time up to `t_k+1` can be fused ([`Ekf::is_due`]). The first
+    /// sample only sets the filter time.
     pub fn propagate(&mut self, sample: &ImuSample<T>) -> Result<(), Error> {
         sample.validate()?;
-        let Some(last) = self.last_imu else {
+        let Some(now) = self.imu_now else {
             self.time_ns = sample.stamp_ns;
-            self.last_imu = Some(*sample);
+            self.imu_now = Some(*sample);
             return Ok(());
         };
-        if sample.stamp_ns < self.time_ns || sample.stamp_ns <= last.stamp_ns {
+        let newest = self.imu_ahead.unwrap_or(now);
+        if sample.stamp_ns <= newest.stamp_ns {
             return Err(Error::TimeWentBackwards {
-                filter_ns: self.time_ns,
+                filter_ns: newest.stamp_ns,
                 stamp_ns: sample.stamp_ns,
             });
         }
-        let gap = sample.stamp_ns - last.stamp_ns;
+        let gap = sample.stamp_ns - newest.stamp_ns;
         if gap > self.config.max_imu_gap_ns {
             return Err(Error::ImuGap { gap_ns: gap });
         }
-        self.advance_to(sample.stamp_ns)?;
-        self.last_imu = Some(*sample);
+        if let Some(ahead) = self.imu_ahead {
+            self.advance_to(ahead.stamp_ns)?;
+        }
+        self.imu_ahead = Some(*sample);
+        self.imu_period_ns = gap;
         Ok(())
     }
 
-    /// Propagates state and covariance to `t_ns` with the held sample. Only the IMU block
-    /// changes now, `P_II <- Phi P_II Phi^T + Q` with the structured product; `P_IX <- Phi
-    /// P_IX` is deferred by accumulating `Phi` (see `flush_transition`).
-    fn advance_to(&mut self, t_ns: u64) -> Result<(), Error> {
-        let last = self.last_imu.ok_or(Error::NotInitialized)?;
+    /// The newest IMU stamp received, ns: measurements whose IMU time is at or before it can
+    /// be fused. `None` before the first sample.
+    pub fn imu_horizon_ns(&self) -> Option<u64> {
+        self.imu_ahead.or(self.imu_now).map(|s| s.stamp_ns)
+    }
+
+    /// IMU time `stamp + t_d` of sensor `s`'s measurement stamped `stamp_ns` (sensor clock),
+    /// with the current time-offset estimate. This is the one rule for "when did this
+    /// measurement happen on the IMU clock" that every pipeline and the firmware use.
+    pub fn imu_time(&self, s: usize, stamp_ns: u64) -> Result<u64, Error> {
+        let sensor = self.sensors.get(s).ok_or(Error::UnknownSensor)?;
+        // Offset rounded to ns and added in integer space: stamps near 1.7e18 ns have no
+        // sub-microsecond resolution as floats.
+        let td = libm::round(sensor.time_offset.to_f64() * 1e9) as i64;
+        Ok(if td >= 0 {
+            stamp_ns.saturating_add(td as u64)
+        } else {
+            stamp_ns.saturating_sub(td.unsigned_abs())
+        })
+    }
+
+    /// True when sensor `s`'s measurement stamped `stamp_ns` can be fused now: its IMU time is
+    /// at or before the newest IMU sample. Feed IMU samples until it is, then fuse.
+    pub fn is_due(&self, s: usize, stamp_ns: u64) -> bool {
+        match (self.imu_time(s, stamp_ns), self.imu_horizon_ns()) {
+            (Ok(t), Some(h)) => t <= h,
+            _ => false,
+        }
+    }
+
+    /// The nominal IMU state the filter will have at `t_ns` (between the filter time and the
+    /// newest sample), without changing the filter: e.g. the pose at a LiDAR scan's end.
+    pub fn predict_imu(&self, t_ns: u64) -> Result<ImuState<T>, Error> {
+        if t_ns == self.time_ns {
+            return Ok(self.imu);
+        }
+        Ok(self.step_to(t_ns)?.0.state)
+    }
+
+    /// The propagation step from the filter time to `t_ns` and the reading at `t_ns`.
+    fn step_to(&self, t_ns: u64) -> Result<(propagate::ImuStep<T>, ImuSample<T>), Error> {
+        let now = self.imu_now.ok_or(Error::NotInitialized)?;
         if t_ns < self.time_ns {
             return Err(Error::TimeWentBackwards {
                 filter_ns: self.time_ns,
                 stamp_ns: t_ns,
             });
         }
+        let ahead = self
+            .imu_ahead
+            .filter(|a| t_ns <= a.stamp_ns)
+            .ok_or(Error::NotYetDue {
+                imu_time_ns: t_ns,
+                horizon_ns: self.imu_horizon_ns().unwrap_or(self.time_ns),
+            })?;
+        let end = now.lerp(&ahead, t_ns);
+        let (gyro, accel) = now.mean(&end);
+        let dt = T::lit((t_ns - self.time_ns) as f64 * 1e-9);
+        let step = propagate::step(&self.imu, &gyro, &accel, dt, &self.config.imu_noise);
+        Ok((step, end))
+    }
+
+    /// Propagates state and covariance to `t_ns` (at most the newest sample's stamp) over the
+    /// interpolated readings. Only the IMU block changes now, `P_II <- Phi P_II Phi^T + Q`
+    /// with the structured product; `P_IX <- Phi P_IX` is deferred by accumulating `Phi` (see
+    /// `flush_transition`).
+    fn advance_to(&mut self, t_ns: u64) -> Result<(), Error> {
+        if self.imu_now.is_none() {
+            return Err(Error::NotInitialized);
+        }
         if t_ns == self.time_ns {
             return Ok(());
         }
-        let dt = T::lit((t_ns - self.time_ns) as f64 * 1e-9);
-        let step = propagate::step(
-            &self.imu,
-            &last.gyro,
-            &last.accel,
-            dt,
-            &self.config.imu_noise,
-        );
+        let (step, end) = self.step_to(t_ns)?;
         let phi = step.transition;
         let p_ii = self.cov.fixed_view::<15, 15>(0, 0).clone_owned();
         let phi_p = propagate::transition_mul(&phi, &p_ii);
@@ -308,6 +377,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         self.cov.fixed_view_mut::<15, 15>(0, 0).copy_from(&new_ii);
         self.pending_transition = pending;
         self.imu = step.state;
+        self.imu_now = Some(end);
         self.time_ns = t_ns;
         Ok(())
     }

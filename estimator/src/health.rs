@@ -41,6 +41,13 @@ pub struct HealthConfig<T: Scalar> {
     pub inflate_rotation: T,
     /// Sigma (m) added likewise to each translation axis on a translation step.
     pub inflate_translation: T,
+    /// The step detectors of a sensor arm only once its extrinsic has converged: every
+    /// rotation sigma below this (rad) and every translation sigma below
+    /// `arm_sigma_translation`. Before, the innovations of the initial transient are the
+    /// convergence itself, not a knock, and no alarm may come of them.
+    pub arm_sigma_rotation: T,
+    /// Translation half of the arming condition, m.
+    pub arm_sigma_translation: T,
 }
 
 impl<T: Scalar> Default for HealthConfig<T> {
@@ -53,6 +60,9 @@ impl<T: Scalar> Default for HealthConfig<T> {
             step_min_updates: 15,
             inflate_rotation: T::lit(0.0035),
             inflate_translation: T::lit(0.005),
+            // 0.5 deg and 2 cm: the pipelines' own "converged" bounds.
+            arm_sigma_rotation: T::lit(0.5f64.to_radians()),
+            arm_sigma_translation: T::lit(0.02),
         }
     }
 }

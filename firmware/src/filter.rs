@@ -54,6 +54,12 @@ impl Filter {
         on_ekf!(self, f => f.time_ns())
     }
 
+    /// True when a measurement stamped `stamp_ns` (sensor clock) can be fused: its IMU time
+    /// `stamp + t_d` is at or before the newest IMU sample (the estimator's one rule).
+    pub fn is_due(&self, stamp_ns: u64) -> bool {
+        on_ekf!(self, f => f.is_due(SENSOR, stamp_ns))
+    }
+
     /// Time offset `t_d`, s.
     pub fn time_offset(&self) -> f32 {
         on_ekf!(self, f => f.time_offset(SENSOR))

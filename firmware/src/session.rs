@@ -415,7 +415,6 @@ impl Session {
                 self.fault(w, ErrorKind::OutOfRange, seq, b.base_stamp_ns);
                 continue;
             };
-            self.apply_due(w, stamp_ns);
             let sample = ImuSample {
                 stamp_ns,
                 gyro: Vector3::from(s.gyro),
@@ -429,6 +428,8 @@ impl Session {
                     self.counts.imu_samples += 1;
                     self.zero_velocity(w, stamp_ns);
                     self.imu_index += 1;
+                    // The sample is the filter's look-ahead: what it makes due can be fused.
+                    self.apply_due(w);
                 }
                 Err(e) => self.fault(w, error_kind(&e), seq, stamp_ns),
             }
@@ -466,27 +467,24 @@ impl Session {
         );
     }
 
-    /// True when a measurement stamped `stamp_ns` (sensor clock) is due before the IMU
-    /// sample at `imu_stamp_ns`.
-    fn is_due(&self, stamp_ns: u64, imu_stamp_ns: u64) -> bool {
-        self.filter.as_ref().is_some_and(|f| {
-            let offset_ns = (f64::from(f.time_offset()) * 1e9) as i128;
-            i128::from(stamp_ns) + offset_ns <= i128::from(imu_stamp_ns)
-        })
+    /// True when a measurement stamped `stamp_ns` (sensor clock) can be fused: the filter
+    /// holds an IMU sample at or after its IMU time (`Ekf::is_due`).
+    fn is_due(&self, stamp_ns: u64) -> bool {
+        self.filter.as_ref().is_some_and(|f| f.is_due(stamp_ns))
     }
 
-    /// Applies every pending measurement whose IMU time is at or before `imu_stamp_ns`.
-    fn apply_due<W: embedded_io::Write>(&mut self, w: &mut W, imu_stamp_ns: u64) {
-        self.apply_due_poses(w, imu_stamp_ns);
-        self.apply_due_camera(w, imu_stamp_ns);
+    /// Applies every pending measurement that the newest IMU sample made due.
+    fn apply_due<W: embedded_io::Write>(&mut self, w: &mut W) {
+        self.apply_due_poses(w);
+        self.apply_due_camera(w);
     }
 
     /// Not inlined: the popped entry (~1 KB) stays out of `on_imu`'s frame, below which the
     /// pose updates run.
     #[inline(never)]
-    fn apply_due_camera<W: embedded_io::Write>(&mut self, w: &mut W, imu_stamp_ns: u64) {
+    fn apply_due_camera<W: embedded_io::Write>(&mut self, w: &mut W) {
         while let Some(front) = self.camera_pending.front() {
-            if !self.is_due(front.stamp_ns(), imu_stamp_ns) {
+            if !self.is_due(front.stamp_ns()) {
                 return;
             }
             let Some(front) = self.camera_pending.pop_front() else {
@@ -503,9 +501,9 @@ impl Session {
         }
     }
 
-    fn apply_due_poses<W: embedded_io::Write>(&mut self, w: &mut W, imu_stamp_ns: u64) {
+    fn apply_due_poses<W: embedded_io::Write>(&mut self, w: &mut W) {
         while let Some(front) = self.pending.front().copied() {
-            if !self.is_due(front.stamp_ns(), imu_stamp_ns) {
+            if !self.is_due(front.stamp_ns()) {
                 return;
             }
             self.pending.pop_front();
@@ -531,9 +529,12 @@ impl Session {
         let Some(Filter::CameraImu(CameraFilter { ekf, .. })) = self.filter.as_mut() else {
             return;
         };
-        let t_g_t = ekf
-            .imu()
-            .pose()
+        // The IMU pose at the image's IMU time (due, so within the look-ahead).
+        let imu_pose = ekf
+            .imu_time(SENSOR, t.stamp_ns)
+            .and_then(|t_imu| ekf.predict_imu(t_imu.max(ekf.time_ns())))
+            .map_or_else(|_| ekf.imu().pose(), |state| state.pose());
+        let t_g_t = imu_pose
             .compose(&ekf.extrinsic(SENSOR))
             .compose(&pose(&t.t_cam_target));
         match ekf.init_frame(TARGET, t_g_t, t.sigma_rotation_rad, t.sigma_position_m) {

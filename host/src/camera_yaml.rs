@@ -55,6 +55,43 @@ pub enum Target {
         /// Extent along y, metres.
         height_m: f64,
     },
+    /// Kalibr's `target_type: 'aprilgrid'`.
+    AprilGrid(AprilGridTarget),
+}
+
+/// A Kalibr AprilGrid: `tag_cols x tag_rows` tags of side `tag_size_m`, `tag_spacing` (a
+/// ratio of the tag size) apart. Corner id `4 i + k` is corner `k` (0..3 counter-clockwise
+/// from the tag's bottom-left: (0, 0), (s, 0), (s, s), (0, s)) of tag `i`, which sits at
+/// column `i % tag_cols`, row `i / tag_cols`, Kalibr's layout.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AprilGridTarget {
+    /// `tagCols`.
+    pub tag_cols: usize,
+    /// `tagRows`.
+    pub tag_rows: usize,
+    /// `tagSize`, metres.
+    pub tag_size_m: f64,
+    /// `tagSpacing`: the gap between tags as a ratio of `tag_size_m`.
+    pub tag_spacing: f64,
+}
+
+impl AprilGridTarget {
+    /// Corner `id` in the target frame, `None` for an id outside the grid.
+    pub fn corner(&self, id: usize) -> Option<nalgebra::Vector3<f64>> {
+        let (tag, k) = (id / 4, id % 4);
+        if tag >= self.tag_cols * self.tag_rows {
+            return None;
+        }
+        let pitch = self.tag_size_m * (1.0 + self.tag_spacing);
+        let (col, row) = ((tag % self.tag_cols) as f64, (tag / self.tag_cols) as f64);
+        let s = self.tag_size_m;
+        let (dx, dy) = [(0.0, 0.0), (s, 0.0), (s, s), (0.0, s)][k];
+        Some(nalgebra::Vector3::new(
+            col * pitch + dx,
+            row * pitch + dy,
+            0.0,
+        ))
+    }
 }
 
 /// A Kalibr checkerboard: corner id `r * cols + c` at `(r * row_spacing, c * col_spacing, 0)`.
@@ -361,9 +398,17 @@ fn target_from_doc(doc: &Doc) -> Result<Target, YamlError> {
             width_m: positive("width_m")?,
             height_m: positive("height_m")?,
         }),
+        "aprilgrid" => Ok(Target::AprilGrid(AprilGridTarget {
+            tag_cols: doc.count(map, "tagCols")?,
+            tag_rows: doc.count(map, "tagRows")?,
+            tag_size_m: positive("tagSize")?,
+            tag_spacing: positive("tagSpacing")?,
+        })),
         other => Err(doc.invalid(
             "target_type",
-            format!("unsupported target_type `{other}` (expected checkerboard or board)"),
+            format!(
+                "unsupported target_type `{other}` (expected checkerboard, aprilgrid or board)"
+            ),
         )),
     }
 }

@@ -16,6 +16,7 @@ mod imu;
 mod layout;
 mod lidar;
 mod meta;
+mod observed_corners;
 mod pose;
 mod result;
 mod yaml;
@@ -27,12 +28,18 @@ pub use camera::{
 };
 pub use error::DatasetError;
 pub use groundtruth::{read_groundtruth_csv, write_groundtruth_csv, GroundTruthRecord};
-pub use imu::{read_imu_csv, write_imu_csv, ImuNoiseYaml, ImuRecord};
+pub use imu::{
+    check_imu_units, read_imu_csv, to_instantaneous, write_imu_csv, ImuNoiseYaml, ImuRecord,
+    SampleTiming,
+};
 pub use layout::{
     Dataset, DATASET_YAML, GROUNDTRUTH_EXTRINSICS_YAML, GROUNDTRUTH_TRAJECTORY_CSV, IMU_CSV,
     IMU_YAML, POSE_CSV, POSE_SENSOR_YAML,
 };
 pub use lidar::{list_scans, LidarYaml, ScanFile, LIDAR_DIR, LIDAR_YAML};
 pub use meta::DatasetYaml;
+pub use observed_corners::{
+    read_observed_corners, ObservedCorner, ObservedImage, OBSERVED_CORNERS_CSV,
+};
 pub use pose::{read_pose_csv, write_pose_csv, PoseRecord, PoseSensorYaml};
 pub use result::{isometry_from_matrix, CalibrationResult, ExtrinsicEstimate};

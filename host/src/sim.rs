@@ -5,12 +5,11 @@
 //! - Motion ([`Trajectory`]): position and ZYX Euler angles are sums of random
 //!   sinusoids (0.2-1.2 Hz) faded in after a still period by a C2 smooth
 //!   step; body rate and specific force are exact, not differenced.
-//! - IMU ([`ImuSimConfig`]): sample `k` stamped `t_k` carries the truth at the
-//!   interval midpoint `(t_k + t_{k+1}) / 2`. The estimator holds sample `k`
-//!   constant over `[t_k, t_{k+1})`, and the midpoint value is what makes that
-//!   zero-order hold agree with the true motion to second order in `dt`; with
-//!   the sample at `t_k` instead, the filter would see a half-sample lag that
-//!   is not in its model. White noise `density / sqrt(dt)`, bias random walk.
+//! - IMU ([`ImuSimConfig`]): sample `k` stamped `t_k` is the truth at the instant `t_k`
+//!   (body rate and specific force from the trajectory alone), as real IMUs and EuRoC /
+//!   Kalibr / OpenVINS data are; an independent RK4 integrator checks that these samples
+//!   reproduce the trajectory (`sim::tests`). White noise `density / sqrt(dt)`, bias
+//!   random walk.
 //! - Pose sensor ([`PoseSimConfig`]): `T_G_S(t_S) = T_G_I(t_S + t_d) T_imu_pose`,
 //!   reported as odometry from noisy increments composed from an arbitrary
 //!   origin; irregular rate, gaps and any rate are options.

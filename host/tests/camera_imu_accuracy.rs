@@ -5,17 +5,16 @@
 
 #[path = "support/common.rs"]
 mod common;
+#[path = "support/corners.rs"]
+mod corners;
 
 use common::{median, par_map};
-use msreg_estimator::CornerObservation;
+use corners::noisy_corner_frames;
 use msreg_host::calibrate::camera_imu::{
     self, CameraImuCalibration, CameraImuInput, CameraImuOptions, CameraUpdate, CornerFrame,
 };
 use msreg_host::sim::{simulate_camera_imu, CameraImuSim, CameraImuSimConfig};
-use nalgebra::{Isometry3, Vector2, Vector6};
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution, Normal};
+use nalgebra::{Isometry3, Vector6};
 
 /// Per-axis corner noise, pixels: about twice what the detector reaches on the simulator's
 /// blurred and noisy images (see docs/checkerboard.md).
@@ -29,30 +28,6 @@ fn recording(seed: u64) -> CameraImuSim {
         ..CameraImuSimConfig::default()
     };
     simulate_camera_imu(&config).expect("valid simulation config")
-}
-
-/// The true corners of every image with the full board in view, plus Gaussian noise.
-pub fn noisy_corner_frames(sim: &CameraImuSim, sigma_px: f64, seed: u64) -> Vec<CornerFrame> {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x00c0_ffee);
-    let noise = Normal::new(0.0, sigma_px).expect("sigma > 0");
-    let target = sim.target();
-    (0..sim.frame_stamps.len())
-        .filter(|&k| sim.full_board_in_view(k))
-        .map(|k| CornerFrame {
-            stamp_ns: sim.frame_stamps[k],
-            corners: sim
-                .true_corners(k)
-                .iter()
-                .enumerate()
-                .filter_map(|(id, p)| {
-                    p.map(|p| CornerObservation {
-                        point_in_target: target.corner_in_target(id),
-                        pixel: p + Vector2::new(noise.sample(&mut rng), noise.sample(&mut rng)),
-                    })
-                })
-                .collect(),
-        })
-        .collect()
 }
 
 fn calibrate(

@@ -7,6 +7,10 @@
 //! Ouster-128 acceptance run over 5 seeds is `#[ignore]`d (minutes of CPU):
 //! `cargo test --release -p msreg --test lidar_imu_accuracy -- --ignored --nocapture`.
 
+#[path = "support/common.rs"]
+mod common;
+
+use common::chi_square_band;
 use msreg_host::calibrate::lidar_imu::{self, LidarImuCalibration, LidarImuInput, LidarImuOptions};
 use msreg_host::sim::{simulate_lidar_imu, LidarImuSim, LidarImuSimConfig, LidarSimConfig};
 use nalgebra::{Isometry3, Vector6};
@@ -190,15 +194,6 @@ fn print(o: &Outcome) {
         o.seconds,
         o.converged
     );
-}
-
-/// Two-sided 95 % band of a chi-square variable with `k` dof (Wilson-Hilferty).
-fn chi_square_band(k: f64) -> (f64, f64) {
-    let quantile = |z: f64| {
-        let c = 2.0 / (9.0 * k);
-        k * (1.0 - c + z * c.sqrt()).powi(3)
-    };
-    (quantile(-1.959_964), quantile(1.959_964))
 }
 
 #[test]

@@ -7,24 +7,12 @@ use crate::Error;
 use nalgebra::Vector3;
 
 impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> Ekf<T, S, C, N, F> {
-    /// IMU time of a measurement of sensor `s` stamped `stamp_ns`: `stamp + t_d`.
-    pub(super) fn imu_time(&self, s: usize, stamp_ns: u64) -> u64 {
-        // Offset rounded to ns and added in integer space: stamps near 1.7e18 ns have no
-        // sub-microsecond resolution as floats.
-        let td = libm::round(self.sensors[s].time_offset.to_f64() * 1e9) as i64;
-        if td >= 0 {
-            stamp_ns.saturating_add(td as u64)
-        } else {
-            stamp_ns.saturating_sub(td.unsigned_abs())
-        }
-    }
-
     /// IMU time of sensor `s`'s measurement stamped `stamp_ns`, checked to be reachable by
     /// propagation: not before the filter time (up to `max_late_ns`, then the filter time
-    /// itself), not beyond the IMU gap limit.
+    /// itself), not beyond the newest IMU sample.
     pub(super) fn reachable_imu_time(&self, s: usize, stamp_ns: u64) -> Result<u64, Error> {
-        let last = self.last_imu.ok_or(Error::NotInitialized)?;
-        let t = self.imu_time(s, stamp_ns);
+        let horizon = self.imu_horizon_ns().ok_or(Error::NotInitialized)?;
+        let t = self.imu_time(s, stamp_ns)?;
         if t < self.time_ns && self.time_ns - t <= self.config.max_late_ns {
             return Ok(self.time_ns);
         }
@@ -34,9 +22,10 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
                 stamp_ns: t,
             });
         }
-        if t - last.stamp_ns > self.config.max_imu_gap_ns {
-            return Err(Error::ImuGap {
-                gap_ns: t - last.stamp_ns,
+        if t > horizon {
+            return Err(Error::NotYetDue {
+                imu_time_ns: t,
+                horizon_ns: horizon,
             });
         }
         Ok(t)
@@ -72,7 +61,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         self.flush_transition();
         self.drop_clone(slot);
         let w = self
-            .last_imu
+            .imu_now
             .map(|m| m.gyro - self.imu.gyro_bias)
             .unwrap_or_else(Vector3::zeros);
         let v = self.imu.velocity;

@@ -75,11 +75,15 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         Ok(report)
     }
 
-    /// Zero-velocity update with the latest IMU sample (the caller decided the platform is at
-    /// rest).
+    /// Zero-velocity update with the IMU reading at the filter time (the caller decided the
+    /// platform is at rest). The reading's white noise is that of one sample at the stream's
+    /// own period.
     pub fn update_zero_velocity(&mut self) -> Result<UpdateReport<T>, Error> {
-        let sample = self.last_imu.ok_or(Error::NotInitialized)?;
-        let dt = T::lit(2.5e-3);
+        let sample = self.imu_now.ok_or(Error::NotInitialized)?;
+        if self.imu_period_ns == 0 {
+            return Err(Error::NotInitialized);
+        }
+        let dt = T::lit(self.imu_period_ns as f64 * 1e-9);
         let n = &self.config.imu_noise;
         let noise = zero_velocity::noise(
             n.gyro_noise_density / dt.sqrt(),
@@ -141,6 +145,11 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         accepted: bool,
         innovation: Option<&ExtrinsicInnovation<T>>,
     ) -> UpdateReport<T> {
+        // The step detectors see innovations only once the extrinsic has converged.
+        let (sr, st) = self.extrinsic_sigma(s);
+        let h = self.config.health;
+        let armed = sr.max() < h.arm_sigma_rotation && st.max() < h.arm_sigma_translation;
+        let innovation = innovation.filter(|_| armed);
         let event = self
             .health
             .record(s, stamp_ns, nis, dof, accepted, innovation);

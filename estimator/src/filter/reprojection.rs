@@ -22,8 +22,8 @@ use nalgebra::{Matrix2, Matrix2x3, Matrix3, SMatrix, Vector3};
 impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> Ekf<T, S, C, N, F> {
     /// Fuses the corners of target frame `f` seen by camera sensor `s` (whose extrinsic is
     /// `T_I_C`) in the image stamped `meas.stamp_ns`. The filter is propagated to the image's
-    /// IMU time `stamp + t_d` with the held IMU sample, so feed IMU samples up to that time
-    /// first. Rejected by the gate: only the health monitor records it.
+    /// IMU time `stamp + t_d` over the interpolated IMU readings, so feed IMU samples until
+    /// [`Ekf::is_due`] says so first. Rejected by the gate: only the health monitor records it.
     pub fn update_reprojection(
         &mut self,
         s: usize,
@@ -42,9 +42,9 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         }
         meas.validate()?;
         let t = self.reachable_imu_time(s, meas.stamp_ns)?;
-        let last = self.last_imu.ok_or(Error::NotInitialized)?;
         let mut draft = self.clone();
         draft.advance_to(t)?;
+        let last = draft.imu_now.ok_or(Error::NotInitialized)?;
         draft.flush_transition();
         let noise = Matrix2::identity() * (meas.pixel_sigma * meas.pixel_sigma);
         let mut nis = T::zero();

@@ -28,7 +28,22 @@ fn moving_filter(time_offset: f64) -> PoseImuEkf<f64> {
         })
         .expect("sample");
     }
+    look_ahead(&mut ekf);
     ekf
+}
+
+/// One more (constant) reading 20 ms on: the filter stands at `T0 + 240 ms` and can reach
+/// any measurement up to `T0 + 260 ms`.
+fn look_ahead<const S: usize, const C: usize, const N: usize, const F: usize>(
+    ekf: &mut Ekf<f64, S, C, N, F>,
+) {
+    ekf.propagate(&ImuSample {
+        stamp_ns: T0 + 260_000_000,
+        gyro: Vector3::new(1.2, -0.8, 0.5),
+        accel: Vector3::new(0.5, 1.0, 9.0),
+    })
+    .expect("look-ahead sample");
+    assert_eq!(ekf.time_ns(), T0 + 240_000_000);
 }
 
 #[test]
@@ -89,9 +104,9 @@ fn covariance_stays_symmetric_and_positive_through_updates() {
     ekf.anchor(0, t).expect("anchor");
     for k in 1..=20u64 {
         let stamp = t + k * 100_000_000;
-        for j in 1..=32u64 {
+        while !ekf.is_due(0, stamp) {
             ekf.propagate(&ImuSample {
-                stamp_ns: stamp - 100_000_000 + j * 2_500_000,
+                stamp_ns: ekf.imu_horizon_ns().expect("imu") + 2_500_000,
                 gyro: Vector3::new(1.2, -0.8, 0.5),
                 accel: Vector3::new(0.5, 1.0, 9.0),
             })
@@ -181,6 +196,7 @@ mod reprojection {
             })
             .expect("sample");
         }
+        look_ahead(&mut ekf);
         // The target is placed from the pose 4 ms after the stamp whatever `time_offset` is,
         // so that different offsets see the same static target.
         let mut at_image = ekf.clone();
@@ -202,7 +218,10 @@ mod reprojection {
     fn predicted(ekf: &CameraImuEkf<f64>, p: &Vector3<f64>) -> Vector2<f64> {
         let mut at_image = ekf.clone();
         // After an update the filter already stands at the image's (then) IMU time.
-        let t = at_image.imu_time(0, STAMP).max(at_image.time_ns());
+        let t = at_image
+            .imu_time(0, STAMP)
+            .expect("sensor")
+            .max(at_image.time_ns());
         at_image.advance_to(t).expect("advance");
         let p_c = crate::update::reprojection::point_in_camera(
             &at_image.imu().pose(),
@@ -234,7 +253,7 @@ mod reprojection {
         let corner = Vector3::new(0.15, 0.05, 0.0);
         let mut at_image = camera_filter(td);
         at_image
-            .advance_to(at_image.imu_time(0, STAMP))
+            .advance_to(at_image.imu_time(0, STAMP).expect("sensor"))
             .expect("advance");
         // When every error-state direction is perturbed there
         let h = 1e-6;
@@ -265,7 +284,7 @@ mod reprojection {
             &Vector2::zeros(),
         )
         .expect("in view");
-        let gyro = at_image.last_imu.expect("imu").gyro;
+        let gyro = at_image.imu_now.expect("imu").gyro;
         let analytic = at_image.reprojection_jacobian(0, 0, &lin, &gyro);
         // Pixels per unit error are O(500); the time-offset column carries the midpoint
         // integrator's O(|w| |a| dt^2) velocity inconsistency, as in the clone test.

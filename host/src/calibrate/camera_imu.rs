@@ -541,15 +541,14 @@ struct CornerFeed<'a, T: Scalar> {
 }
 
 impl<T: Scalar> ImuHooks<T, CameraImuEkf<T>> for CornerFeed<'_, T> {
-    fn before_sample(
+    fn fuse_due(
         &mut self,
         ekf: &mut CameraImuEkf<T>,
         index: usize,
-        rec: &ImuRecord,
+        _rec: &ImuRecord,
     ) -> Result<(), PoseImuError> {
         while let Some(frame) = self.frames.get(self.next) {
-            let due = frame.stamp_ns as i128 + (ekf.time_offset(0).to_f64() * 1e9) as i128;
-            if due > rec.stamp_ns as i128 {
+            if !ekf.is_due(0, frame.stamp_ns) {
                 break;
             }
             self.next += 1;
@@ -581,7 +580,13 @@ impl<T: Scalar> CornerFeed<'_, T> {
     fn init_target(&self, ekf: &mut CameraImuEkf<T>, frame: &CornerFrame) -> Result<(), String> {
         let camera = self.camera.cast::<f64>();
         let pnp = pnp_of(&camera, frame).map_err(|e| format!("no PnP pose for the target: {e}"))?;
-        let t_g_c = convert::isometry(&ekf.imu().pose()) * convert::isometry(&ekf.extrinsic(0));
+        // The IMU pose at the image's IMU time (the image is due, so it is within reach).
+        let t_imu = ekf
+            .imu_time(0, frame.stamp_ns)
+            .map_err(|e| e.to_string())?
+            .max(ekf.time_ns());
+        let imu_pose = ekf.predict_imu(t_imu).map_err(|e| e.to_string())?.pose();
+        let t_g_c = convert::isometry(&imu_pose) * convert::isometry(&ekf.extrinsic(0));
         let t_g_t = t_g_c * convert::isometry(&pnp.t_cam_target);
         let (sigma_rotation, sigma_position) =
             target_prior_sigmas(&self.prior, pnp.t_cam_target.translation.norm());

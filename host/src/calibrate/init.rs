@@ -57,7 +57,8 @@ pub fn detect_standstill(imu: &[ImuRecord], min_duration_s: f64) -> Option<Stand
     })
 }
 
-/// The rotation of the IMU between two stamps from its gyro (sample held until the next),
+/// The rotation of the IMU between two stamps from its gyro (instantaneous readings, linear
+/// between stamps: each piece integrates the mean of its end readings, as the filter does),
 /// minus `gyro_bias`. `None` when the stamps are outside the IMU data.
 pub fn integrate_gyro(
     imu: &[ImuRecord],
@@ -72,17 +73,26 @@ pub fn integrate_gyro(
     if to_ns > last.stamp_ns {
         return None;
     }
-    // Sample held over [t_k, t_{k+1}): start at the sample at or before `from_ns`.
+    // The interval [t_k, t_{k+1}] that holds `from_ns`.
     let start = imu
         .partition_point(|r| r.stamp_ns <= from_ns)
         .checked_sub(1)?;
+    let rate_at = |k: usize, t: u64| {
+        let a = &imu[k];
+        let Some(b) = imu.get(k + 1) else {
+            return a.gyro;
+        };
+        let f = (t.saturating_sub(a.stamp_ns)) as f64 / (b.stamp_ns - a.stamp_ns) as f64;
+        a.gyro + (b.gyro - a.gyro) * f.clamp(0.0, 1.0)
+    };
     let mut q = UnitQuaternion::identity();
     let mut t = from_ns;
-    for k in start..imu.len() {
-        let end = imu.get(k + 1).map_or(to_ns, |r| r.stamp_ns.min(to_ns));
+    for k in start..imu.len().saturating_sub(1) {
+        let end = imu[k + 1].stamp_ns.min(to_ns);
         if end > t {
             let dt = (end - t) as f64 * 1e-9;
-            q *= lie::exp(&((imu[k].gyro - gyro_bias) * dt));
+            let mean = (rate_at(k, t) + rate_at(k, end)) * 0.5 - gyro_bias;
+            q *= lie::exp(&(mean * dt));
             t = end;
         }
         if t >= to_ns {

@@ -8,14 +8,14 @@
 //!    NDT match) are dropped and the rotation re-solved once.
 //! 2. **Filter cycle**, per scan `k`, when the IMU stream passes the scan's reference time
 //!    `t_ref = stamp + max t_i` (its last firing) `+ t_d`:
-//!    predict (the filter holds the last IMU sample up to `t_ref`) -> **deskew** every point to
+//!    predict (over the IMU readings interpolated up to `t_ref`) -> **deskew** every point to
 //!    `t_ref` with the buffered filter poses and the current extrinsic (eq. 3.18) ->
 //!    voxel filter -> **NDT** against a local map of the last `local_map_scans` deskewed
 //!    scans (default 5; 0: the previous scan) from the IMU-predicted relative motion ->
 //!    **update** with `T_L(k-1)_L(k)` as a relative pose between the two
 //!    reference stamps (eq. 3.19-3.21). Deskewing to the *last* firing means the measurement
-//!    time is one the IMU stream has just reached, so the filter clones its current pose
-//!    (it cannot clone in the past).
+//!    time is one the IMU stream has just reached (the filter's one-sample look-ahead), so
+//!    the filter clones its pose there (it cannot clone in the past).
 //! 3. **Measurement noise**: NDT's inverse Hessian has the right shape but a size set by
 //!    the score's constants and the cells' eigenvalue floor (~5x too large on the
 //!    simulator). The filter uses `R = s * Sigma_NDT + diag(floor^2)` with `s` matched to
@@ -33,7 +33,7 @@
 
 use std::time::Instant;
 
-use msreg_estimator::{propagate, Error as FilterError, PoseImuEkf, RelativePose, Scalar};
+use msreg_estimator::{Error as FilterError, PoseImuEkf, RelativePose, Scalar};
 use nalgebra::{Isometry3, Matrix6, Vector3, Vector6};
 use serde::Serialize;
 
@@ -570,7 +570,6 @@ struct LidarFeed<'a> {
     pending: Option<Pending>,
     previous: Option<Previous>,
     last_end_ns: Option<u64>,
-    held: Option<ImuRecord>,
     buffer: PoseBuffer,
     records: Vec<ScanRecord>,
     timing: StageTiming,
@@ -593,13 +592,12 @@ struct LidarFeed<'a> {
 }
 
 impl<T: Scalar> ImuHooks<T> for LidarFeed<'_> {
-    fn before_sample(
+    fn fuse_due(
         &mut self,
         ekf: &mut PoseImuEkf<T>,
         index: usize,
-        rec: &ImuRecord,
+        _rec: &ImuRecord,
     ) -> Result<(), PoseImuError> {
-        let td_ns = (ekf.time_offset(0).to_f64() * 1e9).round() as i64;
         loop {
             if self.pending.is_none() {
                 if self.next >= self.scans.len() {
@@ -607,7 +605,7 @@ impl<T: Scalar> ImuHooks<T> for LidarFeed<'_> {
                 }
                 let k = self.next;
                 let stamp = self.scans.stamp_ns(k);
-                if imu_time(stamp, 0, td_ns) > rec.stamp_ns {
+                if !ekf.is_due(0, stamp) {
                     return Ok(());
                 }
                 self.next += 1;
@@ -639,21 +637,21 @@ impl<T: Scalar> ImuHooks<T> for LidarFeed<'_> {
             let Some(p) = self.pending.as_ref() else {
                 return Ok(());
             };
-            if imu_time(p.stamp_ns, p.ref_offset_ns, td_ns) > rec.stamp_ns {
+            if !ekf.is_due(0, p.stamp_ns.saturating_add(p.ref_offset_ns)) {
                 return Ok(());
             }
             let Some(p) = self.pending.take() else {
                 return Ok(());
             };
-            match self.held {
-                Some(held) if index > 0 => self.process(ekf, p, &held),
-                _ => self.skip(p.index, p.stamp_ns, "before the first IMU sample"),
+            if index > 0 {
+                self.process(ekf, p);
+            } else {
+                self.skip(p.index, p.stamp_ns, "before the first IMU sample");
             }
         }
     }
 
-    fn after_sample(&mut self, ekf: &PoseImuEkf<T>, rec: &ImuRecord) {
-        self.held = Some(*rec);
+    fn after_sample(&mut self, ekf: &PoseImuEkf<T>, _rec: &ImuRecord) {
         self.buffer
             .push(ekf.time_ns(), convert::isometry(&ekf.imu().pose()));
     }
@@ -669,7 +667,6 @@ impl<'a> LidarFeed<'a> {
             pending: None,
             previous: None,
             last_end_ns: None,
-            held: None,
             buffer: PoseBuffer::new(2_000_000_000),
             records: Vec::new(),
             timing: StageTiming::default(),
@@ -710,23 +707,15 @@ impl<'a> LidarFeed<'a> {
 
     /// Predict -> deskew -> NDT -> update for one scan whose reference time has come.
     #[allow(clippy::too_many_lines)]
-    fn process<T: Scalar>(&mut self, ekf: &mut PoseImuEkf<T>, p: Pending, held: &ImuRecord) {
+    fn process<T: Scalar>(&mut self, ekf: &mut PoseImuEkf<T>, p: Pending) {
         let td_ns = (ekf.time_offset(0).to_f64() * 1e9).round() as i64;
         let ref_stamp = p.stamp_ns.saturating_add(p.ref_offset_ns);
         let due = imu_time(p.stamp_ns, p.ref_offset_ns, td_ns);
-        // Predict: the filter's pose at `due`, holding the last sample as the filter will.
-        let predicted = if due > ekf.time_ns() {
-            let dt = T::lit((due - ekf.time_ns()) as f64 * 1e-9);
-            let s = propagate::step(
-                ekf.imu(),
-                &convert::vec3::<T>(&held.gyro),
-                &convert::vec3::<T>(&held.accel),
-                dt,
-                &ekf.config().imu_noise,
-            );
-            convert::isometry(&s.state.pose())
-        } else {
-            convert::isometry(&ekf.imu().pose())
+        // Predict: the filter's pose at `due`, over the same interpolated IMU readings the
+        // filter will propagate with (the scan is due, so `due` is within reach).
+        let predicted = match ekf.predict_imu(due.max(ekf.time_ns())) {
+            Ok(state) => convert::isometry(&state.pose()),
+            Err(_) => convert::isometry(&ekf.imu().pose()),
         };
         self.buffer.push(due, predicted);
         let t_i_l = convert::isometry(&ekf.extrinsic(0));

@@ -3,8 +3,8 @@
 //! odometry's relative poses, estimating `T_imu_pose` and the time offset.
 //!
 //! Event order: a pose stamped `t_S` belongs at IMU time `t_S + t_d`; it is fused as soon as
-//! the IMU stream passes that time (the filter holds the previous IMU sample over the short
-//! remainder), with the current estimate of `t_d`.
+//! the filter holds an IMU sample at or after that time (`Ekf::is_due`; the filter
+//! propagates over the readings interpolated to it), with the current estimate of `t_d`.
 
 use std::time::Instant;
 
@@ -228,15 +228,14 @@ struct PoseFeed<'a> {
 }
 
 impl<T: Scalar> ImuHooks<T> for PoseFeed<'_> {
-    fn before_sample(
+    fn fuse_due(
         &mut self,
         ekf: &mut PoseImuEkf<T>,
         index: usize,
-        rec: &ImuRecord,
+        _rec: &ImuRecord,
     ) -> Result<(), PoseImuError> {
         while let Some(pose) = self.poses.get(self.next_pose) {
-            let due = pose.stamp_ns as i128 + (ekf.time_offset(0).to_f64() * 1e9) as i128;
-            if due > rec.stamp_ns as i128 {
+            if !ekf.is_due(0, pose.stamp_ns) {
                 break;
             }
             if index == 0 {
@@ -252,16 +251,12 @@ impl<T: Scalar> ImuHooks<T> for PoseFeed<'_> {
 
 /// What a pipeline does around each IMU sample of [`drive_imu`], for a filter `E`.
 pub(crate) trait ImuHooks<T: Scalar, E = PoseImuEkf<T>> {
-    /// Before sample `index` is propagated: fuse every measurement due by `rec.stamp_ns`
-    /// (the filter is still at the previous sample, holding it).
-    fn before_sample(
-        &mut self,
-        ekf: &mut E,
-        index: usize,
-        rec: &ImuRecord,
-    ) -> Result<(), PoseImuError>;
+    /// After sample `index` (`rec`) was fed (the filter stands at the previous sample and
+    /// holds `rec` as its look-ahead): fuse every measurement that is now due
+    /// (`msreg_estimator::Ekf::is_due`).
+    fn fuse_due(&mut self, ekf: &mut E, index: usize, rec: &ImuRecord) -> Result<(), PoseImuError>;
 
-    /// After sample `rec` was propagated (and a standstill ZUPT applied).
+    /// After sample `rec` was fed (and a standstill ZUPT applied), before `fuse_due`.
     fn after_sample(&mut self, _ekf: &E, _rec: &ImuRecord) {}
 }
 
@@ -299,7 +294,6 @@ pub(crate) fn drive_imu<T: Scalar, E: ImuFilter<T>>(
     };
     let total = (last_imu.stamp_ns - first_imu.stamp_ns).max(1) as f64;
     for (i, rec) in imu.iter().enumerate() {
-        hooks.before_sample(ekf, i, rec)?;
         ekf.propagate(&convert::imu_sample::<T>(rec)).map_err(|e| {
             PoseImuError::BadInput(format!(
                 "imu0/data.csv: {e}, ending at the sample stamped {} ns (sample {} of the file)",
@@ -312,6 +306,7 @@ pub(crate) fn drive_imu<T: Scalar, E: ImuFilter<T>>(
             let _ = ekf.update_zero_velocity();
         }
         hooks.after_sample(ekf, rec);
+        hooks.fuse_due(ekf, i, rec)?;
         if i % 2000 == 0 {
             progress((rec.stamp_ns - first_imu.stamp_ns) as f64 / total);
         }

@@ -71,6 +71,111 @@ pub struct ImuNoiseYaml {
     /// ROS topic (Kalibr), kept for round trips.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rostopic: Option<String>,
+    /// What a sample's value means relative to its stamp (msreg key; absent: instantaneous).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sample_timing: Option<SampleTiming>,
+}
+
+/// How an IMU driver's samples relate to their stamps: `sample_timing` in `imu0/imu.yaml`.
+/// The estimator takes every sample as the reading at its stamp; the interval means that
+/// integrating IMUs output are re-stamped to their interval's midpoint at load time
+/// ([`to_instantaneous`]), which makes them that reading to second order in the period.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SampleTiming {
+    /// The rate and specific force at the stamp (EuRoC, Kalibr, OpenVINS; the default).
+    #[default]
+    Instantaneous,
+    /// The mean over the sample period that ends at the stamp.
+    IntervalMeanEnding,
+    /// The mean over the sample period that starts at the stamp.
+    IntervalMeanStarting,
+}
+
+impl SampleTiming {
+    /// The YAML value.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Instantaneous => "instantaneous",
+            Self::IntervalMeanEnding => "interval_mean_ending",
+            Self::IntervalMeanStarting => "interval_mean_starting",
+        }
+    }
+}
+
+/// Re-stamps interval-mean samples to their interval's midpoint (stamps stay strictly
+/// increasing); instantaneous samples are left as they are.
+pub fn to_instantaneous(records: &mut [ImuRecord], timing: SampleTiming) {
+    let n = records.len();
+    if n < 2 || timing == SampleTiming::Instantaneous {
+        return;
+    }
+    let stamps: Vec<u64> = records.iter().map(|r| r.stamp_ns).collect();
+    for (k, r) in records.iter_mut().enumerate() {
+        r.stamp_ns = match timing {
+            SampleTiming::IntervalMeanEnding => {
+                let before = if k == 0 {
+                    stamps[1] - stamps[0]
+                } else {
+                    stamps[k] - stamps[k - 1]
+                };
+                stamps[k].saturating_sub(before / 2)
+            }
+            _ => {
+                let after = if k + 1 == n {
+                    stamps[k] - stamps[k - 1]
+                } else {
+                    stamps[k + 1] - stamps[k]
+                };
+                stamps[k].saturating_add(after / 2)
+            }
+        };
+    }
+}
+
+/// Median |accelerometer| below which the readings are taken to be in g, not m/s^2.
+const ACCEL_IN_G_BELOW: f64 = 2.5;
+/// A gyro reading above this (rad/s, ~2300 deg/s, beyond MEMS ranges) means deg/s.
+const GYRO_IN_DEG_ABOVE: f64 = 40.0;
+
+/// Unit checks of an IMU CSV at load time: an accelerometer in g (median |a| near 1, where
+/// gravity alone gives 9.81) or a gyro in deg/s (readings beyond any MEMS range in rad/s)
+/// is an error that names the file and the likely unit.
+pub fn check_imu_units(path: &Path, records: &[ImuRecord]) -> Result<(), DatasetError> {
+    if records.is_empty() {
+        return Ok(());
+    }
+    let mut norms: Vec<f64> = records.iter().map(|r| r.accel.norm()).collect();
+    norms.sort_by(f64::total_cmp);
+    let median = norms[norms.len() / 2];
+    if median < ACCEL_IN_G_BELOW {
+        return Err(DatasetError::InvalidValue {
+            path: path.to_path_buf(),
+            message: format!(
+                "median accelerometer magnitude is {median:.3}, where gravity alone reads 9.81 \
+                 m/s^2: the accelerometer looks like it is in g; convert the a_x, a_y, a_z \
+                 columns to m/s^2 (multiply by 9.80665)"
+            ),
+        });
+    }
+    if let Some((line, r)) = records
+        .iter()
+        .enumerate()
+        .find(|(_, r)| r.gyro.amax() > GYRO_IN_DEG_ABOVE)
+    {
+        return Err(DatasetError::InvalidValue {
+            path: path.to_path_buf(),
+            message: format!(
+                "sample {} (stamp {} ns) has a gyro reading of {:.1}, beyond any MEMS gyro's \
+                 range in rad/s: the gyro looks like it is in deg/s; convert the w_x, w_y, w_z \
+                 columns to rad/s (multiply by pi/180)",
+                line + 1,
+                r.stamp_ns,
+                r.gyro.amax()
+            ),
+        });
+    }
+    Ok(())
 }
 
 impl ImuNoiseYaml {
@@ -104,6 +209,9 @@ impl ImuNoiseYaml {
         );
         if let Some(topic) = &self.rostopic {
             text.push_str(&format!("rostopic: {}\n", yaml_string(topic)));
+        }
+        if let Some(timing) = self.sample_timing {
+            text.push_str(&format!("sample_timing: {}\n", timing.as_str()));
         }
         text
     }

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use super::error::DatasetError;
 use super::groundtruth::{read_groundtruth_csv, GroundTruthRecord};
-use super::imu::{read_imu_csv, ImuNoiseYaml, ImuRecord};
+use super::imu::{check_imu_units, read_imu_csv, to_instantaneous, ImuNoiseYaml, ImuRecord};
 use super::lidar::{list_scans, LidarYaml, ScanFile, LIDAR_DIR, LIDAR_YAML};
 use super::meta::DatasetYaml;
 use super::pose::{read_pose_csv, PoseRecord, PoseSensorYaml};
@@ -59,10 +59,17 @@ impl Dataset {
         if !root.is_dir() {
             return Err(DatasetError::MissingDirectory { path: root });
         }
+        let imu_noise = optional(root.join(IMU_YAML), ImuNoiseYaml::read)?;
+        let mut imu = optional(root.join(IMU_CSV), read_imu_csv)?;
+        if let Some(records) = imu.as_mut() {
+            check_imu_units(&root.join(IMU_CSV), records)?;
+            let timing = imu_noise.as_ref().and_then(|n| n.sample_timing);
+            to_instantaneous(records, timing.unwrap_or_default());
+        }
         Ok(Self {
             meta: optional(root.join(DATASET_YAML), DatasetYaml::read)?,
-            imu: optional(root.join(IMU_CSV), read_imu_csv)?,
-            imu_noise: optional(root.join(IMU_YAML), ImuNoiseYaml::read)?,
+            imu,
+            imu_noise,
             pose0: optional(root.join(POSE_CSV), read_pose_csv)?,
             pose0_sensor: optional(root.join(POSE_SENSOR_YAML), PoseSensorYaml::read)?,
             groundtruth_trajectory: optional(

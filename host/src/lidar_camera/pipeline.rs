@@ -483,7 +483,7 @@ impl LidarCameraDataset {
         let board = match read_target_yaml(&target_path)? {
             Target::Board { width_m, height_m } => Board { width_m, height_m },
             // A checkerboard's printed pattern breaks the uniform-region detector.
-            Target::Checkerboard(_) => {
+            Target::Checkerboard(_) | Target::AprilGrid(_) => {
                 return Err(anyhow!(
                     "{}: lidar-camera needs target_type 'board' (a plain rectangle), got a \
                      checkerboard",

@@ -1,12 +1,10 @@
 //! IMU synthesis from the analytic trajectory.
 //!
-//! Sample `k`, stamped `t_k`, reports the body rate and specific force at the
-//! interval midpoint `(t_k + t_{k+1}) / 2`, plus the bias at `t_k` and white
-//! noise of standard deviation `density / sqrt(dt)`. The estimator holds
-//! sample `k` constant over `[t_k, t_{k+1})`; evaluating the truth at the
-//! midpoint makes that zero-order hold exact to second order in `dt` (the
-//! midpoint rule), so simulated data and filter model agree and accuracy
-//! results measure the estimator, not a half-sample integration bias.
+//! Sample `k`, stamped `t_k`, is what a real IMU reports (EuRoC, Kalibr, OpenVINS): the body
+//! rate and specific force at the instant `t_k`, evaluated from the trajectory alone, plus the
+//! bias at `t_k` and white noise of standard deviation `density / sqrt(dt)`. Nothing here
+//! knows how the estimator integrates; `sim::tests` checks these samples against the
+//! trajectory with an independent fine-step integrator.
 //! Biases follow a random walk: `b_{k+1} = b_k + N(0, random_walk^2 dt)`.
 
 use nalgebra::Vector3;
@@ -51,8 +49,6 @@ pub fn synthesize_imu(
         let offset_ns = Clock::sample_offset_ns(k, rate);
         let stamp_ns = clock.stamp(offset_ns);
         let t = clock.seconds(stamp_ns);
-        let t_next = clock.seconds(clock.stamp(Clock::sample_offset_ns(k + 1, rate)));
-        let t_mid = 0.5 * (t + t_next);
 
         let (r_g_i, p_g_i) = trajectory.pose(t);
         groundtruth.push(GroundTruthRecord {
@@ -65,8 +61,8 @@ pub fn synthesize_imu(
         });
         records.push(ImuRecord {
             stamp_ns,
-            gyro: trajectory.body_rate(t_mid) + gyro_bias + gaussian3(rng, gyro_white),
-            accel: trajectory.specific_force(t_mid) + accel_bias + gaussian3(rng, accel_white),
+            gyro: trajectory.body_rate(t) + gyro_bias + gaussian3(rng, gyro_white),
+            accel: trajectory.specific_force(t) + accel_bias + gaussian3(rng, accel_white),
         });
         gyro_bias += gaussian3(rng, gyro_step);
         accel_bias += gaussian3(rng, accel_step);
@@ -86,6 +82,7 @@ pub fn imu_noise_yaml(config: &ImuSimConfig) -> ImuNoiseYaml {
         gyroscope_random_walk: config.gyroscope_random_walk,
         update_rate: config.rate_hz,
         rostopic: None,
+        sample_timing: None,
     }
 }
 

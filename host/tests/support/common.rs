@@ -92,3 +92,12 @@ pub fn par_map<R: Send>(seeds: &[u64], f: impl Fn(u64) -> R + Sync) -> Vec<R> {
         .map(|r| r.expect("every seed ran"))
         .collect()
 }
+
+/// Two-sided 95 % band of a chi-square with `k` DoF (Wilson-Hilferty).
+pub fn chi_square_band(k: f64) -> (f64, f64) {
+    let quantile = |z: f64| {
+        let c = 2.0 / (9.0 * k);
+        k * (1.0 - c + z * c.sqrt()).powi(3)
+    };
+    (quantile(-1.959_964), quantile(1.959_964))
+}

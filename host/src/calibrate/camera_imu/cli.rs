@@ -17,10 +17,15 @@ use super::{
     CameraUpdate, CornerFrame, ReprojectionSample,
 };
 use crate::calibrate::pose_imu::PoseImuError;
+use crate::camera_yaml::{read_camera_yaml, read_target_yaml, Target};
 use crate::command::{progress_bar, Outcome};
-use crate::dataset::{CalibrationResult, Dataset};
+use crate::dataset::{
+    read_observed_corners, CalibrationResult, Dataset, ObservedCorner, ObservedImage, CAMERA_YAML,
+    OBSERVED_CORNERS_CSV, TARGET_YAML,
+};
 use crate::vision::frames::{CameraDataset, CameraInputError};
 use crate::vision::{DetectorParams, GrayImage};
+use msreg_estimator::camera::Camera;
 
 /// `msreg calibrate camera-imu`.
 #[derive(Args, Debug)]
@@ -91,13 +96,12 @@ const OVERLAY_MEAN_ERROR_PX: f64 = 12.0;
 /// Runs the command.
 pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
     let dataset = Dataset::open(&args.dataset)?;
-    let camera_data = CameraDataset::open(&args.dataset)?;
     if let Some(sigma) = args.pixel_sigma {
         if !(sigma.is_finite() && sigma > 0.0) {
             return Err(anyhow!("--pixel-sigma must be positive, got {sigma}"));
         }
     }
-    let (frames, detection) = detect_for_calibration(args, &camera_data)?;
+    let (camera, frames, detection, camera_data) = load_frames(args)?;
     let mut options = CameraImuOptions {
         update: args.update,
         pixel_sigma: args.pixel_sigma,
@@ -107,7 +111,7 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
     let input = CameraImuInput {
         imu: dataset.require_imu()?,
         imu_noise: dataset.require_imu_noise()?,
-        camera: &camera_data.camera,
+        camera: &camera,
         frames: &frames,
     };
     let filtering = progress_bar(1000, "{spinner} filtering [{bar:40}] {percent}% {elapsed}");
@@ -147,19 +151,110 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
         write_plot(path, &dataset, &calibration, &args.dataset);
     }
     if let Some(path) = &args.overlay {
-        match &calibration.report.sample {
-            Some(sample) => {
-                let magnification = write_overlay(path, &camera_data, sample)?;
+        match (&calibration.report.sample, &camera_data) {
+            (_, None) => eprintln!(
+                "msreg: warning: no overlay: the corners come from {OBSERVED_CORNERS_CSV}, \
+                 without images"
+            ),
+            (Some(sample), Some(camera_data)) => {
+                let magnification = write_overlay(path, camera_data, sample)?;
                 eprintln!(
                     "msreg: wrote {} (error vectors magnified {magnification}x)",
                     path.display()
                 );
             }
-            None => eprintln!("msreg: warning: no reprojection sample (MoCal has none)"),
+            (None, _) => eprintln!("msreg: warning: no reprojection sample (MoCal has none)"),
         }
     }
     let filter = &calibration.report.filter;
     Ok(Outcome::of(filter.converged, &filter.reasons))
+}
+
+/// The camera, its corner frames and how they were found: `cam0/corners.csv` when the
+/// dataset has it (pre-detected corners, any target), else detection in the images of
+/// `cam0/data.csv` (then the images are returned too, for the overlay).
+fn load_frames(
+    args: &CalibrateCameraImu,
+) -> anyhow::Result<(
+    Camera<f64>,
+    Vec<CornerFrame>,
+    DetectionSummary,
+    Option<CameraDataset>,
+)> {
+    let observed = args.dataset.join(OBSERVED_CORNERS_CSV);
+    if !observed.is_file() {
+        let camera_data = CameraDataset::open(&args.dataset)?;
+        let (frames, detection) = detect_for_calibration(args, &camera_data)?;
+        return Ok((
+            camera_data.camera.clone(),
+            frames,
+            detection,
+            Some(camera_data),
+        ));
+    }
+    let camera = read_camera_yaml(&args.dataset.join(CAMERA_YAML))?;
+    let images = read_observed_corners(&observed)?;
+    let target_path = args.dataset.join(TARGET_YAML);
+    let target = target_path
+        .is_file()
+        .then(|| read_target_yaml(&target_path))
+        .transpose()?;
+    let started = Instant::now();
+    let mut frames = Vec::with_capacity(images.len());
+    let mut rejected = BTreeMap::new();
+    for image in &images {
+        match corner_frame(image, target.as_ref()) {
+            Ok(frame) => frames.push(frame),
+            Err(why) => *rejected.entry(why.to_string()).or_insert(0) += 1,
+        }
+    }
+    if frames.len() < MIN_IMAGES {
+        return Err(anyhow!(
+            "{}: {} images with usable corners, at least {MIN_IMAGES} are needed (rejected: \
+             {rejected:?})",
+            observed.display(),
+            frames.len()
+        ));
+    }
+    let detection = DetectionSummary {
+        images: images.len(),
+        detected: frames.len(),
+        rejected,
+        time_s: started.elapsed().as_secs_f64(),
+    };
+    Ok((camera, frames, detection, None))
+}
+
+/// One image of `cam0/corners.csv` as filter input: each corner's target point from the
+/// file, else from the target by its id.
+fn corner_frame(
+    image: &ObservedImage,
+    target: Option<&Target>,
+) -> Result<CornerFrame, &'static str> {
+    let point = |c: &ObservedCorner| match (c.point, target) {
+        (Some(p), _) => Ok(p),
+        (None, Some(Target::Checkerboard(t))) => Ok(t.corner_in_target(c.corner_id)),
+        (None, Some(Target::AprilGrid(t))) => {
+            t.corner(c.corner_id).ok_or("corner id outside the target")
+        }
+        (None, _) => {
+            Err("no x, y, z and no checkerboard or aprilgrid target.yaml to place the corner")
+        }
+    };
+    let corners = image
+        .corners
+        .iter()
+        .map(|c| {
+            Ok(CornerObservation {
+                point_in_target: point(c)?,
+                pixel: c.pixel,
+            })
+        })
+        .collect::<Result<Vec<_>, &'static str>>()?;
+    Ok(CornerFrame {
+        stamp_ns: image.stamp_ns,
+        corners,
+    })
 }
 
 /// [`detect_corner_frames`] with a progress bar; fewer than [`MIN_IMAGES`] boards found is
