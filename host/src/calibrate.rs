@@ -3,6 +3,7 @@
 
 pub mod camera_imu;
 pub mod convert;
+pub mod dynamic_init;
 pub mod extrinsic;
 pub mod init;
 pub mod lidar_imu;

@@ -104,6 +104,18 @@ struct SimulatePoseImu {
     /// Pose sensor rate, Hz.
     #[arg(long, default_value_t = 10.0)]
     pose_rate: f64,
+    /// Motion: hand-held (every axis excited, still start) or a car-like planar drive.
+    #[arg(long, value_enum, default_value_t = MotionArg::Handheld)]
+    motion: MotionArg,
+}
+
+/// `--motion` of `msreg simulate pose-imu`.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum MotionArg {
+    /// Hand-held sinusoids on every axis after a still start.
+    Handheld,
+    /// A car on a plane (figure-eight with wiggles, +-2 deg suspension roll / pitch).
+    Drive,
 }
 
 #[derive(Subcommand)]
@@ -230,6 +242,9 @@ fn simulate_pose_imu(args: &SimulatePoseImu) -> Result<(), Failure> {
     };
     config.pose.time_offset_s = args.time_offset_ms * 1e-3;
     config.pose.rate_hz = args.pose_rate;
+    if args.motion == MotionArg::Drive {
+        config.trajectory.motion = sim::MotionKind::Drive(sim::DriveConfig::default());
+    }
     let data = sim::simulate_pose_imu(&config).map_err(|e| anyhow!("simulate: {e}"))?;
     data.write(&args.out_dir)?;
     eprintln!(

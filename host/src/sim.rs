@@ -23,6 +23,9 @@ pub mod camera;
 pub mod camera_cli;
 mod clock;
 mod config;
+pub mod drive;
+#[cfg(test)]
+mod drive_tests;
 mod extrinsic;
 mod imu;
 pub mod lidar;
@@ -40,13 +43,16 @@ use rand_chacha::ChaCha8Rng;
 pub use camera::{simulate_camera_imu, CameraImuSim, CameraImuSimConfig, CameraModelChoice};
 pub use clock::Clock;
 pub use config::{ImuSimConfig, Knock, PoseSimConfig, SimConfig, SimError, DEFAULT_START_STAMP_NS};
+pub use drive::DriveConfig;
 pub use extrinsic::{random_mounting, random_pose};
 pub use imu::{imu_noise_yaml, synthesize_imu, ImuSynthesis};
 pub use lidar::{simulate_lidar_imu, Environment, LidarImuSim, LidarImuSimConfig, LidarSimConfig};
 pub use odometry::{pose_sensor_yaml, synthesize_odometry};
 pub use output::SimDataset;
 pub use signal::{EnvelopedSignal, Jet, Sinusoid, SmoothStep};
-pub use trajectory::{gravity_in_g, LookAtConfig, Mount, Trajectory, TrajectoryConfig, GRAVITY};
+pub use trajectory::{
+    gravity_in_g, LookAtConfig, MotionKind, Mount, Trajectory, TrajectoryConfig, GRAVITY,
+};
 
 /// Random stream of each component (see the module docs).
 #[derive(Clone, Copy)]

@@ -5,7 +5,7 @@
 
 use nalgebra::Isometry3;
 
-use super::trajectory::TrajectoryConfig;
+use super::trajectory::{MotionKind, TrajectoryConfig};
 
 /// Default absolute start stamp (ns) (Nov 2023, like real recordings).
 pub const DEFAULT_START_STAMP_NS: u64 = 1_700_000_000_000_000_000;
@@ -118,9 +118,58 @@ impl SimConfig {
             t.max_pitch_amplitude_rad < 1.3,
             "< 1.3 rad (the Euler angles are singular at pitch +-90 deg)",
         )?;
+        if let MotionKind::Drive(drive) = &t.motion {
+            validate_drive(drive)?;
+        }
         self.imu.validate()?;
         self.pose.validate(self.imu.rate_hz, self.duration_s)
     }
+}
+
+/// The drive's options (`trajectory.motion: drive`): the pose-IMU scenario selects it with
+/// `SimConfig::trajectory.motion` (CLI `msreg simulate pose-imu --motion drive`).
+fn validate_drive(d: &super::drive::DriveConfig) -> Result<(), SimError> {
+    check(
+        "trajectory.motion.drive.loop_period_s",
+        positive(d.loop_period_s.0) && d.loop_period_s.0 <= d.loop_period_s.1,
+        "> 0 and min <= max",
+    )?;
+    check(
+        "trajectory.motion.drive.long_speed_m_s",
+        positive(d.long_speed_m_s) && positive(d.cross_speed_m_s),
+        "long and cross speeds > 0 (the vehicle never stops)",
+    )?;
+    check(
+        "trajectory.motion.drive.wiggle_frequency_hz",
+        positive(d.wiggle_frequency_hz.0) && d.wiggle_frequency_hz.0 <= d.wiggle_frequency_hz.1,
+        "> 0 and min <= max",
+    )?;
+    check(
+        "trajectory.motion.drive.bump_frequency_hz",
+        positive(d.bump_frequency_hz.0) && d.bump_frequency_hz.0 <= d.bump_frequency_hz.1,
+        "> 0 and min <= max",
+    )?;
+    for (option, value) in [
+        (
+            "trajectory.motion.drive.wiggle_amplitude_m",
+            d.wiggle_amplitude_m,
+        ),
+        (
+            "trajectory.motion.drive.suspension_rad_per_m_s2",
+            d.suspension_rad_per_m_s2,
+        ),
+        (
+            "trajectory.motion.drive.bump_amplitude_rad",
+            d.bump_amplitude_rad,
+        ),
+    ] {
+        check(option, non_negative(value), ">= 0")?;
+    }
+    check(
+        "trajectory.motion.drive.height_m",
+        d.height_m.is_finite(),
+        "finite",
+    )
 }
 
 /// IMU rate and noise; defaults are a VN-300-class MEMS IMU at 400 Hz.

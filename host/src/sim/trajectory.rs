@@ -13,6 +13,7 @@ use std::f64::consts::{PI, TAU};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use rand::Rng;
 
+use super::drive::{Drive, DriveConfig};
 use super::signal::{EnvelopedSignal, Jet, Sinusoid, SmoothStep};
 
 /// Standard gravity [m/s^2]; gravity in `G` is `(0, 0, -GRAVITY)`.
@@ -44,6 +45,20 @@ pub struct TrajectoryConfig {
     pub max_roll_amplitude_rad: f64,
     /// Cap on the summed pitch amplitudes (rad) (keeps away from gimbal lock).
     pub max_pitch_amplitude_rad: f64,
+    /// Which motion [`Trajectory::random`] draws; the fields above shape the hand-held one
+    /// (the look-at trajectory ignores this).
+    pub motion: MotionKind,
+}
+
+/// The kind of motion of [`Trajectory::random`].
+#[derive(Debug, Clone, PartialEq, Default)]
+pub enum MotionKind {
+    /// Hand-held: sinusoids on every axis after a still start.
+    #[default]
+    Handheld,
+    /// A car on a plane ([`super::drive`]): rotation mostly about one axis, moving from the
+    /// first sample on.
+    Drive(DriveConfig),
 }
 
 impl Default for TrajectoryConfig {
@@ -58,6 +73,7 @@ impl Default for TrajectoryConfig {
             speed_amplitude_m_s: 0.25,
             max_roll_amplitude_rad: 1.0,
             max_pitch_amplitude_rad: 0.7,
+            motion: MotionKind::Handheld,
         }
     }
 }
@@ -65,12 +81,24 @@ impl Default for TrajectoryConfig {
 /// The ground-truth motion of the IMU in `G`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Trajectory {
-    /// `p_G_I` x, y, z (with a [`Mount`]: `p_W_F`).
-    position: [EnvelopedSignal; 3],
-    /// Roll, pitch, yaw of `R_G_I` (ZYX) (with a [`Mount`]: of `R_W_F`).
-    euler: [EnvelopedSignal; 3],
-    /// `None` for the plain hand-held trajectory.
+    /// Position and Euler-angle signals.
+    signals: Signals,
+    /// `None` for the plain hand-held trajectory and the drive.
     mount: Option<Mount>,
+}
+
+/// Where the position and the ZYX Euler angles come from.
+#[derive(Debug, Clone, PartialEq)]
+enum Signals {
+    /// Enveloped sinusoids.
+    Sinusoidal {
+        /// `p_G_I` x, y, z (with a [`Mount`]: `p_W_F`).
+        position: [EnvelopedSignal; 3],
+        /// Roll, pitch, yaw of `R_G_I` (ZYX) (with a [`Mount`]: of `R_W_F`).
+        euler: [EnvelopedSignal; 3],
+    },
+    /// A car-like drive.
+    Drive(Drive),
 }
 
 /// Constant frames around the sinusoidal motion, for motions shaped in another frame than
@@ -100,8 +128,15 @@ pub struct LookAtConfig {
 }
 
 impl Trajectory {
-    /// A random trajectory drawn from `rng` with the shape of `config`.
+    /// A random trajectory drawn from `rng` with the shape of `config` (hand-held or drive,
+    /// [`TrajectoryConfig::motion`]).
     pub fn random(config: &TrajectoryConfig, rng: &mut impl Rng) -> Self {
+        if let MotionKind::Drive(drive) = &config.motion {
+            return Self {
+                signals: Signals::Drive(Drive::random(drive, rng)),
+                mount: None,
+            };
+        }
         let envelope = SmoothStep {
             start_s: config.stationary_s,
             duration_s: config.ramp_s,
@@ -124,8 +159,7 @@ impl Trajectory {
         let euler = [0, 1, 2]
             .map(|k| random_signal(config, envelope, rng, euler_base[k], rate, euler_cap[k]));
         Self {
-            position,
-            euler,
+            signals: Signals::Sinusoidal { position, euler },
             mount: None,
         }
     }
@@ -172,8 +206,7 @@ impl Trajectory {
         euler[0].sinusoids.extend(tilt);
         euler[1].sinusoids.extend(pan);
         Self {
-            position,
-            euler,
+            signals: Signals::Sinusoidal { position, euler },
             mount: Some(mount),
         }
     }
@@ -286,11 +319,17 @@ impl Trajectory {
     }
 
     fn position_jets(&self, t: f64) -> [Jet; 3] {
-        [0, 1, 2].map(|k| self.position[k].eval(t))
+        match &self.signals {
+            Signals::Sinusoidal { position, .. } => [0, 1, 2].map(|k| position[k].eval(t)),
+            Signals::Drive(drive) => drive.position_jets(t),
+        }
     }
 
     fn euler_jets(&self, t: f64) -> [Jet; 3] {
-        [0, 1, 2].map(|k| self.euler[k].eval(t))
+        match &self.signals {
+            Signals::Sinusoidal { euler, .. } => [0, 1, 2].map(|k| euler[k].eval(t)),
+            Signals::Drive(drive) => drive.euler_jets(t),
+        }
     }
 }
 
