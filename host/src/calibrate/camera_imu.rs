@@ -26,8 +26,8 @@ use super::convert;
 use super::extrinsic::ImuExtrinsicCalibration;
 use super::init;
 use super::pose_imu::{
-    self, drive_imu, finish, initial_state, ImuHooks, PoseImuError, PoseImuOptions, PoseImuReport,
-    Run, Timing,
+    self, drive_imu, finish, initial_state, moving_start, with_moving_start, ImuHooks,
+    PoseImuError, PoseImuOptions, PoseImuReport, Run, Timing,
 };
 use crate::dataset::{ExtrinsicEstimate, ImuNoiseYaml, ImuRecord, PoseRecord, PoseSensorYaml};
 use crate::vision::pnp::{solve_pnp, PnpSolution};
@@ -460,13 +460,28 @@ fn start_from_motion<T: Scalar>(
         prior.translation_sigma_m,
         prior.time_offset_sigma_s,
     );
-    let initial = initial_state::<T>(imu, standstill, &motion.t_imu_sensor.rotation, &prior)?
-        .with_extrinsic(
-            0,
-            convert::pose::<T>(&motion.t_imu_sensor),
-            T::lit(sigma_r),
-            T::lit(sigma_t),
-        );
+    let initial = initial_state::<T>(imu, standstill, &motion.t_imu_sensor.rotation, &prior)?;
+    let initial = match standstill {
+        // A moving start: the IMU state from the dynamic alignment on the PnP odometry.
+        None => {
+            let odometry: Vec<PoseRecord> = frame_poses(input.camera, input.frames)
+                .iter()
+                .map(camera_in_target)
+                .collect();
+            let noise = input.imu_noise;
+            match moving_start(imu, &odometry, &motion.t_imu_sensor.rotation, noise) {
+                Ok(p) => with_moving_start(initial, &p),
+                Err(_) => initial,
+            }
+        }
+        Some(_) => initial,
+    };
+    let initial = initial.with_extrinsic(
+        0,
+        convert::pose::<T>(&motion.t_imu_sensor),
+        T::lit(sigma_r),
+        T::lit(sigma_t),
+    );
     let initial = if prior.estimate_time_offset {
         initial.with_time_offset(0, T::lit(motion.time_offset_s), T::lit(sigma_td))
     } else {

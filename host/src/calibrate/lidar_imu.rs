@@ -377,10 +377,11 @@ pub fn calibrate<T: Scalar>(
         mut ekf,
         rotation_init,
         init_problem,
+        ..
     } = start_filter::<T>(
         imu,
         input.imu_noise,
-        standstill.as_ref(),
+        (standstill.as_ref(), &[]),
         rotation,
         &options.filter,
     )?;

@@ -16,6 +16,7 @@ use nalgebra::{Isometry3, Matrix6, Vector3};
 use serde::Serialize;
 
 use super::convert;
+use super::dynamic_init::{self, DynamicInitInput, DynamicInitOptions, FilterPrior};
 use super::extrinsic::ImuExtrinsicCalibration;
 use super::init::{self, Standstill};
 use crate::dataset::{ImuNoiseYaml, ImuRecord, PoseRecord, PoseSensorYaml};
@@ -115,6 +116,9 @@ pub struct PoseImuReport {
     pub scalar: &'static str,
     /// Standstill used for initialisation, s (0 when none).
     pub standstill_s: f64,
+    /// How the IMU state was initialised without a standstill: the dynamic alignment's
+    /// result, or why it could not run (empty with a standstill).
+    pub moving_start: String,
     /// Hand-eye pairs used.
     pub hand_eye_pairs: usize,
     /// Second/first eigenvalue of the rotation scatter (excitation about two axes).
@@ -181,7 +185,14 @@ pub fn calibrate<T: Scalar>(
         mut ekf,
         rotation_init,
         init_problem,
-    } = start_filter::<T>(imu, input.imu_noise, standstill.as_ref(), rotation, options)?;
+        moving_start,
+    } = start_filter::<T>(
+        imu,
+        input.imu_noise,
+        (standstill.as_ref(), poses),
+        rotation,
+        options,
+    )?;
 
     let started = Instant::now();
     let mut feed = PoseFeed {
@@ -215,6 +226,7 @@ pub fn calibrate<T: Scalar>(
         calibration.report.reasons.insert(0, problem);
         calibration.report.converged = false;
     }
+    calibration.report.moving_start = describe_moving_start(&moving_start);
     Ok(calibration)
 }
 
@@ -320,6 +332,8 @@ pub(crate) struct FilterStart<T: Scalar> {
     pub(crate) rotation_init: init::RotationInit,
     /// Why the hand-eye initialisation failed, when it did.
     pub(crate) init_problem: Option<String>,
+    /// The moving-start prior, or why there is none.
+    pub(crate) moving_start: Result<FilterPrior, MovingStart>,
 }
 
 /// Builds the filter from the standstill and the hand-eye result. Without rotation about two
@@ -328,7 +342,7 @@ pub(crate) struct FilterStart<T: Scalar> {
 pub(crate) fn start_filter<T: Scalar>(
     imu: &[ImuRecord],
     imu_noise: &ImuNoiseYaml,
-    standstill: Option<&Standstill>,
+    (standstill, odometry): (Option<&Standstill>, &[PoseRecord]),
     rotation: Result<init::RotationInit, msreg_estimator::HandEyeError<f64>>,
     options: &PoseImuOptions,
 ) -> Result<FilterStart<T>, PoseImuError> {
@@ -350,7 +364,15 @@ pub(crate) fn start_filter<T: Scalar>(
     if init_problem.is_some() {
         options.rotation_sigma_rad = 0.5;
     }
+    let moving = match (standstill, init_problem.is_none()) {
+        (None, true) => moving_start(imu, odometry, &rotation_init.rotation, imu_noise),
+        _ => Err(MovingStart::NotNeeded),
+    };
     let initial = initial_state::<T>(imu, standstill, &rotation_init.rotation, &options)?;
+    let initial = match &moving {
+        Ok(prior) => with_moving_start(initial, prior),
+        Err(_) => initial,
+    };
     let config = FilterConfig::new(convert::imu_noise::<T>(imu_noise));
     let ekf = PoseImuEkf::<T>::new(&config, &initial)
         .map_err(|e| PoseImuError::BadInput(format!("imu0/imu.yaml: invalid noise ({e})")))?;
@@ -358,7 +380,95 @@ pub(crate) fn start_filter<T: Scalar>(
         ekf,
         rotation_init,
         init_problem,
+        moving_start: moving,
     })
+}
+
+/// Why no moving-start prior was used.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum MovingStart {
+    /// A standstill gives gravity and the gyro bias directly, or the hand-eye rotation
+    /// failed (nothing to align with).
+    NotNeeded,
+    /// The dynamic initialisation could not run (its reason).
+    Failed(String),
+}
+
+/// The report's words for a moving start.
+pub(crate) fn describe_moving_start(m: &Result<FilterPrior, MovingStart>) -> String {
+    match m {
+        Ok(p) => format!(
+            "dynamic alignment: gravity tilt sigma {:.3} deg, velocity sigma {:.3} m/s, lever \
+             arm [{:.3}, {:.3}, {:.3}] m (sigma [{:.3}, {:.3}, {:.3}])",
+            p.sigma_orientation.to_degrees(),
+            p.sigma_velocity,
+            p.t_imu_sensor.translation.x,
+            p.t_imu_sensor.translation.y,
+            p.t_imu_sensor.translation.z,
+            p.sigma_translation.x,
+            p.sigma_translation.y,
+            p.sigma_translation.z
+        ),
+        Err(MovingStart::NotNeeded) => String::new(),
+        Err(MovingStart::Failed(why)) => {
+            format!("dynamic alignment failed ({why}): level start with wide sigmas")
+        }
+    }
+}
+
+/// Floors of the moving-start prior's sigmas. The alignment assumes `t_d = 0`; an offset
+/// of `sigma_td` (5-20 ms) moves the odometry against the IMU by `|a| sigma_td`, ~0.1 m/s at
+/// 5 m/s^2 and 20 ms, and tilts gravity by that over |g|, ~0.6 deg: floors of that size
+/// keep the prior honest whatever the offset.
+const MOVING_START_MIN_SIGMA_VELOCITY: f64 = 0.1;
+const MOVING_START_MIN_SIGMA_TILT_RAD: f64 = 0.6 * std::f64::consts::PI / 180.0;
+
+/// The filter prior at the first IMU sample from a moving start: gravity, velocity, biases
+/// and lever arm by the dynamic initialisation (VINS-Mono-style alignment of the odometry
+/// with the pre-integrated IMU; `dynamic_init`).
+pub(crate) fn moving_start(
+    imu: &[ImuRecord],
+    odometry: &[PoseRecord],
+    rotation: &nalgebra::UnitQuaternion<f64>,
+    imu_noise: &ImuNoiseYaml,
+) -> Result<FilterPrior, MovingStart> {
+    let input = DynamicInitInput {
+        imu,
+        poses: odometry,
+        r_i_s: *rotation,
+        gyro_bias: Vector3::zeros(),
+        time_offset_s: 0.0,
+    };
+    let options = DynamicInitOptions {
+        accel_noise_density: imu_noise.accelerometer_noise_density,
+        ..DynamicInitOptions::default()
+    };
+    let solution = dynamic_init::initialise(&input, &options)
+        .map_err(|e| MovingStart::Failed(e.to_string()))?;
+    solution
+        .filter_prior(imu, 0.0)
+        .ok_or_else(|| MovingStart::Failed("the first IMU sample is outside the data".into()))
+}
+
+/// The prior with the moving start's IMU state: orientation, velocity and biases with their
+/// sigmas (floored, see above); the extrinsic translation starts at the aligned lever arm
+/// with the pipeline's own (wide) sigma, so the alignment improves the linearisation point
+/// without claiming its precision.
+pub(crate) fn with_moving_start<T: Scalar>(
+    mut initial: InitialState<T, 1>,
+    prior: &FilterPrior,
+) -> InitialState<T, 1> {
+    let pose = convert::pose::<T>(&Isometry3::from_parts(Default::default(), prior.rotation));
+    initial.imu.rotation = pose.rotation;
+    initial.imu.velocity = convert::vec3(&prior.velocity);
+    initial.imu.gyro_bias = convert::vec3(&prior.gyro_bias);
+    initial.imu.accel_bias = convert::vec3(&prior.accel_bias);
+    initial.sigma_orientation =
+        T::lit(prior.sigma_orientation.max(MOVING_START_MIN_SIGMA_TILT_RAD));
+    initial.sigma_velocity = T::lit(prior.sigma_velocity.max(MOVING_START_MIN_SIGMA_VELOCITY));
+    initial.sensors[0].state.extrinsic.translation =
+        convert::vec3(&prior.t_imu_sensor.translation.vector);
+    initial
 }
 
 /// Median spacing of the odometry, ns.
@@ -637,6 +747,7 @@ pub(crate) fn finish<T: Scalar, const S: usize, const C: usize, const N: usize, 
         reasons,
         scalar: core::any::type_name::<T>(),
         standstill_s: standstill.map_or(0.0, |s| run.seconds(s.until_ns)),
+        moving_start: String::new(),
         hand_eye_pairs: rotation_init.pairs,
         hand_eye_axis_ratio: rotation_init.axis_ratio,
         hand_eye_rotation_vector: [rv.x, rv.y, rv.z],
