@@ -24,6 +24,9 @@ pub mod topics;
 mod warnings;
 pub mod wire;
 
+#[cfg(test)]
+mod tests;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 

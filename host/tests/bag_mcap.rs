@@ -154,14 +154,13 @@ fn simulated_lidar_imu_mcap_converts_back_bit_exact() -> TestResult {
 }
 
 #[test]
-#[ignore = "acceptance: ~2 x the calibration time of a 20 s 16x256 recording; docs/bags.md"]
 fn simulated_lidar_imu_mcap_calibrates_like_the_directory() -> TestResult {
     let dir = tempfile::tempdir()?;
     let original = dir.path().join("sim");
     let duration = std::env::var("MSREG_BAG_DURATION")
         .ok()
         .and_then(|s| s.parse().ok())
-        .unwrap_or(20.0);
+        .unwrap_or(12.0);
     simulated_dataset(&original, duration)?;
     let (converted, _) = convert_mcap(dir.path(), &original)?;
     assert_round_trip(&original, &converted)?;
