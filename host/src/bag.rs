@@ -92,6 +92,8 @@ pub struct StreamSummary {
     pub msg_type: String,
     /// `frame_id` of the first message.
     pub frame_id: String,
+    /// Odometry's `child_frame_id` (the moving frame), empty for the other types.
+    pub child_frame_id: String,
     /// Records written (after sorting and dropping duplicates).
     pub written: usize,
     /// First and last stamp, ns.
@@ -231,6 +233,11 @@ fn finish_role(
         topic: s.topic.clone(),
         msg_type: s.msg_type.clone(),
         frame_id: sink.frame_ids.get(&s.topic).cloned().unwrap_or_default(),
+        child_frame_id: sink
+            .child_frame_ids
+            .get(&s.topic)
+            .cloned()
+            .unwrap_or_default(),
         written: stamps.len(),
         first_last_ns: (
             stamps.first().copied().unwrap_or(0),
@@ -393,8 +400,13 @@ fn write_dataset_yaml(path: &Path, out: &Path, summary: &ConvertSummary) -> Resu
         .streams
         .iter()
         .map(|s| {
+            let child = if s.child_frame_id.is_empty() {
+                String::new()
+            } else {
+                format!(", child_frame_id `{}`", s.child_frame_id)
+            };
             format!(
-                "{} <- {} ({}, frame_id `{}`)",
+                "{} <- {} ({}, frame_id `{}`{child})",
                 s.role.sensor(),
                 s.topic,
                 s.msg_type,

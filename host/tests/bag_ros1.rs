@@ -76,8 +76,10 @@ fn real_robot_localization_bag_converts_with_auto_detected_topics() -> TestResul
         BagWarning::AccelUnits { .. } | BagWarning::Gaps { .. }
     )));
     assert_eq!(
-        ImuNoiseYaml::read(out.join(IMU_YAML))?.gyroscope_noise_density,
-        bag::DEFAULT_IMU_NOISE.gyroscope_noise_density
+        ImuNoiseYaml::read(out.join(IMU_YAML))?
+            .gyroscope_noise_density
+            .to_bits(),
+        bag::DEFAULT_IMU_NOISE.gyroscope_noise_density.to_bits()
     );
     Ok(())
 }

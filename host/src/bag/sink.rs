@@ -47,6 +47,8 @@ pub(crate) struct Sink<'p> {
     /// First frame id per topic.
     pub frame_ids: BTreeMap<String, String>,
     frame_changed: BTreeSet<String>,
+    /// Odometry's `child_frame_id` (the moving frame) per topic, first message.
+    pub child_frame_ids: BTreeMap<String, String>,
     zero_stamps: BTreeMap<String, usize>,
     pub imu: Vec<(u64, ImuRecord)>,
     /// Covariance diagonals of the first IMU message: gyro, accel.
@@ -75,6 +77,7 @@ impl<'p> Sink<'p> {
             seen: BTreeMap::new(),
             frame_ids: BTreeMap::new(),
             frame_changed: BTreeSet::new(),
+            child_frame_ids: BTreeMap::new(),
             zero_stamps: BTreeMap::new(),
             imu: Vec::new(),
             imu_covariance: None,
@@ -183,6 +186,11 @@ impl<'p> Sink<'p> {
             StampedPose::decode_pose_stamped(r)?
         };
         let stamp_ns = self.stamp(&selected.topic, &m.header, log_time_ns);
+        if !m.child_frame_id.is_empty() {
+            self.child_frame_ids
+                .entry(selected.topic.clone())
+                .or_insert(m.child_frame_id);
+        }
         let Some(rotation) = unit_rotation(m.pose.orientation) else {
             self.bad_quaternions += 1;
             return Ok(());

@@ -172,6 +172,16 @@ impl fmt::Display for BagWarning {
                 f,
                 "{file} not written (pass --camera-config / --target); camera calibration needs it"
             ),
+            _ => self.fmt_stream(f),
+        }
+    }
+}
+
+impl BagWarning {
+    /// Display of the stream-timing warnings.
+    fn fmt_stream(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        use BagWarning as W;
+        match self {
             W::LowRate {
                 topic,
                 rate_hz,
@@ -213,6 +223,14 @@ impl fmt::Display for BagWarning {
                 first,
                 other,
             } => write!(f, "{topic}: frame_id changes from `{first}` to `{other}`"),
+            _ => self.fmt_content(f),
+        }
+    }
+
+    /// Display of the message-content warnings.
+    fn fmt_content(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        use BagWarning as W;
+        match self {
             W::AccelUnits { topic, median_norm } => write!(
                 f,
                 "{topic}: median |acceleration| {median_norm:.3}, far from 9.81 m/s^2 \
@@ -248,6 +266,7 @@ impl fmt::Display for BagWarning {
                 f,
                 "{topic}: {count} pose(s) with a non-unit quaternion skipped"
             ),
+            _ => Ok(()),
         }
     }
 }

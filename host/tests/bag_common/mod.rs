@@ -244,21 +244,28 @@ fn connection(out: &mut Vec<u8>, id: u32, topic: &str, msg_type: &str) {
     );
 }
 
-/// Writes `messages` as a ROS 1 bag (format 2.0) with one uncompressed chunk.
-pub fn write_ros1_bag(path: &Path, messages: &[Recorded]) {
+/// Connections (topic, type) in order of first appearance.
+fn connections(messages: &[Recorded]) -> Vec<(String, String)> {
     let mut conns: Vec<(String, String)> = Vec::new();
     for m in messages {
         if !conns.iter().any(|(t, _)| *t == m.topic) {
             conns.push((m.topic.clone(), m.msg_type.clone()));
         }
     }
+    conns
+}
+
+/// Per-connection index entries: (time, offset in the chunk data).
+type ChunkIndex = BTreeMap<u32, Vec<(u64, u32)>>;
+
+/// The chunk data (connections, then messages) and its index.
+fn chunk_data(conns: &[(String, String)], messages: &[Recorded]) -> (Vec<u8>, ChunkIndex) {
     let conn_id = |topic: &str| conns.iter().position(|(t, _)| t == topic).unwrap_or(0) as u32;
-    // Chunk contents: connections, then messages; remember each message's offset.
     let mut chunk = Vec::new();
     for (id, (topic, ty)) in conns.iter().enumerate() {
         connection(&mut chunk, id as u32, topic, ty);
     }
-    let mut index: BTreeMap<u32, Vec<(u64, u32)>> = BTreeMap::new();
+    let mut index = ChunkIndex::new();
     for m in messages {
         let id = conn_id(&m.topic);
         index
@@ -275,10 +282,12 @@ pub fn write_ros1_bag(path: &Path, messages: &[Recorded]) {
             &m.data,
         );
     }
-    let start = messages.iter().map(|m| m.log_time_ns).min().unwrap_or(0);
-    let end = messages.iter().map(|m| m.log_time_ns).max().unwrap_or(0);
+    (chunk, index)
+}
+
+/// The chunk record followed by its index-data records.
+fn chunk_section(chunk: &[u8], index: &ChunkIndex) -> Vec<u8> {
     let mut body = Vec::new();
-    let chunk_pos_in_body = body.len();
     record(
         &mut body,
         &[
@@ -286,9 +295,9 @@ pub fn write_ros1_bag(path: &Path, messages: &[Recorded]) {
             ("compression", b"none".to_vec()),
             ("size", (chunk.len() as u32).to_le_bytes().to_vec()),
         ],
-        &chunk,
+        chunk,
     );
-    for (id, entries) in &index {
+    for (id, entries) in index {
         let mut data = Vec::new();
         for (t, off) in entries {
             data.extend_from_slice(&time_bytes(*t));
@@ -305,37 +314,53 @@ pub fn write_ros1_bag(path: &Path, messages: &[Recorded]) {
             &data,
         );
     }
-    // File: magic, bag header record padded to 4096 bytes, body, index section.
-    let magic = b"#ROSBAG V2.0\n";
-    let header_len = 4096;
-    let body_start = magic.len() + header_len;
-    let index_pos = (body_start + body.len()) as u64;
-    let mut index_section = Vec::new();
+    body
+}
+
+/// The index section: connections and one chunk-info record.
+fn index_section(
+    conns: &[(String, String)],
+    index: &ChunkIndex,
+    chunk_pos: u64,
+    (start, end): (u64, u64),
+) -> Vec<u8> {
+    let mut out = Vec::new();
     for (id, (topic, ty)) in conns.iter().enumerate() {
-        connection(&mut index_section, id as u32, topic, ty);
+        connection(&mut out, id as u32, topic, ty);
     }
     let mut info = Vec::new();
-    for (id, entries) in &index {
+    for (id, entries) in index {
         info.extend_from_slice(&id.to_le_bytes());
         info.extend_from_slice(&(entries.len() as u32).to_le_bytes());
     }
     record(
-        &mut index_section,
+        &mut out,
         &[
             ("op", vec![0x06]),
             ("ver", 1u32.to_le_bytes().to_vec()),
-            (
-                "chunk_pos",
-                ((body_start + chunk_pos_in_body) as u64)
-                    .to_le_bytes()
-                    .to_vec(),
-            ),
+            ("chunk_pos", chunk_pos.to_le_bytes().to_vec()),
             ("start_time", time_bytes(start)),
             ("end_time", time_bytes(end)),
             ("count", (index.len() as u32).to_le_bytes().to_vec()),
         ],
         &info,
     );
+    out
+}
+
+/// Writes `messages` as a ROS 1 bag (format 2.0) with one uncompressed chunk.
+pub fn write_ros1_bag(path: &Path, messages: &[Recorded]) {
+    let conns = connections(messages);
+    let (chunk, index) = chunk_data(&conns, messages);
+    let body = chunk_section(&chunk, &index);
+    let start = messages.iter().map(|m| m.log_time_ns).min().unwrap_or(0);
+    let end = messages.iter().map(|m| m.log_time_ns).max().unwrap_or(0);
+    // File: magic, bag header record padded to 4096 bytes, chunk section, index section.
+    let magic = b"#ROSBAG V2.0\n";
+    let header_len = 4096;
+    let body_start = magic.len() + header_len;
+    let index_pos = (body_start + body.len()) as u64;
+    let index_records = index_section(&conns, &index, body_start as u64, (start, end));
     let mut header = Vec::new();
     record(
         &mut header,
@@ -349,14 +374,12 @@ pub fn write_ros1_bag(path: &Path, messages: &[Recorded]) {
     );
     // Pad the header record's data so the record is exactly `header_len` bytes.
     let pad = header_len - header.len();
-    let header_fields_len =
-        u32::from_le_bytes([header[0], header[1], header[2], header[3]]) as usize;
-    header.truncate(4 + header_fields_len);
+    header.truncate(header.len() - 4);
     header.extend_from_slice(&(pad as u32).to_le_bytes());
     header.extend(std::iter::repeat_n(b' ', pad));
     let mut file = magic.to_vec();
     file.extend_from_slice(&header);
     file.extend_from_slice(&body);
-    file.extend_from_slice(&index_section);
+    file.extend_from_slice(&index_records);
     std::fs::write(path, file).expect("write bag");
 }
