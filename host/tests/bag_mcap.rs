@@ -10,10 +10,13 @@ use bag_common::{cloud_msg, imu_msg, write_mcap, Recorded};
 use msreg_host::bag::wire::Dialect;
 use msreg_host::bag::{self, BagError, BagWarning, ConvertOptions, PointTime, TimeUnit, Topics};
 use msreg_host::calibrate::lidar_imu::{self, LidarImuCalibration, LidarImuInput, LidarImuOptions};
-use msreg_host::dataset::{list_scans, read_imu_csv, ImuNoiseYaml, IMU_CSV, IMU_YAML, LIDAR_DIR};
+use msreg_host::dataset::{
+    list_scans, read_imu_csv, ImuNoiseYaml, ImuRecord, IMU_CSV, IMU_YAML, LIDAR_DIR,
+};
 use msreg_host::lidar::FileScans;
 use msreg_host::pointcloud::read_pcd;
 use msreg_host::sim::{simulate_lidar_imu, LidarImuSimConfig, LidarSimConfig};
+use nalgebra::Vector3;
 
 type TestResult = Result<(), Box<dyn std::error::Error>>;
 
@@ -176,6 +179,24 @@ fn simulated_lidar_imu_mcap_calibrates_like_the_directory() -> TestResult {
     Ok(())
 }
 
+/// An IMU sample at rest.
+fn at_rest(stamp_ns: u64) -> ImuRecord {
+    ImuRecord {
+        stamp_ns,
+        gyro: Vector3::zeros(),
+        accel: Vector3::new(0.0, 0.0, 9.81),
+    }
+}
+
+/// The error of converting `path` (auto-detected topics) under `dir`.
+fn convert_error(path: &Path, dir: &Path) -> Result<BagError, Box<dyn std::error::Error>> {
+    Ok(
+        bag::convert(path, &Topics::default(), &dir.join("out"), &mut |_| {})
+            .err()
+            .ok_or("expected an error")?,
+    )
+}
+
 #[test]
 fn mcap_topic_in_an_unknown_encoding_is_a_typed_error() -> TestResult {
     // Given an MCAP whose only IMU channel is protobuf-encoded
@@ -189,14 +210,7 @@ fn mcap_topic_in_an_unknown_encoding_is_a_typed_error() -> TestResult {
     };
     write_mcap(&path, &[message], "protobuf");
     // When it is converted, then the error names the topic and the encoding
-    let err = bag::convert(
-        &path,
-        &Topics::default(),
-        &dir.path().join("out"),
-        &mut |_| {},
-    )
-    .err()
-    .ok_or("expected an error")?;
+    let err = convert_error(&path, dir.path())?;
     assert!(
         matches!(&err, BagError::UnsupportedEncoding { topic, encoding, .. }
             if topic == "/imu" && encoding == "protobuf"),
@@ -209,17 +223,7 @@ fn mcap_topic_in_an_unknown_encoding_is_a_typed_error() -> TestResult {
 fn truncated_cdr_message_names_topic_and_index() -> TestResult {
     let dir = tempfile::tempdir()?;
     let path = dir.path().join("short.mcap");
-    let mut data = imu_msg(
-        Dialect::Cdr,
-        0,
-        &msreg_host::dataset::ImuRecord {
-            stamp_ns: 5,
-            gyro: nalgebra::Vector3::zeros(),
-            accel: nalgebra::Vector3::new(0.0, 0.0, 9.81),
-        },
-        "imu",
-        [0.0, 0.0],
-    );
+    let mut data = imu_msg(Dialect::Cdr, 0, &at_rest(5), "imu", [0.0, 0.0]);
     let good = data.clone();
     data.truncate(100);
     let messages = [good, data].map(|data| Recorded {
@@ -229,14 +233,7 @@ fn truncated_cdr_message_names_topic_and_index() -> TestResult {
         data,
     });
     write_mcap(&path, &messages, "cdr");
-    let err = bag::convert(
-        &path,
-        &Topics::default(),
-        &dir.path().join("out"),
-        &mut |_| {},
-    )
-    .err()
-    .ok_or("expected an error")?;
+    let err = convert_error(&path, dir.path())?;
     assert!(
         matches!(&err, BagError::Decode { topic, index: 1, .. } if topic == "/imu"),
         "{err}"
@@ -266,11 +263,7 @@ fn zero_and_backward_stamps_are_warned_and_sorted() -> TestResult {
             data: imu_msg(
                 Dialect::Cdr,
                 i as u32,
-                &msreg_host::dataset::ImuRecord {
-                    stamp_ns,
-                    gyro: nalgebra::Vector3::zeros(),
-                    accel: nalgebra::Vector3::new(0.0, 0.0, 9.81),
-                },
+                &at_rest(stamp_ns),
                 "imu",
                 [0.0, 0.0],
             ),

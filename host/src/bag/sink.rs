@@ -103,12 +103,7 @@ impl<'p> Sink<'p> {
             .entry(topic.to_string())
             .and_modify(|n| *n += 1)
             .or_insert(0);
-        let decode_error = |source: DecodeError| BagError::Decode {
-            path: self.path.to_path_buf(),
-            topic: topic.to_string(),
-            index,
-            source,
-        };
+        let decode_error = decode_error(self.path, topic, index);
         let mut r = WireReader::new(data, selected.dialect).map_err(decode_error)?;
         let result = match selected.role {
             Role::Imu => ImuMsg::decode(&mut r).map(|m| self.imu_message(topic, log_time_ns, m)),
@@ -213,12 +208,7 @@ impl<'p> Sink<'p> {
         log_time_ns: u64,
         index: usize,
     ) -> Result<(), BagError> {
-        let decode_error = |source| BagError::Decode {
-            path: self.path.to_path_buf(),
-            topic: topic.to_string(),
-            index,
-            source,
-        };
+        let decode_error = decode_error(self.path, topic, index);
         let msg = PointCloud2Msg::decode(r).map_err(decode_error)?;
         let header_stamp = self.stamp(topic, &msg.header, log_time_ns);
         let scan = convert_cloud(&msg, header_stamp).map_err(decode_error)?;
@@ -265,12 +255,7 @@ impl<'p> Sink<'p> {
         log_time_ns: u64,
         index: usize,
     ) -> Result<(), BagError> {
-        let decode_error = |source| BagError::Decode {
-            path: self.path.to_path_buf(),
-            topic: selected.topic.clone(),
-            index,
-            source,
-        };
+        let decode_error = decode_error(self.path, &selected.topic, index);
         let (header, out) = if selected.msg_type == "sensor_msgs/Image" {
             let m = ImageMsg::decode(r).map_err(decode_error)?;
             (m.header.clone(), convert_image(&m).map_err(decode_error)?)
@@ -349,6 +334,20 @@ impl<'p> Sink<'p> {
                 count: self.bad_quaternions,
             });
         }
+    }
+}
+
+/// The error of message `index` of `topic`.
+fn decode_error<'a>(
+    path: &'a Path,
+    topic: &'a str,
+    index: usize,
+) -> impl Fn(DecodeError) -> BagError + Copy + 'a {
+    move |source| BagError::Decode {
+        path: path.to_path_buf(),
+        topic: topic.to_string(),
+        index,
+        source,
     }
 }
 

@@ -117,6 +117,45 @@ pub fn odometry_msg(d: Dialect, seq: u32, p: &PoseRecord, frame: &str, child: &s
     w.buf
 }
 
+/// `geometry_msgs/PoseStamped`.
+pub fn pose_stamped_msg(d: Dialect, seq: u32, p: &PoseRecord, frame: &str) -> Vec<u8> {
+    let mut w = WireWriter::new(d);
+    w.header(seq, p.stamp_ns, frame);
+    for x in p.position.iter() {
+        w.f64(*x);
+    }
+    let q = p.rotation.quaternion();
+    for v in [q.i, q.j, q.k, q.w] {
+        w.f64(v);
+    }
+    w.buf
+}
+
+/// `sensor_msgs/Image` `mono8` of `pixels` (`width` per row), rows padded to `step`.
+pub fn mono8_image_msg(
+    d: Dialect,
+    stamp_ns: u64,
+    frame: &str,
+    (width, step): (u32, u32),
+    pixels: &[u8],
+) -> Vec<u8> {
+    let mut w = WireWriter::new(d);
+    w.header(0, stamp_ns, frame);
+    let height = pixels.len() as u32 / width;
+    w.u32(height);
+    w.u32(width);
+    w.string("mono8");
+    w.u8(0);
+    w.u32(step);
+    let mut data = Vec::new();
+    for row in pixels.chunks(width as usize) {
+        data.extend_from_slice(row);
+        data.resize(data.len() + (step - width) as usize, 0xEE);
+    }
+    w.bytes(&data);
+    w.buf
+}
+
 /// A `PointField` list entry.
 fn point_field(w: &mut WireWriter, name: &str, offset: u32, datatype: u8) {
     w.string(name);
