@@ -304,3 +304,38 @@ fn zero_and_backward_stamps_are_warned_and_sorted() -> TestResult {
     assert!(has(&|w| matches!(w, BagWarning::DefaultImuNoise { .. })));
     Ok(())
 }
+
+#[test]
+fn imu_in_g_and_deg_per_s_is_flagged() -> TestResult {
+    // Given an IMU that reports acceleration in g and angular rate in deg/s
+    let dir = tempfile::tempdir()?;
+    let path = dir.path().join("units.mcap");
+    let messages: Vec<Recorded> = (0..20u64)
+        .map(|k| {
+            let r = ImuRecord {
+                stamp_ns: 1_000_000_000 + k * 5_000_000,
+                gyro: Vector3::new(0.0, 0.0, 90.0),
+                accel: Vector3::new(0.0, 0.0, 1.0),
+            };
+            Recorded {
+                topic: "/imu".into(),
+                msg_type: "sensor_msgs/Imu".into(),
+                log_time_ns: r.stamp_ns,
+                data: imu_msg(Dialect::Cdr, k as u32, &r, "imu", [0.0, 0.0]),
+            }
+        })
+        .collect();
+    write_mcap(&path, &messages, "cdr");
+    let summary = bag::convert(
+        &path,
+        &Topics::default(),
+        &dir.path().join("out"),
+        &mut |_| {},
+    )?;
+    // Then both units are questioned, and the 200 Hz rate is not
+    let has = |f: &dyn Fn(&BagWarning) -> bool| summary.warnings.iter().any(f);
+    assert!(has(&|w| matches!(w, BagWarning::AccelUnits { .. })));
+    assert!(has(&|w| matches!(w, BagWarning::GyroUnits { .. })));
+    assert!(!has(&|w| matches!(w, BagWarning::LowRate { .. })));
+    Ok(())
+}

@@ -263,3 +263,52 @@ fn compressed_png_is_kept_and_unknown_formats_refused() -> TestResult {
     assert!(matches!(err, Some(DecodeError::ImagePayload { .. })));
     Ok(())
 }
+
+#[test]
+fn cloud_without_time_field_keeps_the_header_stamp_and_zero_offsets() -> TestResult {
+    let (mut fields, data, step) = cloud_bytes(&[5.0, 6.0], 6);
+    fields.retain(|f| f.name != "time");
+    let msg = PointCloud2Msg {
+        header: Header::default(),
+        height: 1,
+        width: 2,
+        fields,
+        is_bigendian: false,
+        point_step: step,
+        row_step: 2 * step,
+        data: &data,
+    };
+    let scan = convert_cloud(&msg, STAMP)?;
+    assert_eq!(scan.time, PointTime::Missing);
+    assert_eq!(scan.stamp_ns, STAMP);
+    assert_eq!(scan.cloud.len(), 2);
+    assert!(scan.cloud.points.iter().all(|p| p.t_ns == 0));
+    Ok(())
+}
+
+#[test]
+fn gaps_over_three_median_intervals_are_reported_once_with_the_longest() {
+    use super::warnings::{cadence, BagWarning};
+    // 100 Hz with a 50 ms and a 100 ms hole
+    let mut stamps: Vec<u64> = (0..50).map(|k| k * 10_000_000).collect();
+    stamps.extend((0..50).map(|k| 540_000_000 + k * 10_000_000));
+    stamps.extend((0..50).map(|k| 1_140_000_000 + k * 10_000_000));
+    let mut warnings = Vec::new();
+    let c = cadence("/imu", &stamps, &mut warnings);
+    assert!((c.rate_hz - 100.0).abs() < 1e-9);
+    let [BagWarning::Gaps {
+        count,
+        largest_s,
+        at_s,
+        ..
+    }] = warnings.as_slice()
+    else {
+        panic!("expected one Gaps warning, got {warnings:?}");
+    };
+    assert_eq!(*count, 2);
+    assert!((largest_s - 0.11).abs() < 1e-9 && (at_s - 1.03).abs() < 1e-9);
+    // A regular stream raises nothing
+    warnings.clear();
+    cadence("/imu", &stamps[..50], &mut warnings);
+    assert!(warnings.is_empty());
+}
