@@ -16,6 +16,16 @@ pub struct ConvertArgs {
     pub bag: PathBuf,
     /// Dataset directory to write (created).
     pub dataset: PathBuf,
+    /// Topics and the files a bag lacks.
+    #[command(flatten)]
+    pub flags: BagFlags,
+}
+
+/// The flags that say how to read a bag: one topic per sensor and the noise / camera files
+/// a bag does not carry (CONVENTIONS.md). Meant to be flattened into every command that
+/// takes a bag (`#[command(flatten)]`).
+#[derive(Debug, Clone, Default, Args)]
+pub struct BagFlags {
     /// IMU topic (sensor_msgs/Imu) -> imu0/; default: the only one; `none` skips.
     #[arg(long)]
     pub imu: Option<String>,
@@ -43,7 +53,7 @@ pub struct ConvertArgs {
     pub target: Option<PathBuf>,
 }
 
-impl ConvertArgs {
+impl BagFlags {
     /// The library options these flags mean (reads the noise files).
     pub fn options(&self) -> anyhow::Result<ConvertOptions> {
         Ok(ConvertOptions {
@@ -71,7 +81,7 @@ impl ConvertArgs {
 
 /// Runs the conversion and prints what it did (stderr).
 pub fn run(args: &ConvertArgs) -> anyhow::Result<ConvertSummary> {
-    let options = args.options()?;
+    let options = args.flags.options()?;
     let bar = progress_bar(1000, "{spinner} reading [{bar:40}] {percent}% {elapsed}");
     let summary = bag::convert_with(&args.bag, &options, &args.dataset, &mut |f| {
         bar.set_position((f * 1000.0) as u64)
