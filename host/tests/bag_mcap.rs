@@ -22,12 +22,21 @@ type TestResult = Result<(), Box<dyn std::error::Error>>;
 
 /// Writes a small simulated LiDAR-IMU dataset (16 x 256 beams) under `dir`.
 fn simulated_dataset(dir: &Path, duration_s: f64) -> TestResult {
+    simulated_dataset_of(dir, duration_s, (16, 256))
+}
+
+/// Writes a simulated LiDAR-IMU dataset of `(rings, columns)` beams under `dir`.
+fn simulated_dataset_of(
+    dir: &Path,
+    duration_s: f64,
+    (rings, columns): (usize, usize),
+) -> TestResult {
     let config = LidarImuSimConfig {
         seed: 3,
         duration_s,
         lidar: LidarSimConfig {
-            rings: 16,
-            columns: 256,
+            rings,
+            columns,
             time_offset_s: 0.004,
             ..LidarSimConfig::default()
         },
@@ -337,5 +346,30 @@ fn imu_in_g_and_deg_per_s_is_flagged() -> TestResult {
     assert!(has(&|w| matches!(w, BagWarning::AccelUnits { .. })));
     assert!(has(&|w| matches!(w, BagWarning::GyroUnits { .. })));
     assert!(!has(&|w| matches!(w, BagWarning::LowRate { .. })));
+    Ok(())
+}
+
+#[test]
+#[ignore = "benchmark: conversion throughput of a 10 s 64 x 512 MCAP; docs/bags.md"]
+fn mcap_conversion_throughput() -> TestResult {
+    let dir = tempfile::tempdir()?;
+    let original = dir.path().join("sim");
+    simulated_dataset_of(&original, 10.0, (64, 512))?;
+    let mcap_path = dir.path().join("sim.mcap");
+    write_mcap(&mcap_path, &recorded_messages(&original)?, "cdr");
+    let options = ConvertOptions {
+        imu_noise: Some(ImuNoiseYaml::read(original.join(IMU_YAML))?),
+        ..ConvertOptions::default()
+    };
+    let started = std::time::Instant::now();
+    let summary = bag::convert_with(&mcap_path, &options, &dir.path().join("out"), &mut |_| {})?;
+    let seconds = started.elapsed().as_secs_f64();
+    let mb = std::fs::metadata(&mcap_path)?.len() as f64 / 1e6;
+    eprintln!(
+        "converted {mb:.1} MB MCAP ({} scans, {} IMU rows) in {seconds:.2} s: {:.0} MB/s",
+        summary.streams[1].written,
+        summary.streams[0].written,
+        mb / seconds
+    );
     Ok(())
 }
