@@ -41,8 +41,9 @@ use crate::dataset::{
     PoseSensorYaml, CAMERA_CSV, CAMERA_DATA_DIR, CAMERA_YAML, DATASET_YAML, IMU_CSV, IMU_YAML,
     LIDAR_YAML, POSE_CSV, POSE_SENSOR_YAML, TARGET_YAML,
 };
+use msreg_estimator::{FilterConfig, ImuNoise};
 use sink::Sink;
-use warnings::{cadence, sort_stamped};
+use warnings::{cadence, long_intervals, sort_stamped};
 
 /// `imu0/imu.yaml` written when no `--imu-config` is given: EuRoC's published ADIS16448
 /// figures (a mid-grade MEMS IMU; `update_rate` is replaced by the measured rate).
@@ -263,6 +264,9 @@ fn finish_imu(
         });
     }
     imu_unit_checks(&s.topic, sink, w);
+    let stamps: Vec<u64> = sink.imu.iter().map(|(t, _)| *t).collect();
+    let limit = FilterConfig::<f64>::new(ImuNoise::vn300()).max_imu_gap_ns;
+    long_intervals(&s.topic, &stamps, limit, w);
     let noise = match &options.imu_noise {
         Some(noise) => noise.clone(),
         None => {

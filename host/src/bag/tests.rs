@@ -311,4 +311,10 @@ fn gaps_over_three_median_intervals_are_reported_once_with_the_longest() {
     warnings.clear();
     cadence("/imu", &stamps[..50], &mut warnings);
     assert!(warnings.is_empty());
+    // Over a 60 ms limit only the 110 ms interval counts
+    super::warnings::long_intervals("/imu", &stamps, 60_000_000, &mut warnings);
+    assert!(matches!(
+        warnings.as_slice(),
+        [BagWarning::ImuGapOverFilterLimit { count: 1, .. }]
+    ));
 }

@@ -51,6 +51,20 @@ pub enum BagWarning {
         /// Median interval, s.
         median_dt_s: f64,
     },
+    /// IMU intervals longer than the filter accepts: the calibration will refuse the data
+    /// (exit code 2) until the recording is cut there.
+    ImuGapOverFilterLimit {
+        /// Topic.
+        topic: String,
+        /// Intervals over the limit.
+        count: usize,
+        /// Longest, s.
+        largest_s: f64,
+        /// Where the longest starts, s after the first stamp.
+        at_s: f64,
+        /// The filter's limit (`FilterConfig::max_imu_gap_ns`), s.
+        limit_s: f64,
+    },
     /// Header stamps that go backwards in recording order (sorted before writing).
     TimestampJumps {
         /// Topic.
@@ -202,6 +216,19 @@ impl BagWarning {
                 median_dt_s * 1e3,
                 largest_s * 1e3
             ),
+            W::ImuGapOverFilterLimit {
+                topic,
+                count,
+                largest_s,
+                at_s,
+                limit_s,
+            } => write!(
+                f,
+                "{topic}: {count} interval(s) over the filter's {:.0} ms limit, longest {:.1} ms \
+                 at {at_s:.3} s: the calibration will refuse the data there",
+                limit_s * 1e3,
+                largest_s * 1e3
+            ),
             W::TimestampJumps {
                 topic,
                 count,
@@ -303,6 +330,26 @@ pub fn cadence(topic: &str, stamps: &[u64], warnings: &mut Vec<BagWarning>) -> C
     Cadence {
         median_dt_s,
         rate_hz: if median > 0 { 1.0 / median_dt_s } else { 0.0 },
+    }
+}
+
+/// Intervals of sorted `stamps` over `limit_ns`: one warning with their count and the
+/// longest.
+pub fn long_intervals(topic: &str, stamps: &[u64], limit_ns: u64, warnings: &mut Vec<BagWarning>) {
+    let over: Vec<(usize, u64)> = stamps
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .enumerate()
+        .filter(|(_, dt)| *dt > limit_ns)
+        .collect();
+    if let Some(&(at, largest)) = over.iter().max_by_key(|(_, dt)| *dt) {
+        warnings.push(BagWarning::ImuGapOverFilterLimit {
+            topic: topic.to_string(),
+            count: over.len(),
+            largest_s: largest as f64 * 1e-9,
+            at_s: (stamps[at] - stamps[0]) as f64 * 1e-9,
+            limit_s: limit_ns as f64 * 1e-9,
+        });
     }
 }
 
