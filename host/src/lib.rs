@@ -2,6 +2,7 @@
 //! pipelines and their evaluation. The `msreg` binary is a thin CLI over it; the estimator
 //! core it drives lives in `msreg-estimator` (no_std, shared with the firmware).
 
+pub mod bag;
 pub mod calibrate;
 pub mod camera_yaml;
 pub mod command;

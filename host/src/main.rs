@@ -3,6 +3,7 @@
 //! Exit codes (CONVENTIONS.md): 0 success; 1 the calibration ran but did not converge or
 //! failed its checks (the result is still written, with the reason); 2 bad input.
 
+mod convert_cmd;
 mod demo_cmd;
 mod detect_cmd;
 mod match_cmd;
@@ -41,6 +42,8 @@ enum Command {
         #[command(subcommand)]
         task: Task,
     },
+    /// Convert a ROS 1 bag or an MCAP file to a dataset directory.
+    Convert(convert_cmd::ConvertArgs),
     /// Errors of a result file against a dataset's groundtruth/.
     Eval {
         /// Result YAML.
@@ -211,6 +214,9 @@ fn run(command: Command) -> Result<(), Failure> {
             json,
         } => evaluate(&result, &dataset, json),
         Command::Demo(args) => demo_cmd::run_demo(&args),
+        Command::Convert(args) => convert_cmd::run(&args)
+            .map(|_| ())
+            .map_err(Failure::BadInput),
         Command::Link { command } => Ok(msreg_host::link::cli::run(command)?),
         Command::Detect {
             target: DetectTarget::Checkerboard(args),

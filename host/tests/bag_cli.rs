@@ -1,0 +1,80 @@
+//! `msreg convert` on the command line: exit codes, and a converted real bag read by
+//! `msreg calibrate pose-imu`.
+
+use std::path::Path;
+use std::process::Command;
+
+type TestResult = Result<(), Box<dyn std::error::Error>>;
+
+fn msreg() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_msreg"))
+}
+
+#[test]
+fn converting_a_missing_or_foreign_file_exits_2_naming_it() -> TestResult {
+    let dir = tempfile::tempdir()?;
+    let out = msreg()
+        .args(["convert", "no/such.bag"])
+        .arg(dir.path().join("out"))
+        .output()?;
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no/such.bag"));
+    let text = dir.path().join("notes.mcap");
+    std::fs::write(&text, "hello")?;
+    let out = msreg()
+        .arg("convert")
+        .arg(&text)
+        .arg(dir.path().join("out"))
+        .output()?;
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("notes.mcap") && stderr.contains("neither"),
+        "{stderr}"
+    );
+    Ok(())
+}
+
+#[test]
+fn real_bag_converts_and_pose_imu_reads_it() -> TestResult {
+    let bag = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/data/real/robot_localization-test2.bag");
+    if !bag.is_file() {
+        eprintln!("SKIP: {} is absent (needs ../shared/data)", bag.display());
+        return Ok(());
+    }
+    let dir = tempfile::tempdir()?;
+    let data = dir.path().join("rl2");
+    let out = msreg()
+        .arg("convert")
+        .arg(&bag)
+        .arg(&data)
+        .args([
+            "--imu",
+            "/imu/data",
+            "--pose",
+            "/jackal_velocity_controller/odom",
+        ])
+        .output()?;
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(
+        stderr.contains("warning: a bag carries no IMU noise figures"),
+        "{stderr}"
+    );
+    // The calibration reads the dataset (exit 0 or 1: planar motion, not bad input)
+    let out = msreg()
+        .args(["calibrate", "pose-imu"])
+        .arg(&data)
+        .arg("-o")
+        .arg(dir.path().join("result.yaml"))
+        .output()?;
+    let code = out.status.code();
+    assert!(
+        matches!(code, Some(0 | 1)),
+        "{code:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(dir.path().join("result.yaml").is_file());
+    Ok(())
+}
