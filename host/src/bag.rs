@@ -54,6 +54,7 @@ pub const DEFAULT_IMU_NOISE: ImuNoiseYaml = ImuNoiseYaml {
     gyroscope_random_walk: 1.9393e-5,
     update_rate: 200.0,
     rostopic: None,
+    sample_timing: None,
 };
 
 /// `pose0/sensor.yaml` written when no `--pose-config` is given: 1-sigma noise of one
