@@ -29,7 +29,9 @@ use rand_chacha::ChaCha8Rng;
 /// Acceptance bound on the time-offset error (issue 11), s.
 const MAX_TIME_OFFSET_ERROR_S: f64 = 0.2e-3;
 
+/// The calibration pipeline under test (each is pose/LiDAR/camera to IMU).
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[allow(clippy::enum_variant_names)]
 enum Pipeline {
     PoseImu,
     LidarImu,

@@ -101,7 +101,12 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
             return Err(anyhow!("--pixel-sigma must be positive, got {sigma}"));
         }
     }
-    let (camera, frames, detection, camera_data) = load_frames(args)?;
+    let LoadedFrames {
+        camera,
+        frames,
+        detection,
+        camera_data,
+    } = load_frames(args)?;
     let mut options = CameraImuOptions {
         update: args.update,
         pixel_sigma: args.pixel_sigma,
@@ -170,27 +175,29 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
     Ok(Outcome::of(filter.converged, &filter.reasons))
 }
 
+/// The camera and its corner frames, with how they were found.
+struct LoadedFrames {
+    camera: Camera<f64>,
+    frames: Vec<CornerFrame>,
+    detection: DetectionSummary,
+    /// The image dataset when the corners were detected here (for the overlay).
+    camera_data: Option<CameraDataset>,
+}
+
 /// The camera, its corner frames and how they were found: `cam0/corners.csv` when the
 /// dataset has it (pre-detected corners, any target), else detection in the images of
 /// `cam0/data.csv` (then the images are returned too, for the overlay).
-fn load_frames(
-    args: &CalibrateCameraImu,
-) -> anyhow::Result<(
-    Camera<f64>,
-    Vec<CornerFrame>,
-    DetectionSummary,
-    Option<CameraDataset>,
-)> {
+fn load_frames(args: &CalibrateCameraImu) -> anyhow::Result<LoadedFrames> {
     let observed = args.dataset.join(OBSERVED_CORNERS_CSV);
     if !observed.is_file() {
         let camera_data = CameraDataset::open(&args.dataset)?;
         let (frames, detection) = detect_for_calibration(args, &camera_data)?;
-        return Ok((
-            camera_data.camera.clone(),
+        return Ok(LoadedFrames {
+            camera: camera_data.camera,
             frames,
             detection,
-            Some(camera_data),
-        ));
+            camera_data: Some(camera_data),
+        });
     }
     let camera = read_camera_yaml(&args.dataset.join(CAMERA_YAML))?;
     let images = read_observed_corners(&observed)?;
@@ -222,7 +229,12 @@ fn load_frames(
         rejected,
         time_s: started.elapsed().as_secs_f64(),
     };
-    Ok((camera, frames, detection, None))
+    Ok(LoadedFrames {
+        camera,
+        frames,
+        detection,
+        camera_data: None,
+    })
 }
 
 /// One image of `cam0/corners.csv` as filter input: each corner's target point from the
