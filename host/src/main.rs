@@ -89,6 +89,9 @@ enum Scenario {
     CameraImu(msreg_host::sim::camera_cli::SimulateCameraImu),
     /// Static LiDAR + camera suite and a plain board at many still poses.
     LidarCamera(msreg_host::lidar_camera::cli::SimulateLidarCamera),
+    /// Robot with an upward fisheye and a marker driving a loop under ~40 static
+    /// infrastructure cameras (marker corners, blobs, COLMAP VO model).
+    Infra(msreg_host::infra::cli::SimulateInfra),
 }
 
 #[derive(Args)]
@@ -202,6 +205,9 @@ fn run(command: Command) -> Result<(), Failure> {
         Command::Simulate {
             scenario: Scenario::LidarCamera(args),
         } => Ok(msreg_host::lidar_camera::cli::simulate(&args)?),
+        Command::Simulate {
+            scenario: Scenario::Infra(args),
+        } => Ok(msreg_host::infra::cli::simulate(&args)?),
         Command::Calibrate {
             task: Task::LidarCamera(args),
         } => exit_code_of(msreg_host::lidar_camera::cli::calibrate(&args)?),
