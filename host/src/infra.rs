@@ -9,6 +9,8 @@ pub mod align;
 pub mod cli;
 pub mod colmap;
 pub mod dataset;
+pub mod interp;
 pub mod io;
+pub mod motion;
 pub mod scene;
 pub mod sim;
