@@ -135,6 +135,9 @@ enum Task {
     /// Camera-IMU calibration from checkerboard images: corner reprojection (RepErrCal) or
     /// PnP relative poses (MoCal) in the EKF.
     CameraImu(msreg_host::calibrate::camera_imu::cli::CalibrateCameraImu),
+    /// Static infrastructure cameras registered from a robot's VO (COLMAP model), marker
+    /// detections and blobs (chapter 6).
+    Infra(msreg_host::infra::cli::CalibrateInfra),
 }
 
 #[derive(Args)]
@@ -214,6 +217,14 @@ fn run(command: Command) -> Result<(), Failure> {
         Command::Calibrate {
             task: Task::CameraImu(args),
         } => exit_code_of(msreg_host::calibrate::camera_imu::cli::run(&args)?),
+        Command::Calibrate {
+            task: Task::Infra(args),
+        } => match msreg_host::infra::cli::calibrate(&args)? {
+            true => Ok(()),
+            false => Err(Failure::NotConverged(
+                "some infrastructure cameras could not be registered (listed above)".into(),
+            )),
+        },
         Command::Eval {
             result,
             dataset,

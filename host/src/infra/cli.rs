@@ -50,3 +50,53 @@ pub fn simulate(args: &SimulateInfra) -> anyhow::Result<()> {
     );
     Ok(())
 }
+
+/// `msreg calibrate infra`.
+#[derive(Args, Debug)]
+pub struct CalibrateInfra {
+    /// Dataset directory (cam0/, vo/, marker.yaml, infra/).
+    pub dataset: PathBuf,
+    /// Result YAML (`infra:` key).
+    #[arg(short, long, default_value = "result.yaml")]
+    pub output: PathBuf,
+    /// JSON report (per-camera RMSE and status, Sampson distances per pair, scale and
+    /// T_F_M degeneracy).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+}
+
+/// Runs `msreg calibrate infra`; `Ok(false)` when some camera could not be solved (the
+/// result holds the others).
+pub fn calibrate(args: &CalibrateInfra) -> anyhow::Result<bool> {
+    let data = super::dataset::InfraDataset::open(&args.dataset)?;
+    let cal =
+        super::pipeline::calibrate(&data).with_context(|| format!("{}", args.dataset.display()))?;
+    cal.result.write(&args.output)?;
+    if let Some(path) = &args.report {
+        let json = serde_json::to_string_pretty(&cal.report)?;
+        std::fs::write(path, json)
+            .with_context(|| format!("{}: cannot write report", path.display()))?;
+    }
+    let failed: Vec<&super::pipeline::CameraReport> =
+        cal.report.cameras.iter().filter(|c| !c.solved).collect();
+    for c in &failed {
+        eprintln!(
+            "msreg: camera {} not solved: {}",
+            c.id,
+            c.reason.as_deref().unwrap_or("unknown")
+        );
+    }
+    if let Some(m) = &cal.report.motion {
+        if !m.degeneracy.is_empty() {
+            eprintln!("msreg: T_cam0_marker from motion is degenerate in {} direction(s) (planar driving); see the report", m.degeneracy.len());
+        }
+    }
+    eprintln!(
+        "msreg: wrote {} ({} of {} cameras solved, VO scale {:.6} m/unit)",
+        args.output.display(),
+        cal.result.infra.cameras.len(),
+        data.cameras.len(),
+        cal.result.infra.vo_scale
+    );
+    Ok(failed.is_empty())
+}
