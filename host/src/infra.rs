@@ -6,6 +6,7 @@
 //! numbers: docs/infra.md.
 
 pub mod align;
+pub mod ba;
 pub mod cli;
 pub mod colmap;
 pub mod dataset;

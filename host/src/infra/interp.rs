@@ -37,6 +37,20 @@ impl KeyframeTrack {
         Isometry3::from_parts(Translation3::from(t.translation.vector * scale), t.rotation)
     }
 
+    /// Bracketing keyframes `(i, j, alpha)` of a stamp (eq. 6.3), `None` outside the span.
+    pub fn bracket(&self, stamp_ns: u64) -> Option<(usize, usize, f64)> {
+        let j = self.stamps.partition_point(|&s| s < stamp_ns);
+        if j < self.stamps.len() && self.stamps[j] == stamp_ns {
+            return Some((j, j, 0.0));
+        }
+        if j == 0 || j == self.stamps.len() {
+            return None;
+        }
+        let alpha =
+            (stamp_ns - self.stamps[j - 1]) as f64 / (self.stamps[j] - self.stamps[j - 1]) as f64;
+        Some((j - 1, j, alpha))
+    }
+
     /// `T_vo_F(t)` (eq. 6.3-6.6), `None` outside the keyframes' span.
     pub fn at(&self, stamp_ns: u64, scale: f64) -> Option<Isometry3<f64>> {
         let j = self.stamps.partition_point(|&s| s < stamp_ns);

@@ -199,12 +199,43 @@ pub fn calibrate(data: &InfraDataset) -> Result<InfraCalibration, InfraCalibrati
         solved_poses.push(solved.map(|p| p.0));
         reports.push(report);
     }
+    let ba = global_ba(
+        data,
+        &track,
+        &keyframes,
+        &t_f_m,
+        &prepared.poses,
+        &solved_poses,
+        &blobs,
+    );
+    let (mut s, mut t_f_m_rows) = (s, sol.t_f_m);
+    if let Some((b, ids)) = &ba {
+        let input: Vec<Vector3<f64>> = track
+            .unscaled
+            .iter()
+            .map(|t| t.translation.vector)
+            .collect();
+        s = super::ba::vo_scale(&input, &b.state);
+        t_f_m_rows = matrix_rows(&b.state.t_f_m);
+        for (c, &ci) in ids.iter().enumerate() {
+            solved_poses[ci] = Some(b.state.cams[c]);
+            let id = &data.cameras[ci].id;
+            let rmse = cameras
+                .get(id)
+                .map_or(0.0, |r: &CameraResult| r.reprojection_rmse_px);
+            cameras.insert(
+                id.clone(),
+                camera_result(&b.state.cams[c], &b.camera_covariances[c], rmse),
+            );
+            covariances.insert(id.clone(), b.camera_covariances[c]);
+        }
+    }
     let sampson = sampson_pairs(data, &prepared.poses, &solved_poses);
     let result = InfraResultFile {
         infra: InfraSection {
             frame: "vo".into(),
             vo_scale: s,
-            t_cam0_marker: sol.t_f_m,
+            t_cam0_marker: t_f_m_rows,
             t_world_vo: None,
             cameras,
         },
@@ -213,8 +244,15 @@ pub fn calibrate(data: &InfraDataset) -> Result<InfraCalibration, InfraCalibrati
         "interpolation (eq. 6.3-6.6)".into(),
         "scale and T_F_M by alternation (eq. 6.7-6.9)".into(),
         "camera initialisation (eq. 6.10, Markley average)".into(),
-        "per-camera refinement: marker corners + gated blobs, VO keyframes fixed (no global bundle adjustment yet)".into(),
+        "per-camera refinement: marker corners + gated blobs, VO keyframes fixed".into(),
     ];
+    let mut stages = stages;
+    if let Some((b, _)) = &ba {
+        stages.push(format!(
+            "global bundle adjustment (keyframes, points, cameras, T_F_M; no epipolar term): cost {:.1} -> {:.1} in {} iterations, variance factor {:.3}",
+            b.initial_cost, b.final_cost, b.iterations, b.variance_factor
+        ));
+    }
     Ok(InfraCalibration {
         result,
         report: InfraReport {
@@ -359,4 +397,84 @@ fn sampson_pairs(
         }
     }
     out
+}
+
+/// The global bundle adjustment over every solved camera; `None` when it fails (the
+/// per-camera results are kept and the report says so).
+#[allow(clippy::too_many_arguments)]
+fn global_ba(
+    data: &InfraDataset,
+    track: &KeyframeTrack,
+    keyframes: &[(u64, Isometry3<f64>)],
+    t_f_m: &Isometry3<f64>,
+    poses: &[Vec<MarkerPose>],
+    solved: &[Option<Isometry3<f64>>],
+    blobs: &[super::io::Blob],
+) -> Option<(super::ba::BaSolution, Vec<usize>)> {
+    use super::ba::{BaProblem, BaState, BlobObs, MarkerObs, VoObs};
+    let ids: Vec<usize> = (0..solved.len()).filter(|&i| solved[i].is_some()).collect();
+    let s = keyframes.get(1).map_or(1.0, |k| {
+        k.1.translation.vector.norm() / track.unscaled[1].translation.vector.norm().max(1e-12)
+    });
+    let first = data.vo.images.first()?.t_cam_world;
+    let points: Vec<Vector3<f64>> = data
+        .vo
+        .points
+        .iter()
+        .map(|x| (first * nalgebra::Point3::from(*x)).coords * s)
+        .collect();
+    let mut vo = Vec::new();
+    for (k, im) in data.vo.images.iter().enumerate() {
+        for (uv, pid) in &im.keypoints {
+            if let Some(point) = pid {
+                vo.push(VoObs {
+                    kf: k,
+                    point: *point,
+                    uv: *uv,
+                });
+            }
+        }
+    }
+    let mut markers = Vec::new();
+    let mut blob_obs = Vec::new();
+    for (c, &ci) in ids.iter().enumerate() {
+        for m in &poses[ci] {
+            let Some((i, j, alpha)) = track.bracket(m.detection.stamp_ns) else {
+                continue;
+            };
+            markers.push(MarkerObs {
+                cam: c,
+                i,
+                j,
+                alpha,
+                detection: m.detection,
+            });
+        }
+        let centre = solved[ci]?.translation.vector;
+        for (k, kf) in keyframes.iter().enumerate() {
+            for b in init::associate_blobs(&data.f_camera, &centre, std::slice::from_ref(kf), blobs)
+            {
+                blob_obs.push(BlobObs {
+                    kf: k,
+                    cam: c,
+                    uv: b.uv,
+                });
+            }
+        }
+    }
+    let problem = BaProblem {
+        f: &data.f_camera,
+        cams: ids.iter().map(|&i| &data.cameras[i].camera).collect(),
+        corners: data.marker.corners_in_marker(),
+        vo,
+        markers,
+        blobs: blob_obs,
+    };
+    let start = BaState {
+        kf: keyframes.iter().map(|k| k.1).collect(),
+        cams: ids.iter().filter_map(|&i| solved[i]).collect(),
+        t_f_m: *t_f_m,
+        points,
+    };
+    super::ba::solve(&problem, start, 30).map(|b| (b, ids))
 }
