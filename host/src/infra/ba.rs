@@ -540,6 +540,31 @@ pub fn vo_scale(input: &[Vector3<f64>], solved: &BaState) -> f64 {
     super::align::similarity_scale(input, &out)
 }
 
+/// Marker-corner reprojection RMSE per camera at `state`, px.
+pub fn marker_rmse(p: &BaProblem<'_>, state: &BaState) -> Vec<f64> {
+    let mut sum = vec![(0.0, 0usize); p.cams.len()];
+    for m in &p.markers {
+        let pred = marker_pixels(
+            p,
+            &state.kf[m.i],
+            &state.kf[m.j],
+            &state.t_f_m,
+            &state.cams[m.cam],
+            m,
+        );
+        if let Some(pred) = pred {
+            for k in 0..4 {
+                let e = Vector2::new(pred[2 * k], pred[2 * k + 1]) - m.detection.corners[k];
+                sum[m.cam].0 += e.norm_squared();
+                sum[m.cam].1 += 1;
+            }
+        }
+    }
+    sum.iter()
+        .map(|(s, n)| (s / (*n).max(1) as f64).sqrt())
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -226,3 +226,92 @@ pub fn refine(
     let s = solve_se3(problem, pose(start), &options).ok()?;
     Some((iso(&s.pose), s.covariance))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::infra::scene::{look_at, robot_fisheye};
+
+    #[test]
+    fn refinement_jacobians_match_finite_differences() {
+        let f = robot_fisheye();
+        let cam = f;
+        let spec = MarkerSpec {
+            dictionary: "DICT_4X4_50".into(),
+            id: 7,
+            side_m: 0.5,
+        };
+        let t_vo_c = look_at(
+            &Vector3::new(2.0, 1.0, 3.0),
+            &Vector3::new(0.0, 0.0, 0.5),
+            0.2,
+        );
+        let det = MarkerDetection {
+            stamp_ns: 0,
+            marker_id: 7,
+            corners: [Vector2::new(500.0, 500.0); 4],
+        };
+        let t_vo_m = Isometry3::from_parts(
+            Translation3::new(0.1, -0.2, 0.55),
+            UnitQuaternion::from_euler_angles(0.02, 0.01, 0.7),
+        );
+        let t_vo_f = Isometry3::from_parts(
+            Translation3::new(-1.0, 0.5, 0.5),
+            UnitQuaternion::from_euler_angles(0.01, -0.02, 0.3),
+        );
+        let problem = CameraProblem {
+            camera: &cam,
+            f_camera: &f,
+            corners: spec.corners_in_marker(),
+            markers: vec![CornerObs {
+                t_vo_m,
+                detection: det,
+            }],
+            blobs: vec![BlobObs {
+                t_vo_f,
+                uv: Vector2::new(400.0, 600.0),
+            }],
+        };
+        let p0 = pose(&t_vo_c);
+        let mut r0 = Vec::new();
+        assert!(problem.residuals(&p0, &mut r0));
+        assert_eq!(r0.len(), 10);
+        let h = 1e-6;
+        for k in 0..6 {
+            let mut d = [Vector3::zeros(), Vector3::zeros()];
+            d[k / 3][k % 3] = h;
+            let (mut rp, mut rm) = (Vec::new(), Vec::new());
+            problem.residuals(&p0.boxplus(&d[0], &d[1]), &mut rp);
+            problem.residuals(&p0.boxplus(&-d[0], &-d[1]), &mut rm);
+            for i in 0..r0.len() {
+                let num = (rp[i].value - rm[i].value) / (2.0 * h);
+                let ana = r0[i].jacobian[k];
+                assert!(
+                    (num - ana).abs() < 1e-4 * (1.0 + num.abs()),
+                    "residual {i} col {k}: {num} vs {ana}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn markley_average_of_symmetric_spread_is_the_centre() {
+        let c = UnitQuaternion::from_euler_angles(0.3, -0.1, 2.0);
+        let qs: Vec<UnitQuaternion<f64>> = [0.1, -0.1]
+            .iter()
+            .flat_map(|&a| {
+                [Vector3::x(), Vector3::y(), Vector3::z()]
+                    .map(|v| c * UnitQuaternion::from_scaled_axis(v * a))
+            })
+            .map(|q| {
+                if q.w < 0.0 {
+                    UnitQuaternion::new_unchecked(-q.into_inner())
+                } else {
+                    q
+                }
+            })
+            .collect();
+        let avg = average_rotation(&qs).expect("average");
+        assert!(avg.angle_to(&c) < 1e-9);
+    }
+}

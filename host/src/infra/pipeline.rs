@@ -153,6 +153,98 @@ pub fn calibrate(data: &InfraDataset) -> Result<InfraCalibration, InfraCalibrati
         .collect();
     let mut blobs = data.blobs.clone();
     blobs.sort_by_key(|b| b.stamp_ns);
+    let Solved {
+        mut cameras,
+        mut covariances,
+        reports,
+        mut solved_poses,
+    } = solve_all(data, &prepared, &track, s, &t_f_m, &keyframes, &blobs);
+    let ba = global_ba(
+        data,
+        &track,
+        &keyframes,
+        &t_f_m,
+        &prepared.poses,
+        &solved_poses,
+        &blobs,
+    );
+    let (mut s, mut t_f_m_rows) = (s, sol.t_f_m);
+    if let Some((b, ids, rmse)) = &ba {
+        let input: Vec<Vector3<f64>> = track
+            .unscaled
+            .iter()
+            .map(|t| t.translation.vector)
+            .collect();
+        s = super::ba::vo_scale(&input, &b.state);
+        t_f_m_rows = matrix_rows(&b.state.t_f_m);
+        for (c, &ci) in ids.iter().enumerate() {
+            solved_poses[ci] = Some(b.state.cams[c]);
+            let id = &data.cameras[ci].id;
+            cameras.insert(
+                id.clone(),
+                camera_result(&b.state.cams[c], &b.camera_covariances[c], rmse[c]),
+            );
+            covariances.insert(id.clone(), b.camera_covariances[c]);
+        }
+    }
+    let mut reports = reports;
+    if let Some((_, ids, rmse)) = &ba {
+        for (c, &ci) in ids.iter().enumerate() {
+            reports[ci].reprojection_rmse_px = rmse[c];
+        }
+    }
+    let sampson = sampson_pairs(data, &prepared.poses, &solved_poses);
+    let result = InfraResultFile {
+        infra: InfraSection {
+            frame: "vo".into(),
+            vo_scale: s,
+            t_cam0_marker: t_f_m_rows,
+            t_world_vo: None,
+            cameras,
+        },
+    };
+    let stages = vec![
+        "interpolation (eq. 6.3-6.6)".into(),
+        "scale and T_F_M by alternation (eq. 6.7-6.9)".into(),
+        "camera initialisation (eq. 6.10, Markley average)".into(),
+        "per-camera refinement: marker corners + gated blobs, VO keyframes fixed".into(),
+    ];
+    let mut stages = stages;
+    if let Some((b, _, _)) = &ba {
+        stages.push(format!(
+            "global bundle adjustment (keyframes, points, cameras, T_F_M; no epipolar term): cost {:.1} -> {:.1} in {} iterations, variance factor {:.3}",
+            b.initial_cost, b.final_cost, b.iterations, b.variance_factor
+        ));
+    }
+    Ok(InfraCalibration {
+        result,
+        report: InfraReport {
+            stages,
+            motion: Some(sol),
+            cameras: reports,
+            sampson,
+        },
+        covariances,
+    })
+}
+
+struct Solved {
+    cameras: BTreeMap<String, CameraResult>,
+    covariances: BTreeMap<String, Matrix6<f64>>,
+    reports: Vec<CameraReport>,
+    solved_poses: Vec<Option<Isometry3<f64>>>,
+}
+
+/// Initialisation and per-camera refinement of every camera that has enough detections.
+fn solve_all(
+    data: &InfraDataset,
+    prepared: &Prepared,
+    track: &KeyframeTrack,
+    s: f64,
+    t_f_m: &Isometry3<f64>,
+    keyframes: &[(u64, Isometry3<f64>)],
+    blobs: &[super::io::Blob],
+) -> Solved {
     let mut cameras = BTreeMap::new();
     let mut covariances = BTreeMap::new();
     let mut reports = Vec::new();
@@ -179,11 +271,11 @@ pub fn calibrate(data: &InfraDataset) -> Result<InfraCalibration, InfraCalibrati
                 data,
                 cam,
                 mp,
-                &track,
+                track,
                 s,
-                &t_f_m,
-                &keyframes,
-                &blobs,
+                t_f_m,
+                keyframes,
+                blobs,
                 &mut report,
             )
         } else {
@@ -199,70 +291,12 @@ pub fn calibrate(data: &InfraDataset) -> Result<InfraCalibration, InfraCalibrati
         solved_poses.push(solved.map(|p| p.0));
         reports.push(report);
     }
-    let ba = global_ba(
-        data,
-        &track,
-        &keyframes,
-        &t_f_m,
-        &prepared.poses,
-        &solved_poses,
-        &blobs,
-    );
-    let (mut s, mut t_f_m_rows) = (s, sol.t_f_m);
-    if let Some((b, ids)) = &ba {
-        let input: Vec<Vector3<f64>> = track
-            .unscaled
-            .iter()
-            .map(|t| t.translation.vector)
-            .collect();
-        s = super::ba::vo_scale(&input, &b.state);
-        t_f_m_rows = matrix_rows(&b.state.t_f_m);
-        for (c, &ci) in ids.iter().enumerate() {
-            solved_poses[ci] = Some(b.state.cams[c]);
-            let id = &data.cameras[ci].id;
-            let rmse = cameras
-                .get(id)
-                .map_or(0.0, |r: &CameraResult| r.reprojection_rmse_px);
-            cameras.insert(
-                id.clone(),
-                camera_result(&b.state.cams[c], &b.camera_covariances[c], rmse),
-            );
-            covariances.insert(id.clone(), b.camera_covariances[c]);
-        }
-    }
-    let sampson = sampson_pairs(data, &prepared.poses, &solved_poses);
-    let result = InfraResultFile {
-        infra: InfraSection {
-            frame: "vo".into(),
-            vo_scale: s,
-            t_cam0_marker: t_f_m_rows,
-            t_world_vo: None,
-            cameras,
-        },
-    };
-    let stages = vec![
-        "interpolation (eq. 6.3-6.6)".into(),
-        "scale and T_F_M by alternation (eq. 6.7-6.9)".into(),
-        "camera initialisation (eq. 6.10, Markley average)".into(),
-        "per-camera refinement: marker corners + gated blobs, VO keyframes fixed".into(),
-    ];
-    let mut stages = stages;
-    if let Some((b, _)) = &ba {
-        stages.push(format!(
-            "global bundle adjustment (keyframes, points, cameras, T_F_M; no epipolar term): cost {:.1} -> {:.1} in {} iterations, variance factor {:.3}",
-            b.initial_cost, b.final_cost, b.iterations, b.variance_factor
-        ));
-    }
-    Ok(InfraCalibration {
-        result,
-        report: InfraReport {
-            stages,
-            motion: Some(sol),
-            cameras: reports,
-            sampson,
-        },
+    Solved {
+        cameras,
         covariances,
-    })
+        reports,
+        solved_poses,
+    }
 }
 
 fn camera_result(pose: &Isometry3<f64>, cov: &Matrix6<f64>, rmse: f64) -> CameraResult {
@@ -410,7 +444,7 @@ fn global_ba(
     poses: &[Vec<MarkerPose>],
     solved: &[Option<Isometry3<f64>>],
     blobs: &[super::io::Blob],
-) -> Option<(super::ba::BaSolution, Vec<usize>)> {
+) -> Option<(super::ba::BaSolution, Vec<usize>, Vec<f64>)> {
     use super::ba::{BaProblem, BaState, BlobObs, MarkerObs, VoObs};
     let ids: Vec<usize> = (0..solved.len()).filter(|&i| solved[i].is_some()).collect();
     let s = keyframes.get(1).map_or(1.0, |k| {
@@ -476,5 +510,7 @@ fn global_ba(
         t_f_m: *t_f_m,
         points,
     };
-    super::ba::solve(&problem, start, 30).map(|b| (b, ids))
+    let b = super::ba::solve(&problem, start, 30)?;
+    let rmse = super::ba::marker_rmse(&problem, &b.state);
+    Some((b, ids, rmse))
 }
