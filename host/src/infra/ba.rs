@@ -361,7 +361,8 @@ pub struct BaSolution {
     pub final_cost: f64,
     /// Accepted + rejected iterations.
     pub iterations: usize,
-    /// Variance factor (cost per degree of freedom) applied to the covariances.
+    /// Variance factor (robust cost, i.e. whitened chi-square, per degree of freedom)
+    /// applied to the covariances.
     pub variance_factor: f64,
 }
 
@@ -495,8 +496,7 @@ pub fn solve(p: &BaProblem<'_>, start: BaState, max_iterations: usize) -> Option
         }
     }
     let unknowns = lay.size() + 3 * s.points.len();
-    let variance_factor =
-        (2.0 * n.cost / n.count.saturating_sub(unknowns).max(1) as f64).max(1e-12);
+    let variance_factor = (n.cost / n.count.saturating_sub(unknowns).max(1) as f64).max(1e-12);
     let camera_covariances = covariances(&n, p, &lay, &by_point, variance_factor)?;
     Some(BaSolution {
         state: s,
