@@ -9,13 +9,14 @@
 //! - VO keypoints: `pi_F(R_k^T (X - t_k))`, analytic Jacobian;
 //! - blobs: `pi_F(R_k^T (t_C - t_k))`, analytic;
 //! - marker corners: `pi_C(T_vo_C^-1 T_vo_F(t) T_F_M c)` with `T_vo_F(t)` interpolated between
-//!   keyframes (eq. 6.3-6.6), Jacobian by central differences.
+//!   keyframes (eq. 6.3-6.6), Jacobian by central differences;
+//! - epipolar: the square root of the Sampson distance of a marker corner seen by two
+//!   cameras within 10 ms (eq. 6.13-6.14), whitened by 0.3 px / focal length, Jacobian by
+//!   central differences.
 //!
 //! Solver: Levenberg-Marquardt; the points are eliminated by the Schur complement and the
 //! reduced system (6 per keyframe, camera and `T_F_M`) is solved by faer's dense Cholesky.
 //! Perturbations: right on rotations, additive on positions; points additive.
-//! The epipolar residual (eq. 6.13-6.14) is not in the cost yet (Sampson distances are
-//! reported as a check).
 
 use faer::linalg::solvers::Solve;
 use msreg_estimator::camera::Camera;
@@ -65,6 +66,30 @@ pub struct BlobObs {
     pub uv: Vector2<f64>,
 }
 
+/// A marker corner seen at once (within 10 ms) by cameras `a` and `b` (eq. 6.13).
+#[derive(Clone, Copy, Debug)]
+pub struct EpiObs {
+    /// First camera index.
+    pub a: usize,
+    /// Second camera index.
+    pub b: usize,
+    /// Normalised image point in `a` (z = 1).
+    pub xa: Vector3<f64>,
+    /// Normalised image point in `b`.
+    pub xb: Vector3<f64>,
+    /// Whitening: 1-sigma of the Sampson distance (normalised units).
+    pub sigma: f64,
+}
+
+/// Square root of the signed Sampson distance of `x_a^T E_ab x_b` (eq. 6.13).
+pub fn epipolar(t_vo_a: &Isometry3<f64>, t_vo_b: &Isometry3<f64>, o: &EpiObs) -> f64 {
+    let t_ab = t_vo_a.inverse() * t_vo_b;
+    let e = skew(&t_ab.translation.vector) * t_ab.rotation.to_rotation_matrix().matrix();
+    let (exb, etxa) = (e * o.xb, e.transpose() * o.xa);
+    let den = (exb.x * exb.x + exb.y * exb.y + etxa.x * etxa.x + etxa.y * etxa.y).max(1e-300);
+    o.xa.dot(&exb) / den.sqrt()
+}
+
 /// Measurements and models.
 pub struct BaProblem<'a> {
     /// The robot's fisheye.
@@ -79,6 +104,8 @@ pub struct BaProblem<'a> {
     pub markers: Vec<MarkerObs>,
     /// Blobs.
     pub blobs: Vec<BlobObs>,
+    /// Simultaneous marker corners of camera pairs (epipolar residual, eq. 6.13-6.14).
+    pub epipolar: Vec<EpiObs>,
 }
 
 /// The unknowns.
@@ -285,6 +312,36 @@ fn linearise_blobs(p: &BaProblem<'_>, s: &BaState, lay: &Layout, n: &mut Normal)
     }
 }
 
+fn linearise_epipolar(p: &BaProblem<'_>, s: &BaState, lay: &Layout, n: &mut Normal) {
+    let h = 1e-7;
+    for o in &p.epipolar {
+        let (ta, tb) = (s.cams[o.a], s.cams[o.b]);
+        let r = epipolar(&ta, &tb, o) / o.sigma;
+        let (rho, w) = robust(r * r);
+        n.cost += rho;
+        n.count += 1;
+        let sw = w.sqrt() / o.sigma;
+        let (mut ja, mut jb) = (SMatrix::<f64, 1, 6>::zeros(), SMatrix::<f64, 1, 6>::zeros());
+        for k in 0..6 {
+            let mut d = [0.0; 6];
+            d[k] = h;
+            let up = (
+                epipolar(&plus(&ta, &d), &tb, o),
+                epipolar(&ta, &plus(&tb, &d), o),
+            );
+            d[k] = -h;
+            let dn = (
+                epipolar(&plus(&ta, &d), &tb, o),
+                epipolar(&ta, &plus(&tb, &d), o),
+            );
+            ja[k] = (up.0 - dn.0) / (2.0 * h) * sw;
+            jb[k] = (up.1 - dn.1) / (2.0 * h) * sw;
+        }
+        let blocks = [(ja, lay.cam(o.a)), (jb, lay.cam(o.b))];
+        accumulate(n, &blocks, &SMatrix::<f64, 1, 1>::new(r * w.sqrt()));
+    }
+}
+
 fn accumulate<const R: usize>(
     n: &mut Normal,
     blocks: &[(SMatrix<f64, R, 6>, usize)],
@@ -345,6 +402,7 @@ fn linearise(p: &BaProblem<'_>, s: &BaState, lay: &Layout) -> Option<Normal> {
         return None;
     }
     linearise_blobs(p, s, lay, &mut n);
+    linearise_epipolar(p, s, lay, &mut n);
     Some(n)
 }
 
@@ -597,6 +655,33 @@ mod tests {
             );
         }
         assert!(px.iter().all(|v| v.is_finite()));
+    }
+
+    #[test]
+    fn epipolar_residual_vanishes_for_a_true_correspondence() {
+        let a = Isometry3::from_parts(
+            Translation3::new(0.0, 0.0, 3.0),
+            UnitQuaternion::from_euler_angles(2.5, 0.1, 0.3),
+        );
+        let b = Isometry3::from_parts(
+            Translation3::new(3.0, 1.0, 3.0),
+            UnitQuaternion::from_euler_angles(2.3, -0.2, 1.3),
+        );
+        let x = Vector3::new(1.2, 0.8, 0.5);
+        let (pa, pb) = (
+            a.inverse_transform_point(&x.into()).coords,
+            b.inverse_transform_point(&x.into()).coords,
+        );
+        let o = EpiObs {
+            a: 0,
+            b: 1,
+            xa: pa / pa.z,
+            xb: pb / pb.z,
+            sigma: 1.0,
+        };
+        assert!(epipolar(&a, &b, &o).abs() < 1e-12);
+        let moved = plus(&b, &[0.0, 0.0, 0.0, 0.0, 0.0, 0.05]);
+        assert!(epipolar(&a, &moved, &o).abs() > 1e-5);
     }
 
     #[test]

@@ -212,7 +212,7 @@ pub fn calibrate(data: &InfraDataset) -> Result<InfraCalibration, InfraCalibrati
     let mut stages = stages;
     if let Some((b, _, _)) = &ba {
         stages.push(format!(
-            "global bundle adjustment (keyframes, points, cameras, T_F_M; no epipolar term): cost {:.1} -> {:.1} in {} iterations, variance factor {:.3}",
+            "global bundle adjustment (keyframes, points, cameras, T_F_M; VO keypoints, blobs, marker corners, epipolar): cost {:.1} -> {:.1} in {} iterations, variance factor {:.3}",
             b.initial_cost, b.final_cost, b.iterations, b.variance_factor
         ));
     }
@@ -496,7 +496,9 @@ fn global_ba(
             }
         }
     }
+    let epipolar = epipolar_obs(data, &ids, poses);
     let problem = BaProblem {
+        epipolar,
         f: &data.f_camera,
         cams: ids.iter().map(|&i| &data.cameras[i].camera).collect(),
         corners: data.marker.corners_in_marker(),
@@ -513,4 +515,45 @@ fn global_ba(
     let b = super::ba::solve(&problem, start, 30)?;
     let rmse = super::ba::marker_rmse(&problem, &b.state);
     Some((b, ids, rmse))
+}
+
+/// Simultaneous corners of every pair of cameras in the BA (indices into `ids`).
+fn epipolar_obs(
+    data: &InfraDataset,
+    ids: &[usize],
+    poses: &[Vec<MarkerPose>],
+) -> Vec<super::ba::EpiObs> {
+    let window = (SIMULTANEOUS_S * 1e9) as u64;
+    let mut out = Vec::new();
+    for (a, &ia) in ids.iter().enumerate() {
+        for (b, &ib) in ids.iter().enumerate().skip(a + 1) {
+            let (ca, cb) = (&data.cameras[ia].camera, &data.cameras[ib].camera);
+            let f = 0.5 * (ca.intrinsics().fu + cb.intrinsics().fu);
+            for da in &poses[ia] {
+                let t = da.detection.stamp_ns;
+                let lo = poses[ib].partition_point(|m| m.detection.stamp_ns + window <= t);
+                for db in poses[ib][lo..]
+                    .iter()
+                    .take_while(|m| m.detection.stamp_ns <= t + window)
+                {
+                    for k in 0..4 {
+                        let (Some(xa), Some(xb)) = (
+                            normalised(ca, &da.detection.corners[k]),
+                            normalised(cb, &db.detection.corners[k]),
+                        ) else {
+                            continue;
+                        };
+                        out.push(super::ba::EpiObs {
+                            a,
+                            b,
+                            xa,
+                            xb,
+                            sigma: 0.3 / f,
+                        });
+                    }
+                }
+            }
+        }
+    }
+    out
 }
