@@ -8,6 +8,7 @@ pub mod camera_yaml;
 pub mod command;
 pub mod dataset;
 pub mod eval;
+pub mod infra;
 pub mod lidar;
 pub mod lidar_camera;
 pub mod link;

@@ -89,6 +89,9 @@ enum Scenario {
     CameraImu(msreg_host::sim::camera_cli::SimulateCameraImu),
     /// Static LiDAR + camera suite and a plain board at many still poses.
     LidarCamera(msreg_host::lidar_camera::cli::SimulateLidarCamera),
+    /// Robot with an upward fisheye and a marker driving a loop under ~40 static
+    /// infrastructure cameras (marker corners, blobs, COLMAP VO model).
+    Infra(msreg_host::infra::cli::SimulateInfra),
 }
 
 #[derive(Args)]
@@ -132,6 +135,9 @@ enum Task {
     /// Camera-IMU calibration from checkerboard images: corner reprojection (RepErrCal) or
     /// PnP relative poses (MoCal) in the EKF.
     CameraImu(msreg_host::calibrate::camera_imu::cli::CalibrateCameraImu),
+    /// Static infrastructure cameras registered from a robot's VO (COLMAP model), marker
+    /// detections and blobs (chapter 6).
+    Infra(msreg_host::infra::cli::CalibrateInfra),
 }
 
 #[derive(Args)]
@@ -202,12 +208,23 @@ fn run(command: Command) -> Result<(), Failure> {
         Command::Simulate {
             scenario: Scenario::LidarCamera(args),
         } => Ok(msreg_host::lidar_camera::cli::simulate(&args)?),
+        Command::Simulate {
+            scenario: Scenario::Infra(args),
+        } => Ok(msreg_host::infra::cli::simulate(&args)?),
         Command::Calibrate {
             task: Task::LidarCamera(args),
         } => exit_code_of(msreg_host::lidar_camera::cli::calibrate(&args)?),
         Command::Calibrate {
             task: Task::CameraImu(args),
         } => exit_code_of(msreg_host::calibrate::camera_imu::cli::run(&args)?),
+        Command::Calibrate {
+            task: Task::Infra(args),
+        } => match msreg_host::infra::cli::calibrate(&args)? {
+            true => Ok(()),
+            false => Err(Failure::NotConverged(
+                "some infrastructure cameras could not be registered (listed above)".into(),
+            )),
+        },
         Command::Eval {
             result,
             dataset,
