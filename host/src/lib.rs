@@ -11,6 +11,7 @@ pub mod eval;
 pub mod lidar;
 pub mod lidar_camera;
 pub mod link;
+pub mod mi;
 pub mod ndt;
 pub mod plot;
 pub mod pointcloud;
