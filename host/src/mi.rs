@@ -22,4 +22,4 @@ mod tests;
 
 pub use histogram::{hard_mi, BSplineHistogram, MiScore};
 pub use scene::{equalize, MiScene, PoseParam};
-pub use search::{grid_search, refine, GridAxis, Observability, RefineOptions, Refined};
+pub use search::{grid_search, refine, GridAxis, GridScore, Observability, RefineOptions, Refined};

@@ -138,10 +138,22 @@ pub fn calibrate(args: &CalibrateLidarCamera) -> anyhow::Result<Outcome> {
         std::fs::write(path, serde_json::to_string_pretty(&report)?)
             .with_context(|| format!("{}: cannot write report", path.display()))?;
     }
-    Ok(if refined.converged {
-        Outcome::Converged
-    } else {
+    let poor: Vec<&str> = DOF_NAMES
+        .iter()
+        .zip(&refined.observability)
+        .filter(|(_, o)| **o == Observability::Poor)
+        .map(|(n, _)| *n)
+        .collect();
+    Ok(if !refined.converged {
         Outcome::NotConverged("the MI refinement hit its iteration limit".into())
+    } else if !poor.is_empty() {
+        Outcome::NotConverged(format!(
+            "the MI has no clear maximum along {} (flat or not a maximum there; see \
+             docs/prior_map.md)",
+            poor.join(", ")
+        ))
+    } else {
+        Outcome::Converged
     })
 }
 

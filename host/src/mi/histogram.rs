@@ -33,7 +33,7 @@ pub fn hard_mi(pairs: &[(f32, f32)], bins: usize) -> MiScore {
 }
 
 /// MI / NMI of a joint histogram (row = point intensity bin, column = image bin).
-fn score_of(joint: &[f64], bins: usize, samples: usize) -> MiScore {
+pub(crate) fn score_of(joint: &[f64], bins: usize, samples: usize) -> MiScore {
     let total: f64 = joint.iter().sum();
     if total <= 0.0 {
         return MiScore::default();

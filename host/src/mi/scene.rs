@@ -120,7 +120,7 @@ pub fn rank_normalize(values: &[f32]) -> Vec<f32> {
     let mut i = 0;
     while i < order.len() {
         let mut j = i;
-        while j + 1 < order.len() && values[order[j + 1]] == values[order[i]] {
+        while j + 1 < order.len() && values[order[j + 1]].total_cmp(&values[order[i]]).is_eq() {
             j += 1;
         }
         let rank = 0.5 * (i + j) as f32 / denom;
@@ -286,6 +286,23 @@ impl MiScene {
             }
         }
         h
+    }
+
+    /// Hard-binned MI on one thread, without building the pair list (the grid's score).
+    pub fn hard_serial(&self, t_cam_src: &Isometry3<f64>) -> f64 {
+        let bins = self.bins;
+        let mut joint = vec![0.0f64; bins * bins];
+        let bin = |x: f32| ((x.clamp(0.0, 1.0) * bins as f32) as usize).min(bins - 1);
+        let mut n = 0;
+        for i in 0..self.points.len() {
+            if let Some((p, _)) = self.project(t_cam_src, i) {
+                if let Some((b, _, _)) = self.image.sample(p.pixel.x, p.pixel.y) {
+                    joint[bin(self.values[i]) * bins + bin(b)] += 1.0;
+                    n += 1;
+                }
+            }
+        }
+        super::histogram::score_of(&joint, bins, n).mi
     }
 
     /// Smoothed MI / NMI under `t_cam_src`.

@@ -29,10 +29,25 @@ pub struct GridResult {
     pub evaluations: usize,
 }
 
-/// Maximises the smoothed MI over `axes` (parameters start at zero) for `levels` levels,
+/// Score of a grid candidate.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GridScore {
+    /// B-spline smoothed MI (16 bin updates per sample; smoother).
+    Smoothed,
+    /// Hard-binned MI (one bin update per sample; about twice as fast).
+    Hard,
+}
+
+/// Maximises the MI over `axes` (parameters start at zero) for `levels` levels,
 /// each centred on the previous best with the spacing divided by `steps` (by 2 for one
 /// step). `pose` maps a parameter vector to `T_cam_src`.
-pub fn grid_search<F>(scene: &MiScene, axes: &[GridAxis], levels: usize, pose: F) -> GridResult
+pub fn grid_search<F>(
+    scene: &MiScene,
+    axes: &[GridAxis],
+    levels: usize,
+    score: GridScore,
+    pose: F,
+) -> GridResult
 where
     F: Fn(&[f64]) -> Isometry3<f64> + Sync,
 {
@@ -48,7 +63,14 @@ where
         evaluations += candidates.len();
         let (mi, best) = candidates
             .par_iter()
-            .map(|c| (scene.histogram_serial(&pose(c)).score().mi, c))
+            .map(|c| {
+                let t = pose(c);
+                let mi = match score {
+                    GridScore::Smoothed => scene.histogram_serial(&t).score().mi,
+                    GridScore::Hard => scene.hard_serial(&t),
+                };
+                (mi, c)
+            })
             .reduce_with(|a, b| if b.0 > a.0 { b } else { a })
             .map(|(m, c)| (m, c.clone()))
             .unwrap_or((f64::NEG_INFINITY, centre.clone()));
@@ -99,6 +121,8 @@ pub struct RefineOptions {
     pub tolerance_px: f64,
     /// Image cell (px) counted as one independent sample for the sigmas.
     pub cell_px: f64,
+    /// Recompute the finite-difference Hessian every this many iterations.
+    pub hessian_every: usize,
 }
 
 impl Default for RefineOptions {
@@ -109,6 +133,7 @@ impl Default for RefineOptions {
             max_step_px: 8.0,
             tolerance_px: 0.02,
             cell_px: 3.0,
+            hessian_every: 4,
         }
     }
 }
@@ -190,9 +215,13 @@ pub fn refine(
     let mut current = scene.evaluate(param, &x);
     let mut lambda = 1e-3;
     let (mut iterations, mut converged) = (0, false);
+    let mut a = Matrix6::zeros();
     while iterations < options.max_iterations && !converged {
+        // The curvature (12 gradient evaluations) is refreshed every few iterations only.
+        if iterations % options.hessian_every.max(1) == 0 {
+            a = positive_curvature(&hessian(scene, param, &x, &fd));
+        }
         iterations += 1;
-        let a = positive_curvature(&hessian(scene, param, &x, &fd));
         let mut accepted = false;
         while lambda < 1e8 {
             let damped = a + Matrix6::from_diagonal(&a.diagonal()) * lambda;
@@ -221,6 +250,24 @@ pub fn refine(
     finish(scene, param, x, &fd, options, iterations, converged)
 }
 
+/// Variance assigned along a direction of zero or negative MI curvature (unconstrained).
+pub const UNCONSTRAINED_VARIANCE: f64 = 1e6;
+
+/// Inverse of the information on its positive eigen-directions; directions where the MI
+/// is flat or curves upwards (not a maximum) get [`UNCONSTRAINED_VARIANCE`].
+fn covariance_of(information: &Matrix6<f64>) -> Matrix6<f64> {
+    let eig = SymmetricEigen::new(*information);
+    let top = eig.eigenvalues.max().max(0.0);
+    let inv = eig.eigenvalues.map(|e| {
+        if e > 1e-12 * top && e > 0.0 {
+            1.0 / e
+        } else {
+            UNCONSTRAINED_VARIANCE
+        }
+    });
+    eig.eigenvectors * Matrix6::from_diagonal(&inv) * eig.eigenvectors.transpose()
+}
+
 fn finish(
     scene: &MiScene,
     param: PoseParam,
@@ -234,9 +281,7 @@ fn finish(
     let h = hessian(scene, param, &x, fd);
     let n_eff = scene.occupied_cells(&t, options.cell_px).max(1);
     let information = -h * n_eff as f64;
-    let covariance = information
-        .try_inverse()
-        .unwrap_or_else(|| Matrix6::from_diagonal_element(f64::INFINITY));
+    let covariance = covariance_of(&information);
     let ppu = scene.pixels_per_unit(param, &x);
     let definite = SymmetricEigen::new(information).eigenvalues.min() > 0.0;
     let observability = std::array::from_fn(|k| {

@@ -6,7 +6,7 @@ use msreg_estimator::camera::Camera;
 use nalgebra::{Isometry3, Vector3, Vector6};
 
 use super::scene::{highpass, MiScene, PoseParam};
-use super::search::{grid_search, refine, GridAxis, RefineOptions, Refined};
+use super::search::{grid_search, refine, GridAxis, GridScore, RefineOptions, Refined};
 use crate::pointcloud::PointCloud;
 use crate::vision::GrayImage;
 
@@ -58,10 +58,12 @@ impl Default for TargetlessOptions {
         Self {
             grid_rot_deg: 3.0,
             grid_trans_m: 0.15,
-            grid_levels: 3,
+            // The 6-DoF grid finds higher-MI poses degrees away on real single-pair data
+            // (docs/prior_map.md); off by default, the refinement stays local.
+            grid_levels: 0,
             grid_blur_px: 8.0,
             grid_subsample: 4,
-            refine_blur_px: vec![4.0, 2.0, 1.0],
+            refine_blur_px: vec![2.0, 1.0],
             refine: RefineOptions::default(),
             margin_px: -50.0,
             min_points: 500,
@@ -178,9 +180,13 @@ pub fn calibrate_targetless(
         (*initial, 0)
     } else {
         let coarse = scene.subsampled(options.grid_subsample);
-        let grid = grid_search(&coarse, &axes, options.grid_levels, |v| {
-            param.retract(initial, &Vector6::from_column_slice(v))
-        });
+        let grid = grid_search(
+            &coarse,
+            &axes,
+            options.grid_levels,
+            GridScore::Smoothed,
+            |v| param.retract(initial, &Vector6::from_column_slice(v)),
+        );
         let x = param.retract(initial, &Vector6::from_column_slice(&grid.best));
         (x, grid.evaluations)
     };

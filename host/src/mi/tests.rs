@@ -8,7 +8,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::histogram::{bspline3, hard_mi, BSplineHistogram};
 use super::scene::{MiScene, PoseParam};
-use super::search::{grid_search, refine, GridAxis, RefineOptions};
+use super::search::{grid_search, refine, GridAxis, GridScore, RefineOptions};
 use super::synthetic::synthetic_ground;
 
 #[test]
@@ -120,7 +120,7 @@ fn grid_and_refinement_recover_the_synthetic_camera_inside_three_sigma() {
         );
         x.inverse()
     };
-    let grid = grid_search(&coarse.subsampled(4), &axes, 4, pose);
+    let grid = grid_search(&coarse.subsampled(4), &axes, 4, GridScore::Smoothed, pose);
     let x0 = pose(&grid.best).inverse();
     let r = refine(
         &fine,
