@@ -155,9 +155,10 @@ fn grid_and_refinement_recover_the_synthetic_camera_inside_three_sigma() {
             sig[k + 3]
         );
     }
-    assert!(dp.norm() < 0.05, "position error {} m", dp.norm());
+    // Measured 3.5 mm / 0.023 deg; about 3x.
+    assert!(dp.norm() < 0.012, "position error {} m", dp.norm());
     assert!(
-        dr.norm().to_degrees() < 0.1,
+        dr.norm().to_degrees() < 0.07,
         "rotation error {} deg",
         dr.norm().to_degrees()
     );
