@@ -152,7 +152,13 @@ fn isometry(p: &Pose<f64>) -> Isometry3<f64> {
 /// Runs the calibration on a dataset directory; `Err` is bad input (exit code 2).
 pub fn calibrate(args: &CalibrateLidarCamera) -> anyhow::Result<Outcome> {
     if args.targetless {
-        return crate::mi::cli::calibrate(args);
+        return crate::mi::cli::calibrate(&crate::mi::cli::TargetlessArgs {
+            dataset: &args.dataset,
+            initial: args.initial.as_deref(),
+            output: &args.output,
+            report: args.report.as_deref(),
+            overlay: args.overlay.as_deref(),
+        });
     }
     let data = LidarCameraDataset::open(&args.dataset)?;
     let options = CalibrationOptions {

@@ -1,4 +1,5 @@
-//! `msreg calibrate lidar-camera <dataset> --targetless --initial guess.yaml`: loads the
+//! `msreg calibrate lidar-camera <dataset> --targetless --initial guess.yaml` (routed here
+//! by `lidar_camera::cli` with [`TargetlessArgs`]): loads the
 //! first image and the scan nearest to it, runs [`super::targetless`], writes the result
 //! (`cam0_lidar0` with sigmas, plus a `cam0_lidar0_mi` section), an optional JSON report
 //! and overlays before / after.
@@ -15,9 +16,7 @@ use super::search::{Observability, Refined};
 use super::targetless::{calibrate_targetless, TargetlessOptions, TargetlessResult};
 use crate::camera_yaml::read_camera_yaml;
 use crate::command::Outcome;
-use crate::dataset::{CalibrationResult, ExtrinsicEstimate};
-use crate::lidar_camera::cli::CalibrateLidarCamera;
-use crate::lidar_camera::pipeline::read_image_list;
+use crate::dataset::{list_scans, read_camera_csv, CalibrationResult, ExtrinsicEstimate};
 use crate::pointcloud::{read_pcd, PointCloud};
 use crate::vision::GrayImage;
 
@@ -50,30 +49,30 @@ struct Report {
 /// The scan file of `lidar0/` nearest in time to `stamp`.
 fn nearest_scan(root: &Path, stamp: u64) -> anyhow::Result<PathBuf> {
     let dir = root.join("lidar0");
-    let entries =
-        std::fs::read_dir(&dir).with_context(|| format!("{}: cannot list", dir.display()))?;
-    let mut best: Option<(u64, PathBuf)> = None;
-    for e in entries.flatten() {
-        let path = e.path();
-        let Some(s) = path
-            .file_stem()
-            .and_then(|s| s.to_str())
-            .filter(|_| path.extension().is_some_and(|x| x == "pcd"))
-            .and_then(|s| s.parse::<u64>().ok())
-        else {
-            continue;
-        };
-        let d = s.abs_diff(stamp);
-        if best.as_ref().is_none_or(|(bd, _)| d < *bd) {
-            best = Some((d, path));
-        }
-    }
-    best.map(|(_, p)| p)
+    list_scans(&dir)?
+        .into_iter()
+        .min_by_key(|s| s.stamp_ns.abs_diff(stamp))
+        .map(|s| s.path)
         .ok_or_else(|| anyhow!("{}: no <timestamp_ns>.pcd scan", dir.display()))
 }
 
+/// Arguments of the targetless command (from `msreg calibrate lidar-camera --targetless`).
+#[derive(Clone, Copy, Debug)]
+pub struct TargetlessArgs<'a> {
+    /// Dataset directory.
+    pub dataset: &'a Path,
+    /// Result file with the initial `cam0_lidar0.T_cam_lidar`.
+    pub initial: Option<&'a Path>,
+    /// Result YAML.
+    pub output: &'a Path,
+    /// JSON report.
+    pub report: Option<&'a Path>,
+    /// Overlay PNG (default: the output with extension png).
+    pub overlay: Option<&'a Path>,
+}
+
 /// The initial `T_cam_lidar` from a result file.
-fn read_initial(path: Option<&PathBuf>) -> anyhow::Result<Isometry3<f64>> {
+fn read_initial(path: Option<&Path>) -> anyhow::Result<Isometry3<f64>> {
     let path = path.ok_or_else(|| {
         anyhow!("--targetless needs --initial guess.yaml (a result file with cam0_lidar0)")
     })?;
@@ -85,14 +84,14 @@ fn read_initial(path: Option<&PathBuf>) -> anyhow::Result<Isometry3<f64>> {
 }
 
 /// Runs the targetless calibration; `Err` is bad input (exit code 2).
-pub fn calibrate(args: &CalibrateLidarCamera) -> anyhow::Result<Outcome> {
-    let initial = read_initial(args.initial.as_ref())?;
-    let root = &args.dataset;
+pub fn calibrate(args: &TargetlessArgs<'_>) -> anyhow::Result<Outcome> {
+    let initial = read_initial(args.initial)?;
+    let root = args.dataset;
     let camera = read_camera_yaml(&root.join("cam0/camera.yaml"))?;
-    let images = read_image_list(&root.join("cam0/data.csv"))?;
+    let images = read_camera_csv(root.join("cam0/data.csv"))?;
     let (stamp, image_path) = images
         .first()
-        .cloned()
+        .map(|f| (f.stamp_ns, f.path.clone()))
         .ok_or_else(|| anyhow!("{}: no image listed", root.join("cam0/data.csv").display()))?;
     let image = GrayImage::load(&image_path)?;
     let scan_path = nearest_scan(root, stamp)?;
@@ -117,13 +116,12 @@ pub fn calibrate(args: &CalibrateLidarCamera) -> anyhow::Result<Outcome> {
     }
     .to_yaml_string();
     text.push_str(&mi_section("cam0_lidar0_mi", refined));
-    std::fs::write(&args.output, text)
+    std::fs::write(args.output, text)
         .with_context(|| format!("{}: cannot write", args.output.display()))?;
-    print_summary(&args.output, &result, seconds);
+    print_summary(args.output, &result, seconds);
     let overlay = args
         .overlay
-        .clone()
-        .unwrap_or_else(|| args.output.with_extension("png"));
+        .map_or_else(|| args.output.with_extension("png"), Path::to_path_buf);
     write_overlay(&overlay, &image, &cloud, &camera, &refined.x)?;
     let before = overlay.with_file_name(format!(
         "{}_initial.png",
@@ -133,7 +131,7 @@ pub fn calibrate(args: &CalibrateLidarCamera) -> anyhow::Result<Outcome> {
             .unwrap_or("overlay")
     ));
     write_overlay(&before, &image, &cloud, &camera, &initial)?;
-    if let Some(path) = &args.report {
+    if let Some(path) = args.report {
         let report = make_report(args, &image_path, &scan_path, &result, &estimate, seconds);
         std::fs::write(path, serde_json::to_string_pretty(&report)?)
             .with_context(|| format!("{}: cannot write report", path.display()))?;
@@ -197,7 +195,7 @@ fn print_summary(output: &Path, result: &TargetlessResult, seconds: f64) {
 }
 
 fn make_report(
-    args: &CalibrateLidarCamera,
+    args: &TargetlessArgs<'_>,
     image: &Path,
     scan: &Path,
     result: &TargetlessResult,
