@@ -12,6 +12,7 @@ pub mod infra;
 pub mod lidar;
 pub mod lidar_camera;
 pub mod link;
+pub mod mi;
 pub mod ndt;
 pub mod plot;
 pub mod pointcloud;

@@ -75,6 +75,13 @@ pub struct CalibrateLidarCamera {
     /// PNG of the LiDAR edge points projected on one image (default: beside the report).
     #[arg(long)]
     pub overlay: Option<PathBuf>,
+    /// No board: maximise the mutual information of LiDAR intensity and image intensity
+    /// (docs/prior_map.md); needs `--initial`.
+    #[arg(long)]
+    pub targetless: bool,
+    /// Initial guess: a result file with `cam0_lidar0.T_cam_lidar` (with `--targetless`).
+    #[arg(long)]
+    pub initial: Option<PathBuf>,
 }
 
 /// Writes a simulated dataset.
@@ -144,6 +151,15 @@ fn isometry(p: &Pose<f64>) -> Isometry3<f64> {
 
 /// Runs the calibration on a dataset directory; `Err` is bad input (exit code 2).
 pub fn calibrate(args: &CalibrateLidarCamera) -> anyhow::Result<Outcome> {
+    if args.targetless {
+        return crate::mi::cli::calibrate(&crate::mi::cli::TargetlessArgs {
+            dataset: &args.dataset,
+            initial: args.initial.as_deref(),
+            output: &args.output,
+            report: args.report.as_deref(),
+            overlay: args.overlay.as_deref(),
+        });
+    }
     let data = LidarCameraDataset::open(&args.dataset)?;
     let options = CalibrationOptions {
         method: match args.method {

@@ -1,0 +1,275 @@
+//! `msreg calibrate lidar-camera <dataset> --targetless --initial guess.yaml` (routed here
+//! by `lidar_camera::cli` with [`TargetlessArgs`]): loads the
+//! first image and the scan nearest to it, runs [`super::targetless`], writes the result
+//! (`cam0_lidar0` with sigmas, plus a `cam0_lidar0_mi` section), an optional JSON report
+//! and overlays before / after.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{anyhow, Context};
+use msreg_estimator::camera::Camera;
+use nalgebra::Isometry3;
+use serde::Serialize;
+
+use super::scene::rank_normalize;
+use super::search::{Observability, Refined};
+use super::targetless::{calibrate_targetless, TargetlessOptions, TargetlessResult};
+use crate::camera_yaml::read_camera_yaml;
+use crate::command::Outcome;
+use crate::dataset::{list_scans, read_camera_csv, CalibrationResult, ExtrinsicEstimate};
+use crate::pointcloud::{read_pcd, PointCloud};
+use crate::vision::GrayImage;
+
+/// Names of the six DoF of `delta`.
+pub const DOF_NAMES: [&str; 6] = ["rot_x", "rot_y", "rot_z", "x", "y", "z"];
+
+/// JSON report of a targetless run.
+#[derive(Serialize)]
+struct Report {
+    dataset: String,
+    image: String,
+    scan: String,
+    points_used: usize,
+    grid_evaluations: usize,
+    iterations: usize,
+    converged: bool,
+    mi_initial: f64,
+    mi: f64,
+    nmi: f64,
+    mi_hard: f64,
+    nmi_hard: f64,
+    n_eff: usize,
+    sigma_rot_deg: [f64; 3],
+    sigma_trans_m: [f64; 3],
+    observability: Vec<(String, Observability)>,
+    t_cam_lidar: [[f64; 4]; 4],
+    seconds: f64,
+}
+
+/// The scan file of `lidar0/` nearest in time to `stamp`.
+fn nearest_scan(root: &Path, stamp: u64) -> anyhow::Result<PathBuf> {
+    let dir = root.join("lidar0");
+    list_scans(&dir)?
+        .into_iter()
+        .min_by_key(|s| s.stamp_ns.abs_diff(stamp))
+        .map(|s| s.path)
+        .ok_or_else(|| anyhow!("{}: no <timestamp_ns>.pcd scan", dir.display()))
+}
+
+/// Arguments of the targetless command (from `msreg calibrate lidar-camera --targetless`).
+#[derive(Clone, Copy, Debug)]
+pub struct TargetlessArgs<'a> {
+    /// Dataset directory.
+    pub dataset: &'a Path,
+    /// Result file with the initial `cam0_lidar0.T_cam_lidar`.
+    pub initial: Option<&'a Path>,
+    /// Result YAML.
+    pub output: &'a Path,
+    /// JSON report.
+    pub report: Option<&'a Path>,
+    /// Overlay PNG (default: the output with extension png).
+    pub overlay: Option<&'a Path>,
+}
+
+/// The initial `T_cam_lidar` from a result file.
+fn read_initial(path: Option<&Path>) -> anyhow::Result<Isometry3<f64>> {
+    let path = path.ok_or_else(|| {
+        anyhow!("--targetless needs --initial guess.yaml (a result file with cam0_lidar0)")
+    })?;
+    let result = CalibrationResult::read(path)?;
+    result
+        .cam0_lidar0
+        .map(|e| e.transform)
+        .ok_or_else(|| anyhow!("{}: no cam0_lidar0.T_cam_lidar section", path.display()))
+}
+
+/// Runs the targetless calibration; `Err` is bad input (exit code 2).
+pub fn calibrate(args: &TargetlessArgs<'_>) -> anyhow::Result<Outcome> {
+    let initial = read_initial(args.initial)?;
+    let root = args.dataset;
+    let camera = read_camera_yaml(&root.join("cam0/camera.yaml"))?;
+    let images = read_camera_csv(root.join("cam0/data.csv"))?;
+    let (stamp, image_path) = images
+        .first()
+        .map(|f| (f.stamp_ns, f.path.clone()))
+        .ok_or_else(|| anyhow!("{}: no image listed", root.join("cam0/data.csv").display()))?;
+    let image = GrayImage::load(&image_path)?;
+    let scan_path = nearest_scan(root, stamp)?;
+    let cloud = read_pcd(&scan_path)?;
+    let clock = std::time::Instant::now();
+    let result = match calibrate_targetless(
+        &cloud,
+        &image,
+        &camera,
+        &initial,
+        &TargetlessOptions::default(),
+    ) {
+        Ok(r) => r,
+        Err(e) => return Ok(Outcome::NotConverged(e.to_string())),
+    };
+    let seconds = clock.elapsed().as_secs_f64();
+    let refined = &result.refined;
+    let estimate = ExtrinsicEstimate::from_covariance(refined.x, 0.0, &refined.covariance);
+    let mut text = CalibrationResult {
+        cam0_lidar0: Some(estimate),
+        ..CalibrationResult::default()
+    }
+    .to_yaml_string();
+    text.push_str(&mi_section("cam0_lidar0_mi", refined));
+    std::fs::write(args.output, text)
+        .with_context(|| format!("{}: cannot write", args.output.display()))?;
+    print_summary(args.output, &result, seconds);
+    let overlay = args
+        .overlay
+        .map_or_else(|| args.output.with_extension("png"), Path::to_path_buf);
+    write_overlay(&overlay, &image, &cloud, &camera, &refined.x)?;
+    let before = overlay.with_file_name(format!(
+        "{}_initial.png",
+        overlay
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .unwrap_or("overlay")
+    ));
+    write_overlay(&before, &image, &cloud, &camera, &initial)?;
+    if let Some(path) = args.report {
+        let report = make_report(args, &image_path, &scan_path, &result, &estimate, seconds);
+        std::fs::write(path, serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("{}: cannot write report", path.display()))?;
+    }
+    let poor: Vec<&str> = DOF_NAMES
+        .iter()
+        .zip(&refined.observability)
+        .filter(|(_, o)| **o == Observability::Poor)
+        .map(|(n, _)| *n)
+        .collect();
+    Ok(if !refined.converged {
+        Outcome::NotConverged("the MI refinement hit its iteration limit".into())
+    } else if !poor.is_empty() {
+        Outcome::NotConverged(format!(
+            "the MI has no clear maximum along {} (flat or not a maximum there; see \
+             docs/prior_map.md)",
+            poor.join(", ")
+        ))
+    } else {
+        Outcome::Converged
+    })
+}
+
+/// A YAML section with the MI / NMI scores and per-DoF observability.
+pub fn mi_section(name: &str, r: &Refined) -> String {
+    let obs: Vec<String> = DOF_NAMES
+        .iter()
+        .zip(&r.observability)
+        .map(|(n, o)| format!("{n}: {}", format!("{o:?}").to_lowercase()))
+        .collect();
+    format!(
+        "{name}:\n  mi: {}\n  nmi: {}\n  mi_hard: {}\n  nmi_hard: {}\n  samples: {}\n  \
+         n_eff: {}\n  observability: {{{}}}\n",
+        r.smoothed.mi,
+        r.smoothed.nmi,
+        r.hard.mi,
+        r.hard.nmi,
+        r.smoothed.samples,
+        r.n_eff,
+        obs.join(", ")
+    )
+}
+
+fn print_summary(output: &Path, result: &TargetlessResult, seconds: f64) {
+    let r = &result.refined;
+    let names: Vec<String> = DOF_NAMES
+        .iter()
+        .zip(&r.observability)
+        .map(|(n, o)| format!("{n} {o:?}"))
+        .collect();
+    eprintln!(
+        "msreg: wrote {} (MI {:.4} nats, NMI {:.4}, {} points, {} iterations, {:.1} s; {})",
+        output.display(),
+        r.smoothed.mi,
+        r.smoothed.nmi,
+        result.points_used,
+        r.iterations,
+        seconds,
+        names.join(", ")
+    );
+}
+
+fn make_report(
+    args: &TargetlessArgs<'_>,
+    image: &Path,
+    scan: &Path,
+    result: &TargetlessResult,
+    estimate: &ExtrinsicEstimate,
+    seconds: f64,
+) -> Report {
+    let r = &result.refined;
+    let m = r.x.to_homogeneous();
+    Report {
+        dataset: args.dataset.display().to_string(),
+        image: image.display().to_string(),
+        scan: scan.display().to_string(),
+        points_used: result.points_used,
+        grid_evaluations: result.grid_evaluations,
+        iterations: r.iterations,
+        converged: r.converged,
+        mi_initial: f64::NAN,
+        mi: r.smoothed.mi,
+        nmi: r.smoothed.nmi,
+        mi_hard: r.hard.mi,
+        nmi_hard: r.hard.nmi,
+        n_eff: r.n_eff,
+        sigma_rot_deg: estimate.sigma_rot_deg.into(),
+        sigma_trans_m: estimate.sigma_trans_m.into(),
+        observability: DOF_NAMES
+            .iter()
+            .zip(&r.observability)
+            .map(|(n, o)| (n.to_string(), *o))
+            .collect(),
+        t_cam_lidar: std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)])),
+        seconds,
+    }
+}
+
+/// A colour map from blue (0) through green to red (1).
+fn colour(x: f32) -> [u8; 3] {
+    let x = x.clamp(0.0, 1.0);
+    let r = (1.5 - (4.0 * x - 3.0).abs()).clamp(0.0, 1.0);
+    let g = (1.5 - (4.0 * x - 2.0).abs()).clamp(0.0, 1.0);
+    let b = (1.5 - (4.0 * x - 1.0).abs()).clamp(0.0, 1.0);
+    [(r * 255.0) as u8, (g * 255.0) as u8, (b * 255.0) as u8]
+}
+
+/// The image (grey) with every point projected by `t_cam_src`, coloured by its
+/// rank-normalised intensity (blue low, red high).
+pub fn write_overlay(
+    path: &Path,
+    image: &GrayImage,
+    cloud: &PointCloud,
+    camera: &Camera<f64>,
+    t_cam_src: &Isometry3<f64>,
+) -> anyhow::Result<()> {
+    let grey = image.to_luma8();
+    let mut rgb = image::RgbImage::from_fn(grey.width(), grey.height(), |x, y| {
+        let v = grey.get_pixel(x, y).0[0];
+        image::Rgb([v, v, v])
+    });
+    let values: Vec<f32> = cloud.points.iter().map(|p| p.intensity).collect();
+    let ranks = rank_normalize(&values);
+    for (p, &rank) in cloud.points.iter().zip(&ranks) {
+        let pc = t_cam_src * nalgebra::Point3::from(p.xyz);
+        if pc.z < 0.5 {
+            continue;
+        }
+        let Some(q) = camera.project(&pc.coords) else {
+            continue;
+        };
+        let (u, v) = (q.pixel.x.round() as i64, q.pixel.y.round() as i64);
+        for (x, y) in [(u, v), (u + 1, v), (u, v + 1), (u + 1, v + 1)] {
+            if x >= 0 && y >= 0 && (x as u32) < rgb.width() && (y as u32) < rgb.height() {
+                rgb.put_pixel(x as u32, y as u32, image::Rgb(colour(rank)));
+            }
+        }
+    }
+    rgb.save(path)
+        .with_context(|| format!("{}: cannot write overlay", path.display()))
+}

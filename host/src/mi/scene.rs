@@ -1,0 +1,374 @@
+//! The registration problem: points with normalised intensity, a normalised grey image,
+//! a camera model and a pose parametrisation; the smoothed MI and its analytic gradient.
+
+use msreg_estimator::camera::Camera;
+use nalgebra::{Isometry3, Matrix3, Matrix3x6, Translation3, UnitQuaternion, Vector3, Vector6};
+use rayon::prelude::*;
+
+use super::histogram::{hard_mi, BSplineHistogram, MiScore};
+use crate::vision::GrayImage;
+
+/// Samples per rayon task.
+const CHUNK: usize = 4096;
+
+/// How the 6-vector `delta = [omega (rad); v (m)]` moves the state pose `X`:
+/// `X (+) delta = (R Exp(omega), t + v)` (CONVENTIONS.md: right rotation perturbation,
+/// additive translation). The state is either the camera-from-points transform or its
+/// inverse.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PoseParam {
+    /// `X = T_cam_src` (LiDAR-camera: `T_cam_lidar`).
+    CamFromSource,
+    /// `X = T_src_cam` (prior map: `T_world_cam`).
+    SourceFromCam,
+}
+
+impl PoseParam {
+    /// `X (+) delta`.
+    pub fn retract(self, x: &Isometry3<f64>, delta: &Vector6<f64>) -> Isometry3<f64> {
+        let omega = Vector3::new(delta[0], delta[1], delta[2]);
+        let v = Vector3::new(delta[3], delta[4], delta[5]);
+        Isometry3::from_parts(
+            Translation3::from(x.translation.vector + v),
+            x.rotation * UnitQuaternion::from_scaled_axis(omega),
+        )
+    }
+
+    /// `T_cam_src` of state `X`.
+    pub fn t_cam_src(self, x: &Isometry3<f64>) -> Isometry3<f64> {
+        match self {
+            PoseParam::CamFromSource => *x,
+            PoseParam::SourceFromCam => x.inverse(),
+        }
+    }
+
+    /// `d p_cam / d delta` at `delta = 0` for a point `p_src` imaged at `p_cam`.
+    pub fn point_jacobian(
+        self,
+        x: &Isometry3<f64>,
+        p_src: &Vector3<f64>,
+        p_cam: &Vector3<f64>,
+    ) -> Matrix3x6<f64> {
+        let mut j = Matrix3x6::zeros();
+        let r = x.rotation.to_rotation_matrix().into_inner();
+        match self {
+            PoseParam::CamFromSource => {
+                j.fixed_view_mut::<3, 3>(0, 0)
+                    .copy_from(&(-r * p_src.cross_matrix()));
+                j.fixed_view_mut::<3, 3>(0, 3)
+                    .copy_from(&Matrix3::identity());
+            }
+            PoseParam::SourceFromCam => {
+                j.fixed_view_mut::<3, 3>(0, 0)
+                    .copy_from(&p_cam.cross_matrix());
+                j.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-r.transpose()));
+            }
+        }
+        j
+    }
+}
+
+/// A grey image with values in [0, 1], sampled bilinearly with its exact derivative.
+#[derive(Clone, Debug)]
+pub struct UnitImage {
+    width: usize,
+    height: usize,
+    data: Vec<f32>,
+}
+
+/// Histogram equalisation of a 0..255 image (a monotonic map, so MI is unchanged up to
+/// binning, and the bins are equally filled): values in [0, 1].
+pub fn equalize(image: &GrayImage) -> GrayImage {
+    let mut hist = [0usize; 256];
+    for &v in image.data() {
+        hist[v.round().clamp(0.0, 255.0) as usize] += 1;
+    }
+    let n = image.data().len().max(1) as f32;
+    let mut cdf = [0.0f32; 256];
+    let mut acc = 0usize;
+    for (i, h) in hist.iter().enumerate() {
+        cdf[i] = (acc as f32 + 0.5 * *h as f32) / n;
+        acc += h;
+    }
+    let data = image
+        .data()
+        .iter()
+        .map(|&v| cdf[v.round().clamp(0.0, 255.0) as usize])
+        .collect();
+    GrayImage::from_vec(image.width(), image.height(), data).unwrap_or_else(|| image.clone())
+}
+
+/// `image - gaussian_blur(image, sigma_px) + 128`: removes shading and large-scale
+/// brightness (sky, shadows) so the MI is driven by local texture (markings, edges).
+pub fn highpass(image: &GrayImage, sigma_px: f64) -> GrayImage {
+    let low = image.gaussian_blur(sigma_px);
+    let data = image
+        .data()
+        .iter()
+        .zip(low.data())
+        .map(|(a, b)| a - b + 128.0)
+        .collect();
+    GrayImage::from_vec(image.width(), image.height(), data).unwrap_or_else(|| image.clone())
+}
+
+/// Rank-normalised intensities in [0, 1] (ties share their mean rank).
+pub fn rank_normalize(values: &[f32]) -> Vec<f32> {
+    let mut order: Vec<usize> = (0..values.len()).collect();
+    order.sort_by(|&a, &b| values[a].total_cmp(&values[b]));
+    let mut out = vec![0.0f32; values.len()];
+    let denom = (values.len().max(2) - 1) as f32;
+    let mut i = 0;
+    while i < order.len() {
+        let mut j = i;
+        while j + 1 < order.len() && values[order[j + 1]].total_cmp(&values[order[i]]).is_eq() {
+            j += 1;
+        }
+        let rank = 0.5 * (i + j) as f32 / denom;
+        for &k in &order[i..=j] {
+            out[k] = rank;
+        }
+        i = j + 1;
+    }
+    out
+}
+
+impl UnitImage {
+    /// Equalised and blurred with a Gaussian of `sigma_px`.
+    pub fn from_gray(image: &GrayImage, sigma_px: f64) -> Self {
+        let eq = equalize(image).gaussian_blur(sigma_px);
+        Self {
+            width: eq.width(),
+            height: eq.height(),
+            data: eq.data().to_vec(),
+        }
+    }
+
+    /// Value and `(d/du, d/dv)` at `(u, v)`; `None` off the image.
+    #[inline]
+    pub fn sample(&self, u: f64, v: f64) -> Option<(f32, f64, f64)> {
+        if !(u >= 0.0 && v >= 0.0) {
+            return None;
+        }
+        let (x0, y0) = (u as usize, v as usize);
+        if x0 + 1 >= self.width || y0 + 1 >= self.height {
+            return None;
+        }
+        let (fx, fy) = (u - x0 as f64, v - y0 as f64);
+        let i = y0 * self.width + x0;
+        let a = f64::from(self.data[i]);
+        let b = f64::from(self.data[i + 1]);
+        let c = f64::from(self.data[i + self.width]);
+        let d = f64::from(self.data[i + self.width + 1]);
+        let top = a + (b - a) * fx;
+        let bottom = c + (d - c) * fx;
+        let value = top + (bottom - top) * fy;
+        let du = (b - a) * (1.0 - fy) + (d - c) * fy;
+        let dv = bottom - top;
+        Some((value as f32, du, dv))
+    }
+}
+
+/// Points (with rank-normalised intensity) against one image.
+#[derive(Clone, Debug)]
+pub struct MiScene {
+    /// Points in the source frame (LiDAR or world).
+    pub points: Vec<Vector3<f64>>,
+    /// Their intensity in [0, 1].
+    pub values: Vec<f32>,
+    /// The image, normalised and blurred.
+    pub image: UnitImage,
+    /// The camera model.
+    pub camera: Camera<f64>,
+    /// Bins per histogram axis.
+    pub bins: usize,
+    /// Points closer than this to the camera are ignored (m).
+    pub min_depth: f64,
+}
+
+/// One evaluation with its gradient w.r.t. `delta`.
+#[derive(Clone, Copy, Debug)]
+pub struct Evaluated {
+    /// Smoothed MI (and NMI) score.
+    pub score: MiScore,
+    /// `d MI / d delta`.
+    pub gradient: Vector6<f64>,
+}
+
+impl MiScene {
+    /// A scene; raw point intensities are rank-normalised, the image equalised and blurred.
+    pub fn new(
+        points: Vec<Vector3<f64>>,
+        intensities: &[f32],
+        image: &GrayImage,
+        camera: Camera<f64>,
+        blur_px: f64,
+    ) -> Self {
+        Self {
+            points,
+            values: rank_normalize(intensities),
+            image: UnitImage::from_gray(image, blur_px),
+            camera,
+            bins: 24,
+            min_depth: 0.5,
+        }
+    }
+
+    /// The same points on the image blurred by `blur_px` (coarse-to-fine).
+    pub fn with_image(&self, image: &GrayImage, blur_px: f64) -> Self {
+        Self {
+            image: UnitImage::from_gray(image, blur_px),
+            ..self.clone()
+        }
+    }
+
+    /// Every `step`-th point (coarse grid levels).
+    pub fn subsampled(&self, step: usize) -> Self {
+        let step = step.max(1);
+        Self {
+            points: self.points.iter().step_by(step).copied().collect(),
+            values: self.values.iter().step_by(step).copied().collect(),
+            ..self.clone()
+        }
+    }
+
+    /// Pixel of point `i` under `t_cam_src`, with the camera-frame point.
+    #[inline]
+    fn project(
+        &self,
+        t: &Isometry3<f64>,
+        i: usize,
+    ) -> Option<(msreg_estimator::camera::Projected<f64>, Vector3<f64>)> {
+        let pc = t.rotation * self.points[i] + t.translation.vector;
+        if pc.z < self.min_depth {
+            return None;
+        }
+        self.camera.project(&pc).map(|p| (p, pc))
+    }
+
+    /// `(point value, image value)` of every visible point.
+    pub fn pairs(&self, t_cam_src: &Isometry3<f64>) -> Vec<(f32, f32)> {
+        (0..self.points.len())
+            .into_par_iter()
+            .with_min_len(CHUNK)
+            .filter_map(|i| {
+                let (p, _) = self.project(t_cam_src, i)?;
+                let (b, _, _) = self.image.sample(p.pixel.x, p.pixel.y)?;
+                Some((self.values[i], b))
+            })
+            .collect()
+    }
+
+    /// Smoothed (B-spline) histogram under `t_cam_src`.
+    pub fn histogram(&self, t_cam_src: &Isometry3<f64>) -> BSplineHistogram {
+        let empty = || BSplineHistogram::new(self.bins);
+        (0..self.points.len())
+            .into_par_iter()
+            .with_min_len(CHUNK)
+            .fold(empty, |mut h, i| {
+                if let Some((p, _)) = self.project(t_cam_src, i) {
+                    if let Some((b, _, _)) = self.image.sample(p.pixel.x, p.pixel.y) {
+                        h.add(self.values[i], b);
+                    }
+                }
+                h
+            })
+            .reduce(empty, |a, b| a.merge(&b))
+    }
+
+    /// Smoothed histogram on one thread (the grid parallelises over candidates).
+    pub fn histogram_serial(&self, t_cam_src: &Isometry3<f64>) -> BSplineHistogram {
+        let mut h = BSplineHistogram::new(self.bins);
+        for i in 0..self.points.len() {
+            if let Some((p, _)) = self.project(t_cam_src, i) {
+                if let Some((b, _, _)) = self.image.sample(p.pixel.x, p.pixel.y) {
+                    h.add(self.values[i], b);
+                }
+            }
+        }
+        h
+    }
+
+    /// Hard-binned MI on one thread, without building the pair list (the grid's score).
+    pub fn hard_serial(&self, t_cam_src: &Isometry3<f64>) -> f64 {
+        let bins = self.bins;
+        let mut joint = vec![0.0f64; bins * bins];
+        let bin = |x: f32| ((x.clamp(0.0, 1.0) * bins as f32) as usize).min(bins - 1);
+        let mut n = 0;
+        for i in 0..self.points.len() {
+            if let Some((p, _)) = self.project(t_cam_src, i) {
+                if let Some((b, _, _)) = self.image.sample(p.pixel.x, p.pixel.y) {
+                    joint[bin(self.values[i]) * bins + bin(b)] += 1.0;
+                    n += 1;
+                }
+            }
+        }
+        super::histogram::score_of(&joint, bins, n).mi
+    }
+
+    /// Smoothed MI / NMI under `t_cam_src`.
+    pub fn smoothed(&self, t_cam_src: &Isometry3<f64>) -> MiScore {
+        self.histogram(t_cam_src).score()
+    }
+
+    /// Hard-binned MI / NMI under `t_cam_src`.
+    pub fn hard(&self, t_cam_src: &Isometry3<f64>) -> MiScore {
+        hard_mi(&self.pairs(t_cam_src), self.bins)
+    }
+
+    /// Smoothed MI at state `x` and its analytic gradient w.r.t. `delta` (the visible set
+    /// held fixed, so the point marginal is constant).
+    pub fn evaluate(&self, param: PoseParam, x: &Isometry3<f64>) -> Evaluated {
+        let t = param.t_cam_src(x);
+        let hist = self.histogram(&t);
+        let weights = hist.gradient_weights();
+        let sum = (0..self.points.len())
+            .into_par_iter()
+            .with_min_len(CHUNK)
+            .filter_map(|i| {
+                let (p, pc) = self.project(&t, i)?;
+                let (b, du, dv) = self.image.sample(p.pixel.x, p.pixel.y)?;
+                let s = hist.sample_derivative(&weights, self.values[i], b);
+                let j = p.jacobian * param.point_jacobian(x, &self.points[i], &pc);
+                let di = j.row(0) * du + j.row(1) * dv;
+                Some(di.transpose() * s)
+            })
+            .reduce(Vector6::zeros, |a, b| a + b);
+        let n = hist.total.max(1.0);
+        Evaluated {
+            score: hist.score(),
+            gradient: sum / n,
+        }
+    }
+
+    /// Mean image motion (px) per unit of each DoF of `delta`, over the visible points.
+    pub fn pixels_per_unit(&self, param: PoseParam, x: &Isometry3<f64>) -> Vector6<f64> {
+        let t = param.t_cam_src(x);
+        let (sum, n) = (0..self.points.len())
+            .into_par_iter()
+            .with_min_len(CHUNK)
+            .filter_map(|i| {
+                let (p, pc) = self.project(&t, i)?;
+                self.image.sample(p.pixel.x, p.pixel.y)?;
+                let j = p.jacobian * param.point_jacobian(x, &self.points[i], &pc);
+                Some(Vector6::from_fn(|k, _| j.column(k).norm()))
+            })
+            .fold(|| (Vector6::zeros(), 0usize), |(s, n), v| (s + v, n + 1))
+            .reduce(|| (Vector6::zeros(), 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        sum / n.max(1) as f64
+    }
+
+    /// Number of distinct `cell_px` x `cell_px` image cells the visible points fall in.
+    pub fn occupied_cells(&self, t_cam_src: &Isometry3<f64>, cell_px: f64) -> usize {
+        let cell = cell_px.max(1.0);
+        let mut cells: Vec<(i64, i64)> = (0..self.points.len())
+            .filter_map(|i| {
+                let (p, _) = self.project(t_cam_src, i)?;
+                self.image.sample(p.pixel.x, p.pixel.y)?;
+                Some(((p.pixel.x / cell) as i64, (p.pixel.y / cell) as i64))
+            })
+            .collect();
+        cells.sort_unstable();
+        cells.dedup();
+        cells.len()
+    }
+}
