@@ -41,6 +41,12 @@ pub struct FilterConfig<T: Scalar> {
     /// update, so a measurement that was not yet due when an IMU sample was propagated can
     /// be a little behind it one sample later; its `t_d` Jacobian absorbs the difference.
     pub max_late_ns: u64,
+    /// Largest factor by which a reprojection update's corner noise may be scaled when the
+    /// gate rejects the image at its stated noise: an image with NIS / dof up to this
+    /// squared is fused again with its noise scaled by sqrt(NIS / dof) (a frame-level
+    /// robust weight; real images carry blur and model errors that vary from frame to
+    /// frame). 1 turns it off: the plain gate.
+    pub max_noise_scale: T,
 }
 
 impl<T: Scalar> FilterConfig<T> {
@@ -53,6 +59,7 @@ impl<T: Scalar> FilterConfig<T> {
             health: HealthConfig::default(),
             zero_velocity_sigma: T::lit(0.01),
             max_late_ns: 1_000_000,
+            max_noise_scale: T::one(),
         }
     }
 }

@@ -5,6 +5,7 @@ pub mod camera_imu;
 pub mod convert;
 pub mod dynamic_init;
 pub mod extrinsic;
+pub mod gyro_bias;
 pub mod init;
 pub mod lidar_imu;
 pub mod pose_imu;

@@ -181,9 +181,13 @@ impl Doc {
         }
     }
 
+    /// A missing key is reported at line 1, where the top-level mapping it belongs in starts.
     fn get<'a>(&self, map: &'a Mapping, key: &str) -> Result<&'a Value, YamlError> {
-        map.get(key)
-            .ok_or_else(|| self.invalid(key, format!("missing key `{key}`")))
+        map.get(key).ok_or_else(|| YamlError::Invalid {
+            path: self.path.clone(),
+            line: 1,
+            message: format!("missing key `{key}`"),
+        })
     }
 
     fn string(&self, map: &Mapping, key: &str) -> Result<String, YamlError> {
@@ -398,12 +402,31 @@ fn target_from_doc(doc: &Doc) -> Result<Target, YamlError> {
             width_m: positive("width_m")?,
             height_m: positive("height_m")?,
         }),
-        "aprilgrid" => Ok(Target::AprilGrid(AprilGridTarget {
-            tag_cols: doc.count(map, "tagCols")?,
-            tag_rows: doc.count(map, "tagRows")?,
-            tag_size_m: positive("tagSize")?,
-            tag_spacing: positive("tagSpacing")?,
-        })),
+        "aprilgrid" => {
+            let grid = || -> Result<AprilGridTarget, YamlError> {
+                Ok(AprilGridTarget {
+                    tag_cols: doc.count(map, "tagCols")?,
+                    tag_rows: doc.count(map, "tagRows")?,
+                    tag_size_m: positive("tagSize")?,
+                    tag_spacing: positive("tagSpacing")?,
+                })
+            };
+            grid().map(Target::AprilGrid).map_err(|e| match e {
+                YamlError::Invalid {
+                    path,
+                    line,
+                    message,
+                } => YamlError::Invalid {
+                    path,
+                    line,
+                    message: format!(
+                        "{message} (an aprilgrid target needs tagCols, tagRows, tagSize and \
+                         tagSpacing)"
+                    ),
+                },
+                other => other,
+            })
+        }
         other => Err(doc.invalid(
             "target_type",
             format!(

@@ -42,11 +42,55 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         }
         meas.validate()?;
         let t = self.reachable_imu_time(s, meas.stamp_ns)?;
-        let mut draft = self.clone();
-        draft.advance_to(t)?;
-        let last = draft.imu_now.ok_or(Error::NotInitialized)?;
-        draft.flush_transition();
-        let noise = Matrix2::identity() * (meas.pixel_sigma * meas.pixel_sigma);
+        let dof = 2 * meas.corners.len();
+        let threshold = chi2::quantile::<T>(dof, self.config.gate);
+        // One pass at the stated noise; a frame the gate rejects with NIS / dof up to
+        // `max_noise_scale^2` gets a second pass with its noise scaled by sqrt(NIS / dof),
+        // as one IRLS step of a frame-level robust loss. One draft lives at a time (the
+        // loop reuses its slot), so the stack cost is that of a single pass.
+        let mut scale = T::one();
+        let mut first_nis = None;
+        let (nis, accepted, innovation) = loop {
+            let mut draft = self.clone();
+            let (nis, innovation) = draft.fuse_corners(s, f, camera, meas, t, scale)?;
+            let raw = *first_nis.get_or_insert(nis);
+            if nis <= threshold {
+                *self = draft;
+                break (raw, true, innovation);
+            }
+            let wanted = (nis / T::lit(dof as f64)).sqrt();
+            if scale > T::one() || wanted > self.config.max_noise_scale {
+                break (raw, false, innovation);
+            }
+            scale = wanted;
+        };
+        Ok(self.record_update(
+            UpdateKind::Reprojection,
+            s,
+            meas.stamp_ns,
+            (nis, dof, threshold),
+            accepted,
+            Some(&innovation),
+        ))
+    }
+
+    /// Sequential update of every corner of `meas` on this (draft) filter at IMU time `t`,
+    /// with the corner noise scaled by `scale`: the summed NIS (for a linear model that of
+    /// the stacked measurement) and the innovation statistics for the health monitor.
+    fn fuse_corners(
+        &mut self,
+        s: usize,
+        f: usize,
+        camera: &Camera<T>,
+        meas: &CornerSet<'_, T>,
+        t: u64,
+        scale: T,
+    ) -> Result<(T, ExtrinsicInnovation<T>), Error> {
+        self.advance_to(t)?;
+        let last = self.imu_now.ok_or(Error::NotInitialized)?;
+        self.flush_transition();
+        let sigma = meas.pixel_sigma * scale;
+        let noise = Matrix2::identity() * (sigma * sigma);
         let mut nis = T::zero();
         let mut innovation = ExtrinsicInnovation {
             rotation_info: Matrix3::zeros(),
@@ -55,25 +99,25 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
             translation_score: Vector3::zeros(),
         };
         for corner in meas.corners {
-            let target = draft.frames[f].ok_or(Error::FrameNotInitialized)?;
+            let target = self.frames[f].ok_or(Error::FrameNotInitialized)?;
             let lin = reprojection::linearize(
                 camera,
-                &draft.imu.pose(),
-                &draft.sensors[s].extrinsic,
+                &self.imu.pose(),
+                &self.sensors[s].extrinsic,
                 &target,
                 &corner.point_in_target,
                 &corner.pixel,
             )
             .ok_or(Error::NotProjectable)?;
-            let h = draft.reprojection_jacobian(s, f, &lin, &last.gyro);
+            let h = self.reprojection_jacobian(s, f, &lin, &last.gyro);
             let linearization = Linearization {
                 residual: lin.residual,
                 jacobian: h,
                 noise,
             };
-            let step = kalman_step_gated_at(&draft.cov, &linearization, T::lit(f64::INFINITY))?;
-            draft.apply_correction(&step.correction)?;
-            draft.cov = step.covariance;
+            let step = kalman_step_gated_at(&self.cov, &linearization, T::lit(f64::INFINITY))?;
+            self.apply_correction(&step.correction)?;
+            self.cov = step.covariance;
             nis += step.nis;
             let mut h_e = SMatrix::<T, 2, 6>::zeros();
             h_e.fixed_view_mut::<2, 3>(0, 0)
@@ -87,20 +131,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
             innovation.translation_info += part.translation_info;
             innovation.translation_score += part.translation_score;
         }
-        let dof = 2 * meas.corners.len();
-        let threshold = chi2::quantile::<T>(dof, self.config.gate);
-        let accepted = nis <= threshold;
-        if accepted {
-            *self = draft;
-        }
-        Ok(self.record_update(
-            UpdateKind::Reprojection,
-            s,
-            meas.stamp_ns,
-            (nis, dof, threshold),
-            accepted,
-            Some(&innovation),
-        ))
+        Ok((nis, innovation))
     }
 
     /// The 2 x N Jacobian of one corner. The time offset enters through the IMU pose at the

@@ -24,10 +24,11 @@ use serde::Serialize;
 
 use super::convert;
 use super::extrinsic::ImuExtrinsicCalibration;
+use super::gyro_bias;
 use super::init;
 use super::pose_imu::{
-    self, drive_imu, finish, initial_state, moving_start, with_moving_start, ImuHooks,
-    PoseImuError, PoseImuOptions, PoseImuReport, Run, Timing,
+    self, drive_imu, finish, initial_state, moving_start, with_gyro_bias, with_moving_start,
+    ImuHooks, PoseImuError, PoseImuOptions, PoseImuReport, Run, Timing,
 };
 use crate::dataset::{ExtrinsicEstimate, ImuNoiseYaml, ImuRecord, PoseRecord, PoseSensorYaml};
 use crate::vision::pnp::{solve_pnp, PnpSolution};
@@ -330,6 +331,11 @@ enum ExtrinsicPrior {
     Held,
 }
 
+/// Largest scale of an image's corner noise when the gate rejects it at its own noise
+/// (`FilterConfig::max_noise_scale`): images up to NIS / dof = 9 are fused down-weighted,
+/// beyond that they are outliers.
+const MAX_NOISE_SCALE: f64 = 3.0;
+
 /// Prior 1-sigma (rad, m, s) that holds the extrinsic and time offset in the verification
 /// pass: far below what the data resolve, far above the scalar's rounding.
 const HELD_SIGMA: f64 = 1e-6;
@@ -364,6 +370,7 @@ fn reprojection_calibration<T: Scalar>(
         mut ekf,
         prior,
         rotation_init,
+        gyro_bias_init,
     } = start_from_motion::<T>(input, options, standstill.as_ref(), motion, extrinsic_prior)?;
     let init_s = started.elapsed().as_secs_f64();
 
@@ -375,6 +382,10 @@ fn reprojection_calibration<T: Scalar>(
         next: 0,
         camera,
         pixel_sigma: T::lit(pixel_sigma),
+        frame_sigma: frame_poses(input.camera, input.frames)
+            .iter()
+            .filter_map(|p| Some((p.stamp_ns, frame_pixel_sigma(p)?)))
+            .collect(),
         prior,
         reprojection: Vec::new(),
         buffer: Vec::new(),
@@ -394,7 +405,7 @@ fn reprojection_calibration<T: Scalar>(
     }
     progress(1.0);
     let filter_s = started.elapsed().as_secs_f64();
-    let calibration = finish(
+    let mut calibration = finish(
         &ekf,
         run,
         standstill.as_ref(),
@@ -404,6 +415,7 @@ fn reprojection_calibration<T: Scalar>(
             filter: filter_s,
         },
     );
+    calibration.report.gyro_bias_init = gyro_bias_init;
     let accepted: Vec<f64> = reprojection
         .iter()
         .filter(|f| f.accepted)
@@ -436,6 +448,8 @@ struct StartFromMotion<T: Scalar> {
     ekf: CameraImuEkf<T>,
     prior: PoseImuOptions,
     rotation_init: init::RotationInit,
+    /// Where the starting gyro bias came from (report words).
+    gyro_bias_init: String,
 }
 
 fn start_from_motion<T: Scalar>(
@@ -461,6 +475,7 @@ fn start_from_motion<T: Scalar>(
         prior.time_offset_sigma_s,
     );
     let initial = initial_state::<T>(imu, standstill, &motion.t_imu_sensor.rotation, &prior)?;
+    let mut gyro_bias_init = "standstill mean".to_string();
     let initial = match standstill {
         // A moving start: the IMU state from the dynamic alignment on the PnP odometry.
         None => {
@@ -469,7 +484,16 @@ fn start_from_motion<T: Scalar>(
                 .map(camera_in_target)
                 .collect();
             let noise = input.imu_noise;
-            match moving_start(imu, &odometry, &motion.t_imu_sensor.rotation, noise) {
+            let rotation = motion.t_imu_sensor.rotation;
+            let increments = init::pose_increments(
+                &odometry,
+                nominal_frame_period_ns(input.frames).saturating_mul(3) / 2,
+            );
+            let bias =
+                gyro_bias::estimate_gyro_bias(imu, &increments, &rotation, &Vector3::zeros());
+            let (initial, words) = with_gyro_bias(initial, None, bias.as_ref());
+            gyro_bias_init = words;
+            match moving_start(imu, &odometry, &rotation, bias.as_ref(), noise) {
                 Ok(p) => with_moving_start(initial, &p),
                 Err(_) => initial,
             }
@@ -487,13 +511,17 @@ fn start_from_motion<T: Scalar>(
     } else {
         initial
     };
-    let config = FilterConfig::new(convert::imu_noise::<T>(input.imu_noise));
+    let config = FilterConfig {
+        max_noise_scale: T::lit(MAX_NOISE_SCALE),
+        ..FilterConfig::new(convert::imu_noise::<T>(input.imu_noise))
+    };
     let ekf = CameraImuEkf::<T>::new(&config, &initial)
         .map_err(|e| PoseImuError::BadInput(format!("imu0/imu.yaml: invalid noise ({e})")))?;
     Ok(StartFromMotion {
         ekf,
         prior,
         rotation_init,
+        gyro_bias_init,
     })
 }
 
@@ -506,7 +534,11 @@ fn reprojection_prior(
     let (sigma_r, sigma_t, sigma_td) = match extrinsic_prior {
         ExtrinsicPrior::AroundStart => {
             let (floor_r, floor_t, floor_td) = REPROJECTION_PRIOR_FLOOR;
-            let sd = |i: usize| motion.covariance[(i, i)].max(0.0).sqrt();
+            // MoCal's sigmas hold only as far as its noise model does: scaled up by its
+            // mean NIS per dof when that exceeds 1 (3-4 on EuRoC `imu_april`, whose PnP
+            // depth errors are correlated from image to image).
+            let inflation = motion.report.filter.mean_nis_per_dof.max(1.0).sqrt();
+            let sd = |i: usize| motion.covariance[(i, i)].max(0.0).sqrt() * inflation;
             (
                 (0..3).map(sd).fold(floor_r, f64::max),
                 (3..6).map(sd).fold(floor_t, f64::max),
@@ -546,7 +578,11 @@ struct CornerFeed<'a, T: Scalar> {
     frames: &'a [CornerFrame],
     next: usize,
     camera: Camera<T>,
+    /// Corner noise of the recording (the median image's), and the floor of each image's.
     pixel_sigma: T,
+    /// Each image's own corner noise from its PnP fit, by stamp: motion blur doubles it in
+    /// the fast part of EuRoC `imu_april` (0.15-0.2 px at rest, 0.3-0.5 px at 2 rad/s).
+    frame_sigma: std::collections::HashMap<u64, f64>,
     prior: PoseImuOptions,
     reprojection: Vec<FrameReprojection>,
     buffer: Vec<CornerObservation<T>>,
@@ -622,10 +658,15 @@ impl<T: Scalar> CornerFeed<'_, T> {
                 pixel: Vector2::new(T::lit(c.pixel.x), T::lit(c.pixel.y)),
             }));
         let before = self.mean_error(ekf);
+        let own = self
+            .frame_sigma
+            .get(&frame.stamp_ns)
+            .copied()
+            .unwrap_or(0.0);
         let meas = CornerSet {
             stamp_ns: frame.stamp_ns,
             corners: &self.buffer,
-            pixel_sigma: self.pixel_sigma,
+            pixel_sigma: self.pixel_sigma.max(T::lit(own)),
         };
         match ekf.update_reprojection(0, 0, &self.camera, &meas) {
             Ok(report) => {
@@ -743,21 +784,20 @@ fn camera_in_target(pose: &FramePose) -> PoseRecord {
 /// Per-axis corner noise from the PnP fits: the median RMS residual, per axis, corrected
 /// for the 6 DoF the fit absorbs.
 fn pixel_sigma_from_pnp(poses: &[FramePose]) -> f64 {
-    let mut per_axis: Vec<f64> = poses
-        .iter()
-        .filter_map(|p| {
-            let n = p.points;
-            (n > 3).then(|| {
-                p.pnp.rms_px / 2f64.sqrt() * (2.0 * n as f64 / (2.0 * n as f64 - 6.0)).sqrt()
-            })
-        })
-        .collect();
+    let mut per_axis: Vec<f64> = poses.iter().filter_map(frame_pixel_sigma).collect();
     per_axis.sort_by(f64::total_cmp);
     per_axis
         .get(per_axis.len() / 2)
         .copied()
         .unwrap_or(MIN_PIXEL_SIGMA)
         .max(MIN_PIXEL_SIGMA)
+}
+
+/// One image's per-axis corner noise from its PnP fit: the RMS residual corrected for the
+/// 6 DoF the fit absorbs; `None` with too few corners to say.
+fn frame_pixel_sigma(pose: &FramePose) -> Option<f64> {
+    let n = pose.points as f64;
+    (pose.points > 3).then(|| pose.pnp.rms_px / 2f64.sqrt() * (2.0 * n / (2.0 * n - 6.0)).sqrt())
 }
 
 /// MoCal's odometry noise per increment: two independent PnP poses, each with the median

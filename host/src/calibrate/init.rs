@@ -57,15 +57,15 @@ pub fn detect_standstill(imu: &[ImuRecord], min_duration_s: f64) -> Option<Stand
     })
 }
 
-/// The rotation of the IMU between two stamps from its gyro (instantaneous readings, linear
-/// between stamps: each piece integrates the mean of its end readings, as the filter does),
-/// minus `gyro_bias`. `None` when the stamps are outside the IMU data.
-pub fn integrate_gyro(
+/// The gyro between two stamps as pieces `(mean rate, dt)`: the readings are instantaneous
+/// and linear between stamps, so each piece between consecutive stamps (or the interval's
+/// ends) integrates the mean of its end readings, as the filter does. `None` when the
+/// stamps are outside the IMU data.
+pub fn gyro_pieces(
     imu: &[ImuRecord],
     from_ns: u64,
     to_ns: u64,
-    gyro_bias: &Vector3<f64>,
-) -> Option<UnitQuaternion<f64>> {
+) -> Option<Vec<(Vector3<f64>, f64)>> {
     if imu.is_empty() || from_ns < imu[0].stamp_ns || to_ns <= from_ns {
         return None;
     }
@@ -85,21 +85,38 @@ pub fn integrate_gyro(
         let f = (t.saturating_sub(a.stamp_ns)) as f64 / (b.stamp_ns - a.stamp_ns) as f64;
         a.gyro + (b.gyro - a.gyro) * f.clamp(0.0, 1.0)
     };
-    let mut q = UnitQuaternion::identity();
+    let mut pieces = Vec::new();
     let mut t = from_ns;
     for k in start..imu.len().saturating_sub(1) {
         let end = imu[k + 1].stamp_ns.min(to_ns);
         if end > t {
             let dt = (end - t) as f64 * 1e-9;
-            let mean = (rate_at(k, t) + rate_at(k, end)) * 0.5 - gyro_bias;
-            q *= lie::exp(&(mean * dt));
+            pieces.push(((rate_at(k, t) + rate_at(k, end)) * 0.5, dt));
             t = end;
         }
         if t >= to_ns {
             break;
         }
     }
-    Some(q)
+    Some(pieces)
+}
+
+/// The rotation of the IMU between two stamps from its gyro ([`gyro_pieces`]), minus
+/// `gyro_bias`. `None` when the stamps are outside the IMU data.
+pub fn integrate_gyro(
+    imu: &[ImuRecord],
+    from_ns: u64,
+    to_ns: u64,
+    gyro_bias: &Vector3<f64>,
+) -> Option<UnitQuaternion<f64>> {
+    let pieces = gyro_pieces(imu, from_ns, to_ns)?;
+    Some(
+        pieces
+            .iter()
+            .fold(UnitQuaternion::identity(), |q, (rate, dt)| {
+                q * lie::exp(&((rate - gyro_bias) * *dt))
+            }),
+    )
 }
 
 /// Result of the hand-eye rotation initialisation.
@@ -113,6 +130,22 @@ pub struct RotationInit {
     pub axis_ratio: f64,
 }
 
+/// A rotation increment of a sensor, `(from_ns, to_ns, R_Sfrom_Sto)`, stamps on the IMU clock.
+pub type RotationIncrement = (u64, u64, UnitQuaternion<f64>);
+
+/// The rotation increments between consecutive odometry poses; intervals longer than
+/// `max_interval_ns` (odometry gaps) are left out.
+pub fn pose_increments(poses: &[PoseRecord], max_interval_ns: u64) -> Vec<RotationIncrement> {
+    poses
+        .windows(2)
+        .filter_map(|pair| {
+            let (a, b) = (&pair[0], &pair[1]);
+            (b.stamp_ns - a.stamp_ns <= max_interval_ns)
+                .then(|| (a.stamp_ns, b.stamp_ns, a.rotation.inverse() * b.rotation))
+        })
+        .collect()
+}
+
 /// Hand-eye rotation from consecutive odometry poses and the gyro over the same intervals.
 /// Intervals longer than `max_interval_ns` (odometry gaps) are skipped.
 pub fn hand_eye_rotation(
@@ -121,11 +154,7 @@ pub fn hand_eye_rotation(
     gyro_bias: &Vector3<f64>,
     max_interval_ns: u64,
 ) -> Result<RotationInit, HandEyeError<f64>> {
-    let increments = poses.windows(2).filter_map(|pair| {
-        let (a, b) = (&pair[0], &pair[1]);
-        (b.stamp_ns - a.stamp_ns <= max_interval_ns)
-            .then(|| (a.stamp_ns, b.stamp_ns, a.rotation.inverse() * b.rotation))
-    });
+    let increments = pose_increments(poses, max_interval_ns);
     hand_eye_from_pairs(rotation_pairs(imu, increments, gyro_bias), 10)
 }
 

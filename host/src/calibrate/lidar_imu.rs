@@ -39,10 +39,11 @@ use serde::Serialize;
 
 use super::convert;
 use super::extrinsic::ImuExtrinsicCalibration;
-use super::init::{self, RotationInit};
+use super::gyro_bias::GyroBiasEstimate;
+use super::init::{self, RotationInit, Standstill};
 use super::pose_imu::{
-    drive_imu, finish, start_filter, FilterStart, ImuHooks, PoseImuError, PoseImuOptions,
-    PoseImuReport, Run, Timing,
+    drive_imu, finish, hand_eye_and_gyro_bias, start_filter, FilterStart, ImuHooks, PoseImuError,
+    PoseImuOptions, PoseImuReport, Run, Timing, HAND_EYE_MIN_PAIRS,
 };
 use crate::dataset::{ImuNoiseYaml, ImuRecord};
 use crate::lidar::deskew::imu_time;
@@ -370,8 +371,8 @@ pub fn calibrate<T: Scalar>(
     }
     let started = Instant::now();
     let standstill = init::detect_standstill(imu, options.filter.min_standstill_s);
-    let gyro_bias = standstill.map_or_else(Vector3::zeros, |s| s.gyro_mean);
-    let (rotation, outliers) = rotation_init(imu, input.scans, &gyro_bias, options)?;
+    let (rotation, gyro_bias, outliers) =
+        rotation_init(imu, input.scans, standstill.as_ref(), options)?;
     let init_s = started.elapsed().as_secs_f64();
     let FilterStart {
         mut ekf,
@@ -382,7 +383,7 @@ pub fn calibrate<T: Scalar>(
         imu,
         input.imu_noise,
         (standstill.as_ref(), &[]),
-        rotation,
+        (rotation, gyro_bias.as_ref()),
         &options.filter,
     )?;
 
@@ -474,20 +475,22 @@ fn last_firing_ns(cloud: &PointCloud) -> u64 {
 /// Largest residual `|r_I - R r_L|` kept, rad, however small the median.
 const MIN_OUTLIER_THRESHOLD_RAD: f64 = 0.01;
 
-/// Hand-eye rotation from raw-scan NDT rotations over the first `init_duration_s`.
-/// Returns the rotation (or why not) and the number of pairs dropped as outliers.
+/// The hand-eye rotation (or why not), the gyro bias fitted to the motion (without a
+/// standstill) and the number of pairs dropped as outliers.
+type RotationStart = (
+    Result<RotationInit, msreg_estimator::HandEyeError<f64>>,
+    Option<GyroBiasEstimate>,
+    usize,
+);
+
+/// Hand-eye rotation and, without a standstill, the gyro bias from raw-scan NDT rotations
+/// over the first `init_duration_s`.
 fn rotation_init(
     imu: &[ImuRecord],
     scans: &dyn ScanSource,
-    gyro_bias: &Vector3<f64>,
+    standstill: Option<&Standstill>,
     options: &LidarImuOptions,
-) -> Result<
-    (
-        Result<RotationInit, msreg_estimator::HandEyeError<f64>>,
-        usize,
-    ),
-    PoseImuError,
-> {
+) -> Result<RotationStart, PoseImuError> {
     let first = imu.first().map_or(0, |r| r.stamp_ns);
     let until = first.saturating_add((options.init_duration_s * 1e9) as u64);
     let mut increments = Vec::new();
@@ -520,10 +523,13 @@ fn rotation_init(
             .ok()
             .map(|t| (mid, t));
     }
-    let pairs = init::rotation_pairs(imu, increments, gyro_bias);
-    let first_pass = init::hand_eye_from_pairs(pairs.iter().copied(), 10);
+    // Outliers (NDT failures) are cut against a first hand-eye solution before the final
+    // hand-eye and bias fit.
+    let first_bias = standstill.map_or_else(Vector3::zeros, |s| s.gyro_mean);
+    let pairs = init::rotation_pairs(imu, increments.iter().copied(), &first_bias);
+    let first_pass = init::hand_eye_from_pairs(pairs.iter().copied(), HAND_EYE_MIN_PAIRS);
     let Ok(first_solution) = first_pass else {
-        return Ok((first_pass, 0));
+        return Ok((first_pass, None, 0));
     };
     let r = first_solution.rotation;
     let residuals: Vec<f64> = pairs.iter().map(|(ri, rl)| (ri - r * rl).norm()).collect();
@@ -531,14 +537,20 @@ fn rotation_init(
     sorted.sort_by(f64::total_cmp);
     let median = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
     let threshold = (5.0 * median).max(MIN_OUTLIER_THRESHOLD_RAD);
-    let kept: Vec<_> = pairs
+    // `rotation_pairs` keeps the increments inside the IMU data, in order: pair them back.
+    let inside: Vec<_> = increments
         .iter()
+        .filter(|(from, to, _)| init::integrate_gyro(imu, *from, *to, &first_bias).is_some())
+        .collect();
+    let kept: Vec<init::RotationIncrement> = inside
+        .into_iter()
         .zip(&residuals)
         .filter(|(_, e)| **e <= threshold)
-        .map(|(p, _)| *p)
+        .map(|(inc, _)| *inc)
         .collect();
     let outliers = pairs.len() - kept.len();
-    Ok((init::hand_eye_from_pairs(kept, 10), outliers))
+    let (rotation, gyro_bias) = hand_eye_and_gyro_bias(imu, &kept, standstill);
+    Ok((rotation, gyro_bias, outliers))
 }
 
 /// A scan read and waiting for the IMU to reach its reference time.

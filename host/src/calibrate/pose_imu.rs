@@ -18,6 +18,7 @@ use serde::Serialize;
 use super::convert;
 use super::dynamic_init::{self, DynamicInitInput, DynamicInitOptions, FilterPrior};
 use super::extrinsic::ImuExtrinsicCalibration;
+use super::gyro_bias::{self, GyroBiasEstimate};
 use super::init::{self, Standstill};
 use crate::dataset::{ImuNoiseYaml, ImuRecord, PoseRecord, PoseSensorYaml};
 
@@ -119,6 +120,9 @@ pub struct PoseImuReport {
     /// How the IMU state was initialised without a standstill: the dynamic alignment's
     /// result, or why it could not run (empty with a standstill).
     pub moving_start: String,
+    /// Where the gyro bias the filter started from came from: the standstill, a fit to the
+    /// rotation increments (with its sigma), or nowhere (zero, wide prior).
+    pub gyro_bias_init: String,
     /// Hand-eye pairs used.
     pub hand_eye_pairs: usize,
     /// Second/first eigenvalue of the rotation scatter (excitation about two axes).
@@ -176,21 +180,22 @@ pub fn calibrate<T: Scalar>(
     }
     let started = Instant::now();
     let standstill = init::detect_standstill(imu, options.min_standstill_s);
-    let gyro_bias = standstill.map_or_else(Vector3::zeros, |s| s.gyro_mean);
     let period_ns = nominal_period_ns(poses);
     let max_interval_ns = period_ns.saturating_mul(3) / 2;
-    let rotation = init::hand_eye_rotation(imu, poses, &gyro_bias, max_interval_ns);
+    let increments = init::pose_increments(poses, max_interval_ns);
+    let (rotation, gyro_bias) = hand_eye_and_gyro_bias(imu, &increments, standstill.as_ref());
     let init_s = started.elapsed().as_secs_f64();
     let FilterStart {
         mut ekf,
         rotation_init,
         init_problem,
         moving_start,
+        gyro_bias_init,
     } = start_filter::<T>(
         imu,
         input.imu_noise,
         (standstill.as_ref(), poses),
-        rotation,
+        (rotation, gyro_bias.as_ref()),
         options,
     )?;
 
@@ -227,8 +232,32 @@ pub fn calibrate<T: Scalar>(
         calibration.report.converged = false;
     }
     calibration.report.moving_start = describe_moving_start(&moving_start);
+    calibration.report.gyro_bias_init = gyro_bias_init;
     Ok(calibration)
 }
+
+/// The hand-eye rotation from the rotation `increments` and the gyro bias: at a standstill
+/// the hand-eye at its mean gyro reading (no fit: the standstill measures the bias), else
+/// both from the motion ([`gyro_bias::hand_eye_with_gyro_bias`]).
+pub(crate) fn hand_eye_and_gyro_bias(
+    imu: &[ImuRecord],
+    increments: &[init::RotationIncrement],
+    standstill: Option<&Standstill>,
+) -> (
+    Result<init::RotationInit, msreg_estimator::HandEyeError<f64>>,
+    Option<GyroBiasEstimate>,
+) {
+    match standstill {
+        Some(s) => {
+            let pairs = init::rotation_pairs(imu, increments.iter().copied(), &s.gyro_mean);
+            (init::hand_eye_from_pairs(pairs, HAND_EYE_MIN_PAIRS), None)
+        }
+        None => gyro_bias::hand_eye_with_gyro_bias(imu, increments, HAND_EYE_MIN_PAIRS),
+    }
+}
+
+/// Fewest rotation increments for the hand-eye rotation.
+pub(crate) const HAND_EYE_MIN_PAIRS: usize = 10;
 
 /// The pose-IMU pipeline's measurement feed: fuses every pose whose IMU time has come.
 struct PoseFeed<'a> {
@@ -334,6 +363,8 @@ pub(crate) struct FilterStart<T: Scalar> {
     pub(crate) init_problem: Option<String>,
     /// The moving-start prior, or why there is none.
     pub(crate) moving_start: Result<FilterPrior, MovingStart>,
+    /// Where the starting gyro bias came from (report words).
+    pub(crate) gyro_bias_init: String,
 }
 
 /// Builds the filter from the standstill and the hand-eye result. Without rotation about two
@@ -343,7 +374,10 @@ pub(crate) fn start_filter<T: Scalar>(
     imu: &[ImuRecord],
     imu_noise: &ImuNoiseYaml,
     (standstill, odometry): (Option<&Standstill>, &[PoseRecord]),
-    rotation: Result<init::RotationInit, msreg_estimator::HandEyeError<f64>>,
+    (rotation, gyro_bias): (
+        Result<init::RotationInit, msreg_estimator::HandEyeError<f64>>,
+        Option<&GyroBiasEstimate>,
+    ),
     options: &PoseImuOptions,
 ) -> Result<FilterStart<T>, PoseImuError> {
     let (rotation_init, init_problem) = match rotation {
@@ -365,10 +399,11 @@ pub(crate) fn start_filter<T: Scalar>(
         options.rotation_sigma_rad = 0.5;
     }
     let moving = match (standstill, init_problem.is_none()) {
-        (None, true) => moving_start(imu, odometry, &rotation_init.rotation, imu_noise),
+        (None, true) => moving_start(imu, odometry, &rotation_init.rotation, gyro_bias, imu_noise),
         _ => Err(MovingStart::NotNeeded),
     };
     let initial = initial_state::<T>(imu, standstill, &rotation_init.rotation, &options)?;
+    let (initial, gyro_bias_init) = with_gyro_bias(initial, standstill, gyro_bias);
     let initial = match &moving {
         Ok(prior) => with_moving_start(initial, prior),
         Err(_) => initial,
@@ -381,7 +416,41 @@ pub(crate) fn start_filter<T: Scalar>(
         rotation_init,
         init_problem,
         moving_start: moving,
+        gyro_bias_init,
     })
+}
+
+/// Smallest 1-sigma of a gyro bias fitted to motion, rad/s: the fit's own sigma ignores
+/// the correlation of consecutive increments and the bias's drift over the recording.
+const MIN_FITTED_GYRO_BIAS_SIGMA: f64 = 2e-3;
+/// 1-sigma of the gyro bias when nothing measured it (no standstill, no fit), rad/s: MEMS
+/// turn-on biases of a few deg/s (the EuRoC ADIS16448 reads 4.4 deg/s) are inside 1 sigma.
+const UNKNOWN_GYRO_BIAS_SIGMA: f64 = 0.1;
+
+/// The prior's gyro bias without a standstill: the motion fit with its (floored) sigma, or
+/// zero with [`UNKNOWN_GYRO_BIAS_SIGMA`]; with the report's words for it.
+pub(crate) fn with_gyro_bias<T: Scalar>(
+    mut initial: InitialState<T, 1>,
+    standstill: Option<&Standstill>,
+    fit: Option<&GyroBiasEstimate>,
+) -> (InitialState<T, 1>, String) {
+    let words = match (standstill, fit) {
+        (Some(_), _) => "standstill mean".to_string(),
+        (None, Some(f)) => {
+            initial.imu.gyro_bias = convert::vec3(&f.bias);
+            initial.sigma_gyro_bias = T::lit(f.sigma.amax().max(MIN_FITTED_GYRO_BIAS_SIGMA));
+            format!(
+                "fitted to {} rotation increments: [{:.4}, {:.4}, {:.4}] rad/s (sigma [{:.4}, \
+                 {:.4}, {:.4}])",
+                f.pairs, f.bias.x, f.bias.y, f.bias.z, f.sigma.x, f.sigma.y, f.sigma.z
+            )
+        }
+        (None, None) => {
+            initial.sigma_gyro_bias = T::lit(UNKNOWN_GYRO_BIAS_SIGMA);
+            format!("unknown: zero with sigma {UNKNOWN_GYRO_BIAS_SIGMA} rad/s")
+        }
+    };
+    (initial, words)
 }
 
 /// Why no moving-start prior was used.
@@ -430,13 +499,14 @@ pub(crate) fn moving_start(
     imu: &[ImuRecord],
     odometry: &[PoseRecord],
     rotation: &nalgebra::UnitQuaternion<f64>,
+    gyro_bias: Option<&GyroBiasEstimate>,
     imu_noise: &ImuNoiseYaml,
 ) -> Result<FilterPrior, MovingStart> {
     let input = DynamicInitInput {
         imu,
         poses: odometry,
         r_i_s: *rotation,
-        gyro_bias: Vector3::zeros(),
+        gyro_bias: gyro_bias.map_or_else(Vector3::zeros, |g| g.bias),
         time_offset_s: 0.0,
     };
     let options = DynamicInitOptions {
@@ -748,6 +818,7 @@ pub(crate) fn finish<T: Scalar, const S: usize, const C: usize, const N: usize, 
         scalar: core::any::type_name::<T>(),
         standstill_s: standstill.map_or(0.0, |s| run.seconds(s.until_ns)),
         moving_start: String::new(),
+        gyro_bias_init: String::new(),
         hand_eye_pairs: rotation_init.pairs,
         hand_eye_axis_ratio: rotation_init.axis_ratio,
         hand_eye_rotation_vector: [rv.x, rv.y, rv.z],
