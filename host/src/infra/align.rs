@@ -38,23 +38,11 @@ pub fn similarity_scale(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
     umeyama(a, b).1
 }
 
-/// The least-squares rigid transform `T` with `b ~ T a` (no scale).
+/// The least-squares rigid transform `T` with `b ~ T a` (no scale): Umeyama's rotation
+/// (which does not depend on the scale) and the centroids.
 pub fn rigid(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> Isometry3<f64> {
-    let (ca, cb) = (centroid(a), centroid(b));
-    let mut cov = Matrix3::zeros();
-    for (x, y) in a.iter().zip(b) {
-        cov += (y - cb) * (x - ca).transpose();
-    }
-    let svd = cov.svd(true, true);
-    let (u, vt) = (
-        svd.u.unwrap_or_else(Matrix3::identity),
-        svd.v_t.unwrap_or_else(Matrix3::identity),
-    );
-    let mut d = Matrix3::identity();
-    if (u * vt).determinant() < 0.0 {
-        d[(2, 2)] = -1.0;
-    }
-    let r = nalgebra::Rotation3::from_matrix_unchecked(u * d * vt);
+    let (r, _, ca, cb) = umeyama(a, b);
+    let r = nalgebra::Rotation3::from_matrix_unchecked(r);
     let q = UnitQuaternion::from_rotation_matrix(&r);
     Isometry3::from_parts(Translation3::from(cb - q * ca), q)
 }
