@@ -466,7 +466,7 @@ pub struct HostCameraRun {
 /// Runs RepErrCal in f64 on `dir` as `msreg calibrate camera-imu` does; prints, for the
 /// record, how far the same pipeline in f32 ends from it (the scale of f32 rounding alone).
 pub fn host_reperrcal(dir: &Path) -> HostCameraRun {
-    use msreg_host::calibrate::camera_imu::{self, CameraImuInput, CameraImuOptions};
+    use msreg_host::calibrate::camera_imu::{self, CameraImuInput, CameraImuOptions, ImageNoise};
     use msreg_host::vision::frames::CameraDataset;
     let data = Dataset::open(dir).expect("dataset opens");
     let camera = CameraDataset::open(dir).expect("camera dataset opens");
@@ -482,7 +482,11 @@ pub fn host_reperrcal(dir: &Path) -> HostCameraRun {
         camera: &camera.camera,
         frames: &frames,
     };
-    let options = CameraImuOptions::default();
+    // The device's noise model: one corner noise per session, the plain gate.
+    let options = CameraImuOptions {
+        image_noise: ImageNoise::Uniform,
+        ..CameraImuOptions::default()
+    };
     let host =
         camera_imu::calibrate::<f64>(&input, &options, &mut |_| {}).expect("host RepErrCal runs");
     let host_f32 = camera_imu::calibrate::<f32>(&input, &options, &mut |_| {})

@@ -74,6 +74,19 @@ pub struct CameraImuOptions {
     pub pixel_sigma: Option<f64>,
     /// Extrinsic and time-offset priors, standstill detection (shared with pose-IMU).
     pub prior: PoseImuOptions,
+    /// How RepErrCal weighs each image's corners.
+    pub image_noise: ImageNoise,
+}
+
+/// How RepErrCal weighs each image's corners.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ImageNoise {
+    /// Each image at its own corner noise (its PnP residual, floored at the recording's),
+    /// and the frame-level robust weight up to [`MAX_NOISE_SCALE`]: what real images need.
+    PerImage,
+    /// One corner noise for all images and the plain gate: what the firmware runs (the link
+    /// protocol carries one `pixel_sigma` per session), so the host can mirror it.
+    Uniform,
 }
 
 impl Default for CameraImuOptions {
@@ -85,6 +98,7 @@ impl Default for CameraImuOptions {
                 translation_sigma_m: 0.2,
                 ..PoseImuOptions::default()
             },
+            image_noise: ImageNoise::PerImage,
         }
     }
 }
@@ -334,7 +348,7 @@ enum ExtrinsicPrior {
 /// Largest scale of an image's corner noise when the gate rejects it at its own noise
 /// (`FilterConfig::max_noise_scale`): images up to NIS / dof = 9 are fused down-weighted,
 /// beyond that they are outliers.
-const MAX_NOISE_SCALE: f64 = 3.0;
+pub const MAX_NOISE_SCALE: f64 = 3.0;
 
 /// Prior 1-sigma (rad, m, s) that holds the extrinsic and time offset in the verification
 /// pass: far below what the data resolve, far above the scalar's rounding.
@@ -382,10 +396,13 @@ fn reprojection_calibration<T: Scalar>(
         next: 0,
         camera,
         pixel_sigma: T::lit(pixel_sigma),
-        frame_sigma: frame_poses(input.camera, input.frames)
-            .iter()
-            .filter_map(|p| Some((p.stamp_ns, frame_pixel_sigma(p)?)))
-            .collect(),
+        frame_sigma: match options.image_noise {
+            ImageNoise::PerImage => frame_poses(input.camera, input.frames)
+                .iter()
+                .filter_map(|p| Some((p.stamp_ns, frame_pixel_sigma(p)?)))
+                .collect(),
+            ImageNoise::Uniform => Default::default(),
+        },
         prior,
         reprojection: Vec::new(),
         buffer: Vec::new(),
@@ -512,7 +529,10 @@ fn start_from_motion<T: Scalar>(
         initial
     };
     let config = FilterConfig {
-        max_noise_scale: T::lit(MAX_NOISE_SCALE),
+        max_noise_scale: T::lit(match options.image_noise {
+            ImageNoise::PerImage => MAX_NOISE_SCALE,
+            ImageNoise::Uniform => 1.0,
+        }),
         ..FilterConfig::new(convert::imu_noise::<T>(input.imu_noise))
     };
     let ekf = CameraImuEkf::<T>::new(&config, &initial)
