@@ -225,16 +225,20 @@ pub fn calibrate<T: Scalar>(
     progress: &mut dyn FnMut(f64),
 ) -> Result<CameraImuCalibration, PoseImuError> {
     let started = Instant::now();
+    let poses = frame_poses(input.camera, input.frames);
     let (motion, pixel_sigma) =
-        motion_calibration::<T>(input, options, &mut |f| progress(0.3 * f))?;
+        motion_calibration::<T>(input, &poses, options, &mut |f| progress(0.3 * f))?;
     let mut calibration = match options.update {
         CameraUpdate::Motion => motion,
         CameraUpdate::Reprojection => reprojection_calibration::<T>(
             input,
             options,
-            &motion,
+            &Start {
+                motion: &motion,
+                pixel_sigma,
+                poses: &poses,
+            },
             ExtrinsicPrior::AroundStart,
-            pixel_sigma,
             started,
             &mut |f| progress(0.3 + 0.6 * f),
         )?,
@@ -242,9 +246,12 @@ pub fn calibrate<T: Scalar>(
     let verification = reprojection_calibration::<T>(
         input,
         options,
-        &calibration,
+        &Start {
+            motion: &calibration,
+            pixel_sigma,
+            poses: &poses,
+        },
         ExtrinsicPrior::Held,
-        pixel_sigma,
         Instant::now(),
         &mut |f| progress(0.9 + 0.1 * f),
     )?;
@@ -272,7 +279,8 @@ pub fn reprojection_start<T: Scalar>(
     options: &CameraImuOptions,
     progress: &mut dyn FnMut(f64),
 ) -> Result<ReprojectionStart, PoseImuError> {
-    let (motion, pixel_sigma) = motion_calibration::<T>(input, options, progress)?;
+    let poses = frame_poses(input.camera, input.frames);
+    let (motion, pixel_sigma) = motion_calibration::<T>(input, &poses, options, progress)?;
     let prior = reprojection_prior(options, &motion, ExtrinsicPrior::AroundStart);
     Ok(ReprojectionStart {
         motion,
@@ -296,10 +304,10 @@ pub fn target_prior_sigmas(prior: &PoseImuOptions, distance_m: f64) -> (f64, f64
 /// corner noise.
 fn motion_calibration<T: Scalar>(
     input: &CameraImuInput<'_>,
+    poses: &[FramePose],
     options: &CameraImuOptions,
     progress: &mut dyn FnMut(f64),
 ) -> Result<(CameraImuCalibration, f64), PoseImuError> {
-    let poses = frame_poses(input.camera, input.frames);
     if poses.len() < 3 {
         return Err(PoseImuError::BadInput(format!(
             "cam0: {} of {} images have a target pose; at least 3 are needed",
@@ -309,9 +317,9 @@ fn motion_calibration<T: Scalar>(
     }
     let pixel_sigma = options
         .pixel_sigma
-        .unwrap_or_else(|| pixel_sigma_from_pnp(&poses));
+        .unwrap_or_else(|| pixel_sigma_from_pnp(poses));
     let odometry: Vec<PoseRecord> = poses.iter().map(camera_in_target).collect();
-    let noise = increment_noise(&poses);
+    let noise = increment_noise(poses);
     let motion = pose_imu::calibrate::<T>(
         &pose_imu::PoseImuInput {
             imu: input.imu,
@@ -367,12 +375,16 @@ const REPROJECTION_PRIOR_FLOOR: (f64, f64, f64) = (0.5 * std::f64::consts::PI / 
 fn reprojection_calibration<T: Scalar>(
     input: &CameraImuInput<'_>,
     options: &CameraImuOptions,
-    motion: &CameraImuCalibration,
+    start: &Start<'_>,
     extrinsic_prior: ExtrinsicPrior,
-    pixel_sigma: f64,
     started: Instant,
     progress: &mut dyn FnMut(f64),
 ) -> Result<CameraImuCalibration, PoseImuError> {
+    let Start {
+        motion,
+        pixel_sigma,
+        poses,
+    } = *start;
     let imu = input.imu;
     let Some(first_imu) = imu.first() else {
         return Err(PoseImuError::BadInput(
@@ -385,7 +397,7 @@ fn reprojection_calibration<T: Scalar>(
         prior,
         rotation_init,
         gyro_bias_init,
-    } = start_from_motion::<T>(input, options, standstill.as_ref(), motion, extrinsic_prior)?;
+    } = start_from_motion::<T>(input, options, standstill.as_ref(), start, extrinsic_prior)?;
     let init_s = started.elapsed().as_secs_f64();
 
     let started = Instant::now();
@@ -397,7 +409,7 @@ fn reprojection_calibration<T: Scalar>(
         camera,
         pixel_sigma: T::lit(pixel_sigma),
         frame_sigma: match options.image_noise {
-            ImageNoise::PerImage => frame_poses(input.camera, input.frames)
+            ImageNoise::PerImage => poses
                 .iter()
                 .filter_map(|p| Some((p.stamp_ns, frame_pixel_sigma(p)?)))
                 .collect(),
@@ -460,6 +472,15 @@ fn reprojection_calibration<T: Scalar>(
     }))
 }
 
+/// What RepErrCal starts from: the MoCal (or final) estimate, the recording's corner noise
+/// and every image's PnP pose (computed once per calibration).
+#[derive(Clone, Copy)]
+struct Start<'a> {
+    motion: &'a CameraImuCalibration,
+    pixel_sigma: f64,
+    poses: &'a [FramePose],
+}
+
 /// The RepErrCal filter at the MoCal estimate, with its prior.
 struct StartFromMotion<T: Scalar> {
     ekf: CameraImuEkf<T>,
@@ -473,10 +494,11 @@ fn start_from_motion<T: Scalar>(
     input: &CameraImuInput<'_>,
     options: &CameraImuOptions,
     standstill: Option<&init::Standstill>,
-    motion: &CameraImuCalibration,
+    start: &Start<'_>,
     extrinsic_prior: ExtrinsicPrior,
 ) -> Result<StartFromMotion<T>, PoseImuError> {
     let imu = input.imu;
+    let motion = start.motion;
     let m = &motion.report.filter;
     let rotation_init = init::RotationInit {
         rotation: nalgebra::UnitQuaternion::from_scaled_axis(Vector3::from(
@@ -496,10 +518,7 @@ fn start_from_motion<T: Scalar>(
     let initial = match standstill {
         // A moving start: the IMU state from the dynamic alignment on the PnP odometry.
         None => {
-            let odometry: Vec<PoseRecord> = frame_poses(input.camera, input.frames)
-                .iter()
-                .map(camera_in_target)
-                .collect();
+            let odometry: Vec<PoseRecord> = start.poses.iter().map(camera_in_target).collect();
             let noise = input.imu_noise;
             let rotation = motion.t_imu_sensor.rotation;
             let increments = init::pose_increments(

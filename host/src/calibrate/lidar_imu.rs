@@ -526,7 +526,12 @@ fn rotation_init(
     // Outliers (NDT failures) are cut against a first hand-eye solution before the final
     // hand-eye and bias fit.
     let first_bias = standstill.map_or_else(Vector3::zeros, |s| s.gyro_mean);
-    let pairs = init::rotation_pairs(imu, increments.iter().copied(), &first_bias);
+    // Each increment inside the IMU data with its (gyro, sensor) rotation-vector pair.
+    let paired: Vec<_> = increments
+        .iter()
+        .filter_map(|inc| Some((*inc, init::rotation_pairs(imu, [*inc], &first_bias).pop()?)))
+        .collect();
+    let pairs: Vec<_> = paired.iter().map(|(_, pair)| *pair).collect();
     let first_pass = init::hand_eye_from_pairs(pairs.iter().copied(), HAND_EYE_MIN_PAIRS);
     let Ok(first_solution) = first_pass else {
         return Ok((first_pass, None, 0));
@@ -537,16 +542,11 @@ fn rotation_init(
     sorted.sort_by(f64::total_cmp);
     let median = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
     let threshold = (5.0 * median).max(MIN_OUTLIER_THRESHOLD_RAD);
-    // `rotation_pairs` keeps the increments inside the IMU data, in order: pair them back.
-    let inside: Vec<_> = increments
+    let kept: Vec<init::RotationIncrement> = paired
         .iter()
-        .filter(|(from, to, _)| init::integrate_gyro(imu, *from, *to, &first_bias).is_some())
-        .collect();
-    let kept: Vec<init::RotationIncrement> = inside
-        .into_iter()
         .zip(&residuals)
         .filter(|(_, e)| **e <= threshold)
-        .map(|(inc, _)| *inc)
+        .map(|((inc, _), _)| *inc)
         .collect();
     let outliers = pairs.len() - kept.len();
     let (rotation, gyro_bias) = hand_eye_and_gyro_bias(imu, &kept, standstill);
