@@ -620,7 +620,7 @@ struct CornerFeed<'a, T: Scalar> {
     /// Corner noise of the recording (the median image's), and the floor of each image's.
     pixel_sigma: T,
     /// Each image's own corner noise from its PnP fit, by stamp: motion blur doubles it in
-    /// the fast part of EuRoC `imu_april` (0.15-0.2 px at rest, 0.3-0.5 px at 2 rad/s).
+    /// the fast part of EuRoC `imu_april` (medians 0.2-0.3 px at rest, 0.4-0.55 px at 2 rad/s).
     frame_sigma: std::collections::HashMap<u64, f64>,
     prior: PoseImuOptions,
     reprojection: Vec<FrameReprojection>,
