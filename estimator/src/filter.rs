@@ -92,6 +92,9 @@ pub struct Ekf<T: Scalar, const S: usize, const C: usize, const N: usize, const 
     /// blocks only change through it, so it is applied once per update, not per sample.
     pending_transition: SMatrix<T, 15, 15>,
     health: HealthMonitor<T, S>,
+    /// Per sensor, a direction of the extrinsic translation held at its prior (see
+    /// [`Ekf::hold_translation_axis`]).
+    held_translation: [Option<Vector3<T>>; S],
 }
 
 impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> Ekf<T, S, C, N, F> {
@@ -144,6 +147,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
             cov,
             pending_transition: SMatrix::identity(),
             health: HealthMonitor::new(config.health),
+            held_translation: [None; S],
         })
     }
 
@@ -393,6 +397,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
 mod clones;
 mod frames;
 mod fuse;
+mod holds;
 mod reprojection;
 #[cfg(test)]
 mod tests;

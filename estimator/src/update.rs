@@ -9,7 +9,7 @@ pub mod zero_velocity;
 use crate::chi2::{self, Confidence};
 use crate::scalar::Scalar;
 use crate::Error;
-use nalgebra::{Cholesky, SMatrix, SVector};
+use nalgebra::{Cholesky, SMatrix, SVector, Vector3};
 
 /// Which measurement model produced an update.
 #[non_exhaustive]
@@ -76,13 +76,40 @@ pub struct KalmanStep<T: Scalar, const M: usize, const N: usize> {
     pub innovation_inverse: SMatrix<T, M, M>,
 }
 
+/// A direction of a 3-dof state block that no update may change (a Schmidt "consider"
+/// direction): the gain's component along it is removed, so the estimate keeps its prior
+/// value and variance there while its uncertainty still enters every innovation covariance
+/// and its correlations stay exact (the Joseph form holds for any gain). Used for what the
+/// data cannot observe, e.g. the lever arm along the rotation axis of planar driving,
+/// where the little the data says is dominated by model error.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hold<T: Scalar> {
+    /// First index of the 3-dof block in the error state.
+    pub block: usize,
+    /// Unit direction within the block.
+    pub axis: Vector3<T>,
+}
+
+impl<T: Scalar> Hold<T> {
+    /// Removes the gain's component along the held direction, in place.
+    fn project<const M: usize, const N: usize>(&self, gain: &mut SMatrix<T, N, M>) {
+        if self.block + 3 > N {
+            return;
+        }
+        let mut rows = gain.fixed_rows_mut::<3>(self.block);
+        let along = self.axis.transpose() * &rows;
+        rows -= self.axis * along;
+    }
+}
+
 /// The shared Kalman step: innovation covariance, gate, gain and Joseph-form update.
 pub fn kalman_step<T: Scalar, const M: usize, const N: usize>(
     cov: &SMatrix<T, N, N>,
     lin: &Linearization<T, M, N>,
     gate: Confidence,
+    holds: &[Hold<T>],
 ) -> Result<KalmanStep<T, M, N>, Error> {
-    kalman_step_gated_at(cov, lin, chi2::quantile::<T>(M, gate))
+    kalman_step_gated_at(cov, lin, chi2::quantile::<T>(M, gate), holds)
 }
 
 /// [`kalman_step`] with an explicit NIS threshold; an infinite one never rejects (used for
@@ -91,6 +118,7 @@ pub fn kalman_step_gated_at<T: Scalar, const M: usize, const N: usize>(
     cov: &SMatrix<T, N, N>,
     lin: &Linearization<T, M, N>,
     threshold: T,
+    holds: &[Hold<T>],
 ) -> Result<KalmanStep<T, M, N>, Error> {
     let finite = lin.residual.iter().all(|x| x.is_finite())
         && lin.jacobian.iter().all(|x| x.is_finite())
@@ -119,7 +147,10 @@ pub fn kalman_step_gated_at<T: Scalar, const M: usize, const N: usize>(
             innovation_inverse: s_inv,
         });
     }
-    let gain = ph_t * s_inv;
+    let mut gain = ph_t * s_inv;
+    for hold in holds {
+        hold.project(&mut gain);
+    }
     let correction = gain * lin.residual;
     // Joseph form (I - K H) P (I - K H)^T + K R K^T, associated so that no N x N x N product
     // is formed: B = (I - K H) P = P - K (P H^T)^T, then B (I - K H)^T = B - (B H^T) K^T.
@@ -157,7 +188,7 @@ mod tests {
             jacobian: SMatrix::<f64, 1, 2>::new(1.0, 0.0),
             noise: SMatrix::<f64, 1, 1>::new(4.0),
         };
-        let step = kalman_step(&cov, &lin, Confidence::P99).unwrap();
+        let step = kalman_step(&cov, &lin, Confidence::P99, &[]).unwrap();
         assert!(step.accepted);
         assert!((step.correction - Vector2::new(0.5, 0.0)).norm() < 1e-12);
         assert!((step.covariance[(0, 0)] - 2.0).abs() < 1e-12);
@@ -174,12 +205,46 @@ mod tests {
             jacobian: SMatrix::<f64, 2, 4>::new(1.0, 0.5, 0.0, -0.2, 0.0, 0.3, 1.0, 0.7),
             noise: SMatrix::<f64, 2, 2>::new(0.5, 0.1, 0.1, 0.4),
         };
-        let step = kalman_step(&cov, &lin, Confidence::P99999).unwrap();
+        let step = kalman_step(&cov, &lin, Confidence::P99999, &[]).unwrap();
         let s = lin.jacobian * cov * lin.jacobian.transpose() + lin.noise;
         let k = cov * lin.jacobian.transpose() * s.try_inverse().unwrap();
         let i_kh = SMatrix::<f64, 4, 4>::identity() - k * lin.jacobian;
         let textbook = i_kh * cov * i_kh.transpose() + k * lin.noise * k.transpose();
         assert!((step.covariance - textbook).amax() < 1e-14);
+    }
+
+    #[test]
+    fn held_direction_keeps_its_prior_and_the_covariance_stays_joseph() {
+        let a = SMatrix::<f64, 5, 5>::from_fn(|r, c| ((r * 5 + c) as f64 * 0.61).cos());
+        let cov = a * a.transpose() + SMatrix::<f64, 5, 5>::identity() * 0.2;
+        let lin = Linearization {
+            residual: SVector::<f64, 2>::new(0.4, -0.3),
+            jacobian: SMatrix::<f64, 2, 5>::new(
+                0.2, 1.0, 0.3, -0.5, 0.1, //
+                0.0, -0.4, 0.8, 0.6, 1.0,
+            ),
+            noise: SMatrix::<f64, 2, 2>::new(0.3, 0.05, 0.05, 0.2),
+        };
+        let axis = Vector3::new(1.0, 2.0, -2.0) / 3.0;
+        let hold = Hold { block: 1, axis };
+        let step = kalman_step(&cov, &lin, Confidence::P99999, &[hold]).unwrap();
+        let mut u = SVector::<f64, 5>::zeros();
+        u.fixed_rows_mut::<3>(1).copy_from(&axis);
+        assert!(u.dot(&step.correction).abs() < 1e-14);
+        let (before, after) = (
+            (u.transpose() * cov * u)[0],
+            (u.transpose() * step.covariance * u)[0],
+        );
+        assert!((before - after).abs() < 1e-12, "{before} -> {after}");
+        // The Joseph form with the projected gain, written out.
+        let s = lin.jacobian * cov * lin.jacobian.transpose() + lin.noise;
+        let k = cov * lin.jacobian.transpose() * s.try_inverse().unwrap();
+        let k = (SMatrix::<f64, 5, 5>::identity() - u * u.transpose()) * k;
+        let i_kh = SMatrix::<f64, 5, 5>::identity() - k * lin.jacobian;
+        let textbook = i_kh * cov * i_kh.transpose() + k * lin.noise * k.transpose();
+        assert!((step.covariance - textbook).amax() < 1e-13);
+        // The other directions still learn: the trace drops.
+        assert!(step.covariance.trace() < cov.trace() - 0.1);
     }
 
     #[test]
@@ -190,7 +255,7 @@ mod tests {
             jacobian: SMatrix::<f64, 1, 2>::new(1.0, 0.0),
             noise: SMatrix::<f64, 1, 1>::new(1.0),
         };
-        let step = kalman_step(&cov, &lin, Confidence::P99).unwrap();
+        let step = kalman_step(&cov, &lin, Confidence::P99, &[]).unwrap();
         assert!(!step.accepted);
         assert_eq!(step.covariance, cov);
         assert_eq!(step.correction, Vector2::zeros());
@@ -204,7 +269,7 @@ mod tests {
             noise: SMatrix::<f64, 1, 1>::new(1.0),
         };
         assert_eq!(
-            kalman_step(&Matrix2::identity(), &lin, Confidence::P99).unwrap_err(),
+            kalman_step(&Matrix2::identity(), &lin, Confidence::P99, &[]).unwrap_err(),
             Error::NonFinite
         );
     }

@@ -116,7 +116,8 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         extrinsic_jacobian: Option<&SMatrix<T, M, 6>>,
     ) -> Result<UpdateReport<T>, Error> {
         self.flush_transition();
-        let step = update::kalman_step(&self.cov, lin, self.config.gate)?;
+        let (holds, count) = self.holds();
+        let step = update::kalman_step(&self.cov, lin, self.config.gate, &holds[..count])?;
         if step.accepted {
             self.apply_correction(&step.correction)?;
             self.cov = step.covariance;

@@ -98,6 +98,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
             translation_info: Matrix3::zeros(),
             translation_score: Vector3::zeros(),
         };
+        let (holds, count) = self.holds();
         for corner in meas.corners {
             let target = self.frames[f].ok_or(Error::FrameNotInitialized)?;
             let lin = reprojection::linearize(
@@ -115,7 +116,12 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
                 jacobian: h,
                 noise,
             };
-            let step = kalman_step_gated_at(&self.cov, &linearization, T::lit(f64::INFINITY))?;
+            let step = kalman_step_gated_at(
+                &self.cov,
+                &linearization,
+                T::lit(f64::INFINITY),
+                &holds[..count],
+            )?;
             self.apply_correction(&step.correction)?;
             self.cov = step.covariance;
             nis += step.nis;

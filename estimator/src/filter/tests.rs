@@ -130,6 +130,75 @@ fn covariance_stays_symmetric_and_positive_through_updates() {
     );
 }
 
+#[test]
+fn held_translation_axis_keeps_its_prior_through_relative_pose_updates() {
+    // Given a moving filter holding the lever arm along a tilted axis
+    let mut ekf = moving_filter(0.0);
+    assert_eq!(
+        ekf.hold_translation_axis(1, Some(Vector3::z())),
+        Err(Error::UnknownSensor)
+    );
+    assert_eq!(
+        ekf.hold_translation_axis(0, Some(Vector3::zeros())),
+        Err(Error::InvalidConfig)
+    );
+    assert_eq!(
+        ekf.hold_translation_axis(0, Some(Vector3::new(f64::NAN, 0.0, 1.0))),
+        Err(Error::NonFinite)
+    );
+    let axis = Vector3::new(0.1, -0.2, 1.0).normalize();
+    ekf.hold_translation_axis(0, Some(axis * 3.0))
+        .expect("hold");
+    assert!((ekf.held_translation_axis(0).expect("held") - axis).norm() < 1e-15);
+    let b = Layout::<1, 2>::extrinsic_translation(0).idx;
+    let along = |ekf: &PoseImuEkf<f64>| {
+        let p = ekf.covariance().fixed_view::<3, 3>(b, b).clone_owned();
+        (
+            (axis.transpose() * p * axis)[0],
+            axis.dot(&ekf.extrinsic(0).translation),
+        )
+    };
+    let (var0, value0) = along(&ekf);
+    let sigma_before = ekf.extrinsic_sigma(0).1;
+    // When relative poses near the motion the filter predicts, but not on it, are fused
+    let t = ekf.time_ns();
+    ekf.anchor(0, t).expect("anchor");
+    let mut from = ekf.imu().pose();
+    for k in 1..=6u64 {
+        let stamp = t + k * 100_000_000;
+        while !ekf.is_due(0, stamp) {
+            ekf.propagate(&ImuSample {
+                stamp_ns: ekf.imu_horizon_ns().expect("imu") + 2_500_000,
+                gyro: Vector3::new(1.2, -0.8, 0.5),
+                accel: Vector3::new(0.5, 1.0, 9.0),
+            })
+            .expect("sample");
+        }
+        let mut probe = ekf.clone();
+        probe.anchor(0, stamp).expect("probe");
+        let to = probe.imu().pose();
+        let e = ekf.extrinsic(0);
+        let predicted = e
+            .inverse()
+            .compose(&from.inverse().compose(&to))
+            .compose(&e);
+        let delta = predicted.boxplus(
+            &Vector3::new(0.01, 0.0, -0.01),
+            &Vector3::new(0.01, -0.02, 0.03),
+        );
+        let m = RelativePose::with_sigmas(stamp - 100_000_000, stamp, delta, 0.01, 0.02);
+        let report = ekf.update_relative_pose(0, &m).expect("update");
+        assert!(report.accepted, "update {k}: NIS {}", report.nis);
+        from = to;
+    }
+    // Then the held component keeps its value and variance, and the others learn
+    let (var1, value1) = along(&ekf);
+    assert!((var1 - var0).abs() < 1e-9 * var0, "{var0} -> {var1}");
+    assert!((value1 - value0).abs() < 1e-12, "{value0} -> {value1}");
+    let after = ekf.extrinsic_sigma(0).1;
+    assert!(after.y < 0.8 * sigma_before.y, "{sigma_before} -> {after}");
+}
+
 // ----- reprojection update ---------------------------------------------------------------
 
 mod reprojection {
