@@ -8,4 +8,6 @@ pub mod extrinsic;
 pub mod gyro_bias;
 pub mod init;
 pub mod lidar_imu;
+pub mod observability;
+pub mod planar;
 pub mod pose_imu;

@@ -313,6 +313,7 @@ fn calibrate_pose_imu(args: &CalibratePoseImu) -> Result<(), Failure> {
             .with_context(|| format!("{}: cannot write report", path.display()))?;
     }
     eprintln!("msreg: wrote {}", args.output.display());
+    warn_unobservable(&calibration.report.observability);
     if let Some(path) = &args.plot {
         let series = msreg_host::plot::extrinsic_series(&calibration.report.history, None);
         let title = format!("T_imu_pose convergence: {}", args.dataset.display());
@@ -325,6 +326,16 @@ fn calibrate_pose_imu(args: &CalibratePoseImu) -> Result<(), Failure> {
         return Err(Failure::NotConverged(calibration.report.reasons.join("; ")));
     }
     Ok(())
+}
+
+/// One warning per DoF the calibration could not observe, naming it and why.
+fn warn_unobservable(rows: &[msreg_host::calibrate::observability::DofObservability]) {
+    for row in rows.iter().filter(|r| r.status == "not observable") {
+        eprintln!(
+            "msreg: warning: {} is not observable: {} (sigma {:.3}, prior {:.3})",
+            row.dof, row.reason, row.sigma, row.prior_sigma
+        );
+    }
 }
 
 fn progress_bar() -> indicatif::ProgressBar {

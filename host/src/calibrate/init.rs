@@ -175,6 +175,16 @@ pub fn rotation_pairs(
         .collect()
 }
 
+/// Total rotation of the sensor over total rotation of the gyro across `pairs` (rotation
+/// vectors `(r_I, r_S)` of the same intervals): 1 for a rigid pair whatever the extrinsic.
+/// Far from 1 the two disagree on how much the body turned: a gyro in the wrong unit, or
+/// odometry whose rotation slips (skid-steer wheel odometry); `None` without rotation.
+pub fn rotation_scale(pairs: &[(Vector3<f64>, Vector3<f64>)]) -> Option<f64> {
+    let gyro: f64 = pairs.iter().map(|(ri, _)| ri.norm()).sum();
+    let sensor: f64 = pairs.iter().map(|(_, rs)| rs.norm()).sum();
+    (gyro > 0.0).then(|| sensor / gyro)
+}
+
 /// The closed-form hand-eye rotation (eq. 3.3-3.5) of rotation-vector pairs `(r_I, r_S)`,
 /// with its degeneracy check (fewer than `min_pairs` pairs or rotation about one axis only).
 pub fn hand_eye_from_pairs(
@@ -191,4 +201,28 @@ pub fn hand_eye_from_pairs(
         pairs: he.pairs(),
         axis_ratio: he.axis_ratio(),
     })
+}
+
+#[cfg(test)]
+mod rotation_scale_tests {
+    use super::*;
+
+    #[test]
+    fn rotation_scale_is_one_for_a_rigid_pair_and_57_for_degrees() {
+        let r = UnitQuaternion::from_euler_angles(0.3, -1.0, 2.0);
+        let pairs: Vec<_> = (0..50)
+            .map(|k| {
+                let rs = Vector3::new((k as f64).sin(), 0.3, (0.7 * k as f64).cos()) * 0.05;
+                (r * rs, rs)
+            })
+            .collect();
+        assert!((rotation_scale(&pairs).expect("turns") - 1.0).abs() < 1e-12);
+        let degrees: Vec<_> = pairs
+            .iter()
+            .map(|(ri, rs)| (ri * 180.0 / std::f64::consts::PI, *rs))
+            .collect();
+        let scale = rotation_scale(&degrees).expect("turns");
+        assert!((scale * 180.0 / std::f64::consts::PI - 1.0).abs() < 1e-12);
+        assert_eq!(rotation_scale(&[]), None);
+    }
 }

@@ -384,7 +384,7 @@ pub fn calibrate<T: Scalar>(
         input.imu_noise,
         (standstill.as_ref(), &[]),
         (rotation, gyro_bias.as_ref()),
-        &options.filter,
+        (&options.filter, None),
     )?;
 
     let started = Instant::now();

@@ -20,6 +20,8 @@ use super::dynamic_init::{self, DynamicInitInput, DynamicInitOptions, FilterPrio
 use super::extrinsic::ImuExtrinsicCalibration;
 use super::gyro_bias::{self, GyroBiasEstimate};
 use super::init::{self, Standstill};
+use super::observability::{self, DofObservability, HeldDirection};
+use super::planar::{self, PlanarStart};
 use crate::dataset::{ImuNoiseYaml, ImuRecord, PoseRecord, PoseSensorYaml};
 
 /// What the pipeline reads.
@@ -123,6 +125,13 @@ pub struct PoseImuReport {
     /// Where the gyro bias the filter started from came from: the standstill, a fit to the
     /// rotation increments (with its sigma), or nowhere (zero, wide prior).
     pub gyro_bias_init: String,
+    /// Planar motion (rotation about one axis) and how the rotation about it was found;
+    /// empty when the motion turns about more than one axis.
+    pub planar: String,
+    /// Per DoF: observed, weak or not observable, and why.
+    pub observability: Vec<DofObservability>,
+    /// The lever-arm direction held at its prior (unit, IMU frame), if any.
+    pub held_axis: Option<[f64; 3]>,
     /// Hand-eye pairs used.
     pub hand_eye_pairs: usize,
     /// Second/first eigenvalue of the rotation scatter (excitation about two axes).
@@ -184,6 +193,11 @@ pub fn calibrate<T: Scalar>(
     let max_interval_ns = period_ns.saturating_mul(3) / 2;
     let increments = init::pose_increments(poses, max_interval_ns);
     let (rotation, gyro_bias) = hand_eye_and_gyro_bias(imu, &increments, standstill.as_ref());
+    let planar = planar_start(input, &increments, standstill.as_ref(), gyro_bias.as_ref());
+    let (rotation, gyro_bias) = match &planar {
+        Some(p) => (Ok(p.rotation_init()), p.gyro_bias.or(gyro_bias)),
+        None => (rotation, gyro_bias),
+    };
     let init_s = started.elapsed().as_secs_f64();
     let FilterStart {
         mut ekf,
@@ -196,7 +210,7 @@ pub fn calibrate<T: Scalar>(
         input.imu_noise,
         (standstill.as_ref(), poses),
         (rotation, gyro_bias.as_ref()),
-        options,
+        (options, planar.as_ref()),
     )?;
 
     let started = Instant::now();
@@ -231,9 +245,65 @@ pub fn calibrate<T: Scalar>(
         calibration.report.reasons.insert(0, problem);
         calibration.report.converged = false;
     }
+    if let Some(problem) =
+        rotation_scale_problem(imu, &increments, gyro_bias.as_ref(), standstill.as_ref())
+    {
+        calibration.report.reasons.insert(0, problem);
+        calibration.report.converged = false;
+    }
     calibration.report.moving_start = describe_moving_start(&moving_start);
     calibration.report.gyro_bias_init = gyro_bias_init;
+    calibration.report.planar = planar.as_ref().map_or_else(String::new, |p| p.describe());
     Ok(calibration)
+}
+
+/// Largest factor by which the pose sensor's and the gyro's total rotation may differ: a few
+/// percent is noise and slip; a gyro in deg/s reads 57x, skid-steer wheel odometry
+/// several times the true turn.
+const MAX_ROTATION_SCALE: f64 = 1.25;
+
+/// The reason to distrust the result when the pose sensor and the gyro disagree on how much
+/// the body turned (see [`init::rotation_scale`]).
+fn rotation_scale_problem(
+    imu: &[ImuRecord],
+    increments: &[init::RotationIncrement],
+    fitted: Option<&GyroBiasEstimate>,
+    standstill: Option<&Standstill>,
+) -> Option<String> {
+    let bias = standstill.map_or_else(
+        || fitted.map_or_else(Vector3::zeros, |f| f.bias),
+        |s| s.gyro_mean,
+    );
+    let pairs = init::rotation_pairs(imu, increments.iter().copied(), &bias);
+    let scale = init::rotation_scale(&pairs)?;
+    (!(1.0 / MAX_ROTATION_SCALE..=MAX_ROTATION_SCALE).contains(&scale)).then(|| {
+        format!(
+            "pose0 turns {scale:.2}x as much as the gyro over the same intervals: the odometry's \
+             rotation is not the body's (wheel slip of a skid-steer base, or a unit error in \
+             pose0 or imu0)"
+        )
+    })
+}
+
+/// [`planar::planar_start`] with the gyro bias this pipeline knows at that point.
+fn planar_start(
+    input: &PoseImuInput<'_>,
+    increments: &[init::RotationIncrement],
+    standstill: Option<&Standstill>,
+    fitted: Option<&GyroBiasEstimate>,
+) -> Option<PlanarStart> {
+    let bias = match (standstill, fitted) {
+        (Some(s), _) => s.gyro_mean,
+        (None, Some(f)) => f.bias,
+        (None, None) => Vector3::zeros(),
+    };
+    planar::planar_start(
+        input.imu,
+        input.poses,
+        increments,
+        (bias, standstill.is_some()),
+        input.imu_noise.accelerometer_noise_density,
+    )
 }
 
 /// The hand-eye rotation from the rotation `increments` and the gyro bias: at a standstill
@@ -378,7 +448,7 @@ pub(crate) fn start_filter<T: Scalar>(
         Result<init::RotationInit, msreg_estimator::HandEyeError<f64>>,
         Option<&GyroBiasEstimate>,
     ),
-    options: &PoseImuOptions,
+    (options, planar): (&PoseImuOptions, Option<&PlanarStart>),
 ) -> Result<FilterStart<T>, PoseImuError> {
     let (rotation_init, init_problem) = match rotation {
         Ok(r) => (r, None),
@@ -398,6 +468,9 @@ pub(crate) fn start_filter<T: Scalar>(
     if init_problem.is_some() {
         options.rotation_sigma_rad = 0.5;
     }
+    if let Some(p) = planar {
+        options.rotation_sigma_rad = p.rotation_sigma(options.rotation_sigma_rad);
+    }
     let moving = match (standstill, init_problem.is_none()) {
         (None, true) => moving_start(imu, odometry, &rotation_init.rotation, gyro_bias, imu_noise),
         _ => Err(MovingStart::NotNeeded),
@@ -409,8 +482,16 @@ pub(crate) fn start_filter<T: Scalar>(
         Err(_) => initial,
     };
     let config = FilterConfig::new(convert::imu_noise::<T>(imu_noise));
-    let ekf = PoseImuEkf::<T>::new(&config, &initial)
+    let initial = match planar {
+        Some(p) => p.with_lever_arm_prior(initial),
+        None => initial,
+    };
+    let mut ekf = PoseImuEkf::<T>::new(&config, &initial)
         .map_err(|e| PoseImuError::BadInput(format!("imu0/imu.yaml: invalid noise ({e})")))?;
+    if let Some(p) = planar {
+        ekf.hold_translation_axis(0, Some(convert::vec3(&p.motion.axis_imu)))
+            .map_err(|e| PoseImuError::BadInput(format!("planar rotation axis: {e}")))?;
+    }
     Ok(FilterStart {
         ekf,
         rotation_init,
@@ -790,7 +871,13 @@ pub(crate) fn finish<T: Scalar, const S: usize, const C: usize, const N: usize, 
     let (sr, st) = ekf.extrinsic_sigma(0);
     let mut reasons = Vec::new();
     let max_sr = sr.amax().to_f64().to_degrees();
-    let max_st = st.amax().to_f64();
+    let held = ekf.held_translation_axis(0).map(|a| HeldDirection {
+        axis: convert::vec3_f64(&a),
+        reason: "planar motion (rotation about one axis)".to_string(),
+    });
+    let translation_cov = covariance.fixed_view::<3, 3>(3, 3).clone_owned();
+    let max_st =
+        observability::largest_sigma_across(&translation_cov, held.as_ref().map(|h| &h.axis));
     if max_sr > CONVERGED_SIGMA_ROT_DEG {
         reasons.push(format!(
             "rotation sigma {max_sr:.3} deg > {CONVERGED_SIGMA_ROT_DEG} deg: not enough rotation"
@@ -812,6 +899,10 @@ pub(crate) fn finish<T: Scalar, const S: usize, const C: usize, const N: usize, 
     }
     let mean_nis = run.nis_sum / run.nis_dof.max(1) as f64;
     let rv = rotation_init.rotation.scaled_axis();
+    let excitation = ekf.excitation(0).map(|x| x.to_f64());
+    let sigma = [sr.x, sr.y, sr.z, st.x, st.y, st.z, ekf.time_offset_sigma(0)].map(|x| x.to_f64());
+    // The prior from the excitation `1 - sigma / prior` (clipped at 0, where sigma >= prior).
+    let prior: [f64; 7] = std::array::from_fn(|k| sigma[k] / (1.0 - excitation[k]).max(1e-9));
     let report = PoseImuReport {
         converged: reasons.is_empty(),
         reasons,
@@ -819,6 +910,9 @@ pub(crate) fn finish<T: Scalar, const S: usize, const C: usize, const N: usize, 
         standstill_s: standstill.map_or(0.0, |s| run.seconds(s.until_ns)),
         moving_start: String::new(),
         gyro_bias_init: String::new(),
+        planar: String::new(),
+        observability: observability::table(&sigma, &prior, &translation_cov, held.as_ref()),
+        held_axis: held.as_ref().map(|h| [h.axis.x, h.axis.y, h.axis.z]),
         hand_eye_pairs: rotation_init.pairs,
         hand_eye_axis_ratio: rotation_init.axis_ratio,
         hand_eye_rotation_vector: [rv.x, rv.y, rv.z],
@@ -826,7 +920,7 @@ pub(crate) fn finish<T: Scalar, const S: usize, const C: usize, const N: usize, 
         updates_rejected: run.rejected,
         poses_skipped: run.skipped,
         mean_nis_per_dof: mean_nis,
-        excitation: ekf.excitation(0).map(|x| x.to_f64()),
+        excitation,
         events: run.events,
         timing_s: timing,
         history: run.history,
