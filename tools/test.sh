@@ -29,6 +29,23 @@ step() {
 step "setup (tools/setup.sh)"
 tools/setup.sh
 
+step "headless Chromium for the HTML report test (host/tests/report_html.rs)"
+if command -v chromium >/dev/null; then
+  echo "chromium present: $(chromium --version 2>/dev/null || true)"
+else
+  sudo=()
+  if [[ $(id -u) -ne 0 ]]; then
+    sudo=(sudo)
+  fi
+  apt_opts=(-o DPkg::Lock::Timeout=600 -q)
+  export DEBIAN_FRONTEND=noninteractive
+  if ! { "${sudo[@]}" apt-get "${apt_opts[@]}" install -y --no-install-recommends chromium ||
+    { "${sudo[@]}" apt-get "${apt_opts[@]}" update &&
+      "${sudo[@]}" apt-get "${apt_opts[@]}" install -y --no-install-recommends chromium; }; }; then
+    echo "NOTICE: chromium could not be installed (offline?): report_html skips its browser checks"
+  fi
+fi
+
 step "format (cargo fmt --check; rustfmt --check firmware/)"
 cargo fmt --all -- --check
 # firmware/ is outside the workspace; rustfmt follows `mod` from the crate roots.

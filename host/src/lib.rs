@@ -16,6 +16,7 @@ pub mod mi;
 pub mod ndt;
 pub mod plot;
 pub mod pointcloud;
+pub mod report;
 pub mod shared_data;
 pub mod sim;
 pub mod solve;

@@ -11,7 +11,7 @@ mod match_cmd;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use anyhow::{anyhow, Context};
+use anyhow::anyhow;
 use clap::{Args, Parser, Subcommand};
 use msreg_host::calibrate::pose_imu::{self, PoseImuInput, PoseImuOptions};
 use msreg_host::command::Outcome;
@@ -22,7 +22,7 @@ use msreg_host::sim::{self, SimConfig};
 #[derive(Parser)]
 #[command(
     name = "msreg",
-    version,
+    version = concat!(env!("CARGO_PKG_VERSION"), " (git ", env!("MSREG_GIT_REVISION"), ")"),
     about = "Extrinsic calibration of LiDARs, cameras and IMUs"
 )]
 struct Cli {
@@ -308,9 +308,7 @@ fn calibrate_pose_imu(args: &CalibratePoseImu) -> Result<(), Failure> {
     };
     result.write(&args.output)?;
     if let Some(path) = &args.report {
-        let json = serde_json::to_string_pretty(&calibration.report)?;
-        std::fs::write(path, json)
-            .with_context(|| format!("{}: cannot write report", path.display()))?;
+        msreg_host::report::write_report(path, &calibration.report)?;
     }
     eprintln!("msreg: wrote {}", args.output.display());
     warn_unobservable(&calibration.report.observability);

@@ -143,8 +143,8 @@ pub struct CameraImuReport {
     /// How RepErrCal was initialised (None for MoCal).
     pub initialization: Option<Initialization>,
     /// One image's corners with their final reprojection (RepErrCal; the dissertation's
-    /// Fig. 4.4); not in the JSON.
-    #[serde(skip)]
+    /// Fig. 4.4); drawn by the HTML report.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub sample: Option<ReprojectionSample>,
     /// Filter report: convergence, NIS, excitation, health events, history.
     #[serde(flatten)]
@@ -174,7 +174,7 @@ pub struct Initialization {
 pub type CameraImuCalibration = ImuExtrinsicCalibration<CameraImuReport>;
 
 /// Detected corners of one image and where the filter reprojects them after its update.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ReprojectionSample {
     /// Image stamp, ns.
     pub stamp_ns: u64,

@@ -73,9 +73,7 @@ pub fn calibrate(args: &CalibrateInfra) -> anyhow::Result<bool> {
         super::pipeline::calibrate(&data).with_context(|| format!("{}", args.dataset.display()))?;
     cal.result.write(&args.output)?;
     if let Some(path) = &args.report {
-        let json = serde_json::to_string_pretty(&cal.report)?;
-        std::fs::write(path, json)
-            .with_context(|| format!("{}: cannot write report", path.display()))?;
+        crate::report::write_report(path, &cal.report)?;
     }
     let failed: Vec<&super::pipeline::CameraReport> =
         cal.report.cameras.iter().filter(|c| !c.solved).collect();

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{anyhow, Context};
+use anyhow::anyhow;
 use clap::Args;
 use indicatif::ProgressBar;
 
@@ -137,9 +137,7 @@ pub fn calibrate(args: &CalibrateLidarImu) -> anyhow::Result<Outcome> {
     }
     .write(&args.output)?;
     if let Some(path) = &args.report {
-        let json = serde_json::to_string_pretty(&calibration.report)?;
-        std::fs::write(path, json)
-            .with_context(|| format!("{}: cannot write report", path.display()))?;
+        crate::report::write_report(path, &calibration.report)?;
     }
     if let Some(path) = &args.plot {
         let series = crate::plot::extrinsic_series(&calibration.report.filter.history, None);

@@ -214,9 +214,8 @@ pub fn calibrate(args: &CalibrateLidarCamera) -> anyhow::Result<Outcome> {
         }
     };
     if let Some(path) = &args.report {
-        let json = serde_json::to_string_pretty(&report)?;
-        std::fs::write(path, json)
-            .with_context(|| format!("{}: cannot write report", path.display()))?;
+        let overlay = args.overlay.clone().unwrap_or(path.with_extension("png"));
+        crate::report::write_report_with_images(path, &report, &[overlay])?;
     }
     Ok(result)
 }

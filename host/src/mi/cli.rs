@@ -133,8 +133,7 @@ pub fn calibrate(args: &TargetlessArgs<'_>) -> anyhow::Result<Outcome> {
     write_overlay(&before, &image, &cloud, &camera, &initial)?;
     if let Some(path) = args.report {
         let report = make_report(args, &image_path, &scan_path, &result, &estimate, seconds);
-        std::fs::write(path, serde_json::to_string_pretty(&report)?)
-            .with_context(|| format!("{}: cannot write report", path.display()))?;
+        crate::report::write_report_with_images(path, &report, &[before.clone(), overlay.clone()])?;
     }
     let poor: Vec<&str> = DOF_NAMES
         .iter()

@@ -149,8 +149,7 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
             detection,
             calibration: calibration.report.clone(),
         };
-        std::fs::write(path, serde_json::to_string_pretty(&report)?)
-            .with_context(|| format!("{}: cannot write report", path.display()))?;
+        crate::report::write_report(path, &report)?;
     }
     if let Some(path) = &args.plot {
         write_plot(path, &dataset, &calibration, &args.dataset);

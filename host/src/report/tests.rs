@@ -1,0 +1,138 @@
+//! The page's structure without a browser: figures present with their ids, tags balanced,
+//! nothing loaded from outside, the JSON embedded inertly.
+
+use serde_json::{json, Value};
+
+use super::{is_html, render_html, Kind};
+
+/// A pose-IMU-like report: `n` updates converging to rz = 90 deg, t = (0.1, 0, 0) m.
+fn filter_report(n: usize) -> Value {
+    let history: Vec<Value> = (0..n)
+        .map(|k| {
+            let s = 1.0 / (1.0 + k as f64);
+            json!({
+                "t_s": 0.1 * k as f64,
+                "rotation_vector": [0.0, 0.0, std::f64::consts::FRAC_PI_2 + 0.01 * s],
+                "translation_m": [0.1 + 0.02 * s, 0.0, 0.0],
+                "sigma_rot_deg": [s, s, s],
+                "sigma_trans_m": [0.05 * s, 0.05 * s, 0.05 * s],
+                "time_offset_s": 0.001,
+                "sigma_time_offset_s": 0.01 * s,
+                "nis": 6.0 + (k % 5) as f64 - 2.0,
+                "accepted": k % 17 != 3,
+            })
+        })
+        .collect();
+    json!({
+        "converged": true,
+        "reasons": [],
+        "scalar": "f64",
+        "mean_nis_per_dof": 1.0,
+        "excitation": [0.99, 0.98, 0.999, 0.95, 0.5, 0.97, 0.9],
+        "events": [{"t_s": 2.0, "kind": "rotation_step", "statistic": 40.0, "magnitude": 0.02}],
+        "timing_s": {"init": 0.1, "filter": 1.0},
+        "poses_skipped": ["1000: before the first IMU sample </script><b>"],
+        "history": history,
+    })
+}
+
+/// Every `<tag` has its `</tag>` (void and self-closed elements excepted).
+fn assert_balanced(html: &str, tag: &str) {
+    let open =
+        html.matches(&format!("<{tag}>")).count() + html.matches(&format!("<{tag} ")).count();
+    let close = html.matches(&format!("</{tag}>")).count();
+    assert_eq!(open, close, "<{tag}> opened {open} times, closed {close}");
+}
+
+#[test]
+fn filter_report_page_has_every_figure_and_balanced_markup() {
+    // Given a filter pipeline's report
+    let report = filter_report(200);
+    assert_eq!(Kind::of(&report), Kind::PoseImu);
+    // When it is rendered
+    let html = render_html(&report);
+    // Then every figure is there, once
+    for id in [
+        "result",
+        "fig-convergence",
+        "fig-nis",
+        "fig-residuals",
+        "fig-excitation",
+        "fig-sigmas",
+        "events",
+        "summary",
+        "report-json",
+    ] {
+        assert_eq!(
+            html.matches(&format!("id=\"{id}\"")).count(),
+            1,
+            "id {id} once"
+        );
+    }
+    // 7 convergence panels, each with its band
+    assert_eq!(html.matches("class=\"band\"").count(), 7);
+    for tag in [
+        "svg", "section", "table", "tr", "g", "p", "ul", "script", "clipPath",
+    ] {
+        assert_balanced(&html, tag);
+    }
+    // nothing external, and the only script is the inert JSON
+    assert!(!html.contains("src=\"http") && !html.contains("href=\"http"));
+    assert_eq!(html.matches("<script").count(), 1);
+    assert!(html.contains("<script type=\"application/json\" id=\"report-json\">"));
+    // text from the report is escaped
+    assert!(html.contains("&lt;/script&gt;&lt;b&gt;"));
+    assert!(html.starts_with("<!DOCTYPE html>"));
+}
+
+#[test]
+fn result_table_holds_the_last_estimate_and_sigmas_in_display_units() {
+    let html = render_html(&filter_report(10));
+    // last point (s = 1/10): rz = 90 deg + 0.001 rad, sigma 0.1 deg; tx = 102 mm, sigma 5 mm;
+    // t_d = 1 ms, sigma 1 ms
+    let rz = (std::f64::consts::FRAC_PI_2 + 0.001).to_degrees();
+    assert!(html.contains(&format!(
+        "<td class=\"k\">rz</td><td>{rz:.4}</td><td>0.1000</td>"
+    )));
+    assert!(
+        html.contains("<td class=\"k\">tx</td><td>102.0000</td><td>5.0000</td><td>15.0000</td>")
+    );
+    assert!(html.contains("<td class=\"k\">t_d</td><td>1.0000</td><td>1.0000</td>"));
+}
+
+#[test]
+fn lidar_camera_matrix_becomes_a_rotation_vector_row() {
+    // Given a target-based LiDAR-camera report with a 30 deg rotation about z
+    let (s, c) = 30f64.to_radians().sin_cos();
+    let report = json!({
+        "method": "pbpc", "frames_total": 3, "frames_used": 3, "converged": false,
+        "reason": "the solver hit its iteration limit",
+        "t_cam_lidar": [[c, -s, 0.0, 0.5], [s, c, 0.0, -0.25], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]],
+        "sigma_rot_deg": [0.1, 0.2, 0.3], "sigma_trans_m": [0.001, 0.002, 0.003],
+        "frames": [{"frame": 0, "mlre_px": 0.5, "plane_rms_m": 0.01}, {"frame": 1, "mlre_px": 0.7, "plane_rms_m": 0.02}],
+        "rejected": [{"frame": 2, "reason": "board missing"}],
+    });
+    assert_eq!(Kind::of(&report), Kind::LidarCamera);
+    let html = render_html(&report);
+    assert!(html.contains("<td class=\"k\">rz</td><td>30.0000</td><td>0.3000</td>"));
+    assert!(html.contains("<td class=\"k\">ty</td><td>-250.0000</td><td>2.0000</td>"));
+    assert!(html.contains("class=\"bad\"><b>NOT converged</b><br>the solver hit"));
+    for id in ["fig-residuals", "fig-sigmas", "rejected", "frames"] {
+        assert!(html.contains(&format!("id=\"{id}\"")), "{id}");
+    }
+    assert!(!html.contains("id=\"fig-convergence\""));
+}
+
+#[test]
+fn html_is_chosen_by_extension() {
+    use std::path::Path;
+    assert!(is_html(Path::new("r.html")) && is_html(Path::new("a/R.HTM")));
+    assert!(!is_html(Path::new("r.json")) && !is_html(Path::new("html")));
+}
+
+#[test]
+fn ticks_are_round_and_cover_the_range() {
+    let t = super::svg::ticks(0.013, 0.87, 5);
+    assert_eq!(t.len(), 4);
+    assert!((t[0] - 0.2).abs() < 1e-12 && (t[3] - 0.8).abs() < 1e-12);
+}

@@ -1,0 +1,260 @@
+//! `--report run.html` of every pipeline, from short simulated runs of the `msreg` binary,
+//! opened in headless Chromium (Debian `chromium`, installed by tools/test.sh): the page
+//! renders without a console message (it has no script; anything logged is an error), the
+//! browser's DOM holds every figure, and the JSON report of the same run carries what the
+//! figures were drawn from. Without Chromium the browser half prints a skip notice.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use serde_json::Value;
+
+fn msreg(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_msreg"))
+        .args(args)
+        .output()
+        .expect("msreg runs")
+}
+
+fn run_ok(args: &[&str]) {
+    let out = msreg(args);
+    assert!(
+        out.status.success(),
+        "msreg {}: {}",
+        args.join(" "),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// Calibrates with `--report r.html`; returns the page and the JSON report embedded in it.
+fn reports(dir: &Path, calibrate: &[&str]) -> (Value, String) {
+    let html = dir.join("r.html");
+    let mut args = calibrate.to_vec();
+    let r = html.to_string_lossy().into_owned();
+    let out = dir.join("result.yaml").to_string_lossy().into_owned();
+    args.extend(["-o", &out, "--report", &r]);
+    // Exit 1 (ran, did not converge) still writes the report.
+    let o = msreg(&args);
+    assert!(
+        matches!(o.status.code(), Some(0 | 1)),
+        "msreg {}: {}",
+        args.join(" "),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let page = std::fs::read_to_string(html).expect("html");
+    let start = "<script type=\"application/json\" id=\"report-json\">";
+    let json = page
+        .split_once(start)
+        .and_then(|(_, rest)| rest.split_once("</script>"))
+        .map(|(json, _)| json)
+        .expect("embedded JSON");
+    (
+        serde_json::from_str(json).expect("embedded JSON parses"),
+        page,
+    )
+}
+
+fn chromium() -> Option<PathBuf> {
+    ["chromium", "chromium-browser", "google-chrome"]
+        .iter()
+        .find_map(|name| {
+            let ok = Command::new(name).arg("--version").output().ok()?;
+            ok.status.success().then(|| PathBuf::from(name))
+        })
+}
+
+/// The DOM after loading `page` in headless Chromium and the console lines it logged.
+fn browse(browser: &Path, page: &Path, profile: &Path) -> (String, Vec<String>) {
+    let url = format!("file://{}", page.canonicalize().expect("page").display());
+    let out = Command::new(browser)
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--no-first-run",
+            "--host-resolver-rules=MAP * ~NOTFOUND",
+            "--enable-logging=stderr",
+            "--log-level=0",
+        ])
+        .arg(format!("--user-data-dir={}", profile.display()))
+        .args(["--dump-dom", &url])
+        .output()
+        .expect("chromium runs");
+    assert!(out.status.success(), "chromium failed on {url}");
+    let console = String::from_utf8_lossy(&out.stderr)
+        .lines()
+        .filter(|l| l.contains(":CONSOLE"))
+        .map(str::to_string)
+        .collect();
+    (String::from_utf8_lossy(&out.stdout).into_owned(), console)
+}
+
+/// Asserts the page renders cleanly in the browser with `ids` in its DOM; skips (with a
+/// notice) without a browser.
+fn assert_renders(name: &str, dir: &Path, ids: &[&str]) {
+    let Some(browser) = chromium() else {
+        eprintln!("SKIP report_html {name}: no chromium on PATH (tools/test.sh installs it)");
+        return;
+    };
+    let (dom, console) = browse(&browser, &dir.join("r.html"), &dir.join("profile"));
+    assert!(console.is_empty(), "{name}: console messages {console:?}");
+    for id in ids {
+        assert!(
+            dom.contains(&format!("id=\"{id}\"")),
+            "{name}: no element {id} in the browser's DOM"
+        );
+    }
+    // The browser parsed every SVG as SVG (an unbalanced tag would merge or drop some).
+    let source = std::fs::read_to_string(dir.join("r.html")).expect("html");
+    for tag in ["<svg", "<polyline", "<polygon", "<circle"] {
+        assert_eq!(
+            dom.matches(tag).count(),
+            source.matches(tag).count(),
+            "{name}: {tag} count differs in the DOM"
+        );
+    }
+}
+
+fn assert_ids(name: &str, html: &str, ids: &[&str]) {
+    for id in ids {
+        assert!(html.contains(&format!("id=\"{id}\"")), "{name}: no {id}");
+    }
+}
+
+/// The NIS figure divides by the DoF the renderer infers per update: they reproduce the
+/// report's own mean NIS per DoF.
+fn assert_nis_dofs_match(name: &str, report: &Value) {
+    let history = report["history"].as_array().expect("history");
+    let reprojection = report["update"].as_str() == Some("reprojection");
+    let frames = report["frames"].as_array().cloned().unwrap_or_default();
+    let (mut nis, mut dof) = (0.0, 0.0);
+    for h in history {
+        nis += h["nis"].as_f64().expect("nis");
+        dof += if reprojection {
+            let t = h["t_s"].as_f64().expect("t");
+            let f = frames
+                .iter()
+                .min_by(|a, b| {
+                    let d = |f: &Value| (f["t_s"].as_f64().unwrap_or(f64::NAN) - t).abs();
+                    d(a).total_cmp(&d(b))
+                })
+                .expect("frame");
+            2.0 * f["corners"].as_f64().expect("corners")
+        } else {
+            6.0
+        };
+    }
+    let mean = report["mean_nis_per_dof"].as_f64().expect("mean");
+    assert!(
+        (nis / dof - mean).abs() <= 1e-9 * mean.abs().max(1.0),
+        "{name}: NIS/dof {} vs report {mean}",
+        nis / dof
+    );
+}
+
+const FILTER_IDS: [&str; 8] = [
+    "status",
+    "result",
+    "fig-convergence",
+    "fig-nis",
+    "fig-residuals",
+    "fig-excitation",
+    "fig-sigmas",
+    "events",
+];
+
+#[test]
+fn pose_imu_report_renders() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let ds = tmp.path().join("ds").to_string_lossy().into_owned();
+    run_ok(&["simulate", "pose-imu", &ds, "--duration", "20"]);
+    let (json, html) = reports(tmp.path(), &["calibrate", "pose-imu", &ds]);
+    assert_ids("pose-imu", &html, &FILTER_IDS);
+    assert_nis_dofs_match("pose-imu", &json);
+    assert_renders("pose-imu", tmp.path(), &FILTER_IDS);
+}
+
+#[test]
+fn camera_imu_report_renders_with_the_reprojection_sample() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let ds = tmp.path().join("ds").to_string_lossy().into_owned();
+    run_ok(&["simulate", "camera-imu", &ds, "--duration", "12"]);
+    let (json, html) = reports(tmp.path(), &["calibrate", "camera-imu", &ds]);
+    assert!(json["sample"]["detected"]
+        .as_array()
+        .is_some_and(|a| !a.is_empty()));
+    let ids: Vec<&str> = FILTER_IDS
+        .iter()
+        .copied()
+        .chain(["fig-reprojection"])
+        .collect();
+    assert_ids("camera-imu", &html, &ids);
+    assert_nis_dofs_match("camera-imu", &json);
+    assert_renders("camera-imu", tmp.path(), &ids);
+}
+
+#[test]
+fn lidar_imu_report_renders() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let ds = tmp.path().join("ds").to_string_lossy().into_owned();
+    run_ok(&["simulate", "lidar-imu", &ds, "--duration", "12"]);
+    let (json, html) = reports(tmp.path(), &["calibrate", "lidar-imu", &ds]);
+    assert_ids("lidar-imu", &html, &FILTER_IDS);
+    assert_nis_dofs_match("lidar-imu", &json);
+    assert_renders("lidar-imu", tmp.path(), &FILTER_IDS);
+}
+
+#[test]
+fn lidar_camera_and_targetless_reports_render_with_overlays() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let ds = tmp.path().join("ds").to_string_lossy().into_owned();
+    run_ok(&["simulate", "lidar-camera", &ds, "--poses", "6"]);
+    let target = tmp.path().join("target");
+    std::fs::create_dir_all(&target).expect("mkdir");
+    let (_, html) = reports(&target, &["calibrate", "lidar-camera", &ds]);
+    let ids = [
+        "status",
+        "result",
+        "fig-residuals",
+        "fig-sigmas",
+        "overlay-0",
+    ];
+    assert_ids("lidar-camera", &html, &ids);
+    assert_renders("lidar-camera", &target, &ids);
+
+    let mi = tmp.path().join("mi");
+    std::fs::create_dir_all(&mi).expect("mkdir");
+    let initial = target.join("result.yaml").to_string_lossy().into_owned();
+    let (_, html) = reports(
+        &mi,
+        &[
+            "calibrate",
+            "lidar-camera",
+            &ds,
+            "--targetless",
+            "--initial",
+            &initial,
+        ],
+    );
+    let ids = [
+        "status",
+        "result",
+        "fig-sigmas",
+        "overlay-0",
+        "overlay-1",
+        "observability",
+    ];
+    assert_ids("targetless", &html, &ids);
+    assert_renders("targetless", &mi, &ids);
+}
+
+#[test]
+fn infra_report_renders() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let ds = tmp.path().join("ds").to_string_lossy().into_owned();
+    run_ok(&["simulate", "infra", &ds, "--cameras", "6"]);
+    let (_, html) = reports(tmp.path(), &["calibrate", "infra", &ds]);
+    let ids = ["fig-residuals", "cameras"];
+    assert_ids("infra", &html, &ids);
+    assert_renders("infra", tmp.path(), &ids);
+}
