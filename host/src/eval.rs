@@ -66,6 +66,54 @@ pub fn compare(
     }
 }
 
+/// Hints that a section was written in another convention than the file's key says: the
+/// inverse transform (`T_imu_cam` under `T_cam_imu`), or a time shift far beyond any
+/// sensor latency (ms or ns where seconds are meant). One line each, for warnings.
+pub fn convention_hints(result: &CalibrationResult, truth: &CalibrationResult) -> Vec<String> {
+    let pairs = [
+        ("cam0", &result.cam0, &truth.cam0),
+        ("lidar0", &result.lidar0, &truth.lidar0),
+        ("pose0", &result.pose0, &truth.pose0),
+        ("cam0_lidar0", &result.cam0_lidar0, &truth.cam0_lidar0),
+    ];
+    let mut hints = Vec::new();
+    for (name, est, truth) in pairs {
+        let (Some(est), Some(truth)) = (est, truth) else {
+            continue;
+        };
+        if let Some(h) = inverted_hint(name, est, truth) {
+            hints.push(h);
+        }
+        if est.timeshift_s.abs() > MAX_PLAUSIBLE_TIMESHIFT_S {
+            hints.push(format!(
+                "{name}: time shift {} s is beyond any sensor latency: seconds are expected \
+                 (a value in ms or ns?)",
+                est.timeshift_s
+            ));
+        }
+    }
+    hints
+}
+
+/// Largest time shift (s) taken as a time shift in seconds rather than a unit mistake.
+const MAX_PLAUSIBLE_TIMESHIFT_S: f64 = 1.0;
+
+/// `Some` when the inverse of `est` is far closer to `truth` than `est` is.
+fn inverted_hint(name: &str, est: &ExtrinsicEstimate, truth: &ExtrinsicEstimate) -> Option<String> {
+    let distance = |a: &nalgebra::Isometry3<f64>| {
+        let d = a.inverse() * truth.transform;
+        d.rotation.angle() + d.translation.vector.norm()
+    };
+    let (direct, inverse) = (distance(&est.transform), distance(&est.transform.inverse()));
+    (direct > 0.05 && inverse < 0.2 * direct).then(|| {
+        format!(
+            "{name}: the inverse transform matches the reference ({inverse:.3} against \
+             {direct:.3} rad + m): the result looks written the other way round \
+             (e.g. T_imu_cam under the key T_cam_imu)"
+        )
+    })
+}
+
 /// Errors of every section present in both files.
 pub fn evaluate(result: &CalibrationResult, truth: &CalibrationResult) -> Vec<SectionErrors> {
     let pairs = [
@@ -107,4 +155,31 @@ pub fn table_rows(errors: &[SectionErrors]) -> String {
         ));
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+
+    #[test]
+    fn inverted_section_and_implausible_time_shift_are_hinted() {
+        let t = Isometry3::from_parts(
+            Translation3::new(0.1, -0.05, 0.02),
+            UnitQuaternion::from_euler_angles(1.5, 0.2, -0.3),
+        );
+        let truth = CalibrationResult {
+            cam0: Some(ExtrinsicEstimate::exact(t, 0.005)),
+            ..CalibrationResult::default()
+        };
+        let good = truth.clone();
+        assert!(convention_hints(&good, &truth).is_empty());
+        let swapped = CalibrationResult {
+            cam0: Some(ExtrinsicEstimate::exact(t.inverse(), 5e6)),
+            ..CalibrationResult::default()
+        };
+        let hints = convention_hints(&swapped, &truth);
+        assert_eq!(hints.len(), 2, "{hints:?}");
+        assert!(hints[0].contains("other way round") && hints[1].contains("ms or ns"));
+    }
 }

@@ -345,6 +345,9 @@ fn evaluate(result: &Path, dataset: &Path, json: bool) -> Result<(), Failure> {
     let truth = Dataset::open(dataset)?;
     let truth = truth.require_groundtruth_extrinsics()?;
     let errors = eval::evaluate(&estimate, truth);
+    for hint in eval::convention_hints(&estimate, truth) {
+        eprintln!("msreg: warning: {}: {hint}", result.display());
+    }
     if errors.is_empty() {
         return Err(Failure::BadInput(anyhow!(
             "{}: no section in common with {}/groundtruth/extrinsics.yaml",
