@@ -103,8 +103,12 @@ fn row(name: &str, sigma: f64, prior: f64, held: Option<&HeldDirection>) -> DofO
 }
 
 /// The largest 1-sigma of a translation covariance in the plane perpendicular to `axis`
-/// (all of it without one): what a convergence check may demand when `axis` is held.
-pub fn largest_sigma_across(cov: &Matrix3<f64>, axis: Option<&Vector3<f64>>) -> f64 {
+/// (all of it without one), and its direction: what a convergence check may demand when
+/// `axis` is held.
+pub fn largest_sigma_across(
+    cov: &Matrix3<f64>,
+    axis: Option<&Vector3<f64>>,
+) -> (f64, Vector3<f64>) {
     let projected = match axis {
         Some(a) => {
             let p = Matrix3::identity() - a * a.transpose();
@@ -112,7 +116,23 @@ pub fn largest_sigma_across(cov: &Matrix3<f64>, axis: Option<&Vector3<f64>>) -> 
         }
         None => *cov,
     };
-    projected.symmetric_eigenvalues().max().max(0.0).sqrt()
+    let eig = projected.symmetric_eigen();
+    let k = eig.eigenvalues.imax();
+    (
+        eig.eigenvalues[k].max(0.0).sqrt(),
+        eig.eigenvectors.column(k).into_owned(),
+    )
+}
+
+/// The names of the axes (`x`, `y`, `z`) whose value exceeds `limit`, joined by commas.
+pub fn axes_above(values: &Vector3<f64>, limit: f64) -> String {
+    ["x", "y", "z"]
+        .iter()
+        .zip(values.iter())
+        .filter(|(_, v)| **v > limit)
+        .map(|(n, _)| *n)
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 #[cfg(test)]
@@ -122,9 +142,12 @@ mod tests {
     #[test]
     fn held_direction_is_excluded_from_the_across_sigma() {
         let cov = Matrix3::from_diagonal(&Vector3::new(1e-4, 4e-4, 0.25));
-        assert!((largest_sigma_across(&cov, None) - 0.5).abs() < 1e-12);
+        let (sigma, direction) = largest_sigma_across(&cov, None);
+        assert!((sigma - 0.5).abs() < 1e-12 && direction.z.abs() > 1.0 - 1e-12);
         let z = Vector3::z();
-        assert!((largest_sigma_across(&cov, Some(&z)) - 0.02).abs() < 1e-12);
+        let (sigma, direction) = largest_sigma_across(&cov, Some(&z));
+        assert!((sigma - 0.02).abs() < 1e-12 && direction.y.abs() > 1.0 - 1e-12);
+        assert_eq!(axes_above(&Vector3::new(0.6, 0.1, 0.7), 0.5), "x, z");
     }
 
     #[test]

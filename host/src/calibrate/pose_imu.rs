@@ -876,17 +876,23 @@ pub(crate) fn finish<T: Scalar, const S: usize, const C: usize, const N: usize, 
         reason: "planar motion (rotation about one axis)".to_string(),
     });
     let translation_cov = covariance.fixed_view::<3, 3>(3, 3).clone_owned();
-    let max_st =
+    let (max_st, worst) =
         observability::largest_sigma_across(&translation_cov, held.as_ref().map(|h| &h.axis));
     if max_sr > CONVERGED_SIGMA_ROT_DEG {
+        let axes = observability::axes_above(
+            &sr.map(|x| x.to_f64().to_degrees()),
+            CONVERGED_SIGMA_ROT_DEG,
+        );
         reasons.push(format!(
-            "rotation sigma {max_sr:.3} deg > {CONVERGED_SIGMA_ROT_DEG} deg: not enough rotation"
+            "rotation about {axes}: sigma up to {max_sr:.3} deg > {CONVERGED_SIGMA_ROT_DEG} deg: \
+             not enough rotation"
         ));
     }
     if max_st > CONVERGED_SIGMA_TRANS_M {
         reasons.push(format!(
-            "translation sigma {max_st:.4} m > {CONVERGED_SIGMA_TRANS_M} m: not enough rotation \
-             to observe the lever arm"
+            "translation along [{:.2}, {:.2}, {:.2}]: sigma {max_st:.4} m > \
+             {CONVERGED_SIGMA_TRANS_M} m: not enough rotation to observe the lever arm",
+            worst.x, worst.y, worst.z
         ));
     }
     let total = run.accepted + run.rejected;
