@@ -125,28 +125,20 @@ pub fn detect_markers(
             params,
         ));
     }
-    let quads = remove_duplicates(quads, params.min_marker_distance_rate);
+    let groups = group_duplicates(quads, params.min_marker_distance_rate);
     let n = dictionary.bits();
     let max_border = (n as f64 * n as f64 * params.max_border_error_rate) as usize;
     let max_errors =
         (dictionary.max_correction_bits() as f64 * params.error_correction_rate) as usize;
-    let mut markers: Vec<Marker> = quads
+    let mut markers: Vec<Marker> = groups
         .iter()
-        .filter_map(|q| {
-            let (code, border) = decode::read_bits(img, &q.corners, n, params)?;
-            if border > max_border {
-                return None;
-            }
-            let (id, turns, corrected_bits) = dictionary.identify(code, max_errors)?;
-            // The printed top-left shows at candidate corner `turns`.
-            let corners = std::array::from_fn(|i| q.corners[(i + turns) % 4]);
-            Some(Marker {
-                id,
-                corners,
-                corrected_bits,
-            })
+        .filter_map(|group| {
+            group
+                .iter()
+                .find_map(|q| decode_quad(img, q, dictionary, max_border, max_errors, params))
         })
         .collect();
+    remove_same_marker_twice(&mut markers);
     if let Some(refinement) = &params.subpix {
         markers
             .iter_mut()
@@ -160,13 +152,59 @@ pub fn detect_markers(
     markers
 }
 
-/// Keeps, of candidates closer than `rate` times the smaller contour length (mean corner
-/// distance, best cyclic correspondence), the one with the longer contour.
-fn remove_duplicates(mut quads: Vec<quad::Quad>, rate: f64) -> Vec<quad::Quad> {
+/// Drops a decoded marker whose id and centre repeat an earlier one's (centres closer than
+/// a quarter of its mean side): candidates of one marker that escaped the grouping.
+fn remove_same_marker_twice(markers: &mut Vec<Marker>) {
+    let centre = |m: &Marker| m.corners.iter().sum::<Vector2<f64>>() / 4.0;
+    let side = |m: &Marker| {
+        (0..4)
+            .map(|i| (m.corners[i] - m.corners[(i + 1) % 4]).norm())
+            .sum::<f64>()
+            / 4.0
+    };
+    let mut kept: Vec<Marker> = Vec::with_capacity(markers.len());
+    for m in markers.drain(..) {
+        let repeat = kept
+            .iter()
+            .any(|k| k.id == m.id && (centre(k) - centre(&m)).norm() < 0.25 * side(k));
+        if !repeat {
+            kept.push(m);
+        }
+    }
+    *markers = kept;
+}
+
+/// Decodes one candidate: the marker with its corners in OpenCV order, unrefined.
+fn decode_quad(
+    img: &GrayImage,
+    q: &quad::Quad,
+    dictionary: Dictionary,
+    max_border: usize,
+    max_errors: usize,
+    params: &ArucoParams,
+) -> Option<Marker> {
+    let (code, border) = decode::read_bits(img, &q.corners, dictionary.bits(), params)?;
+    if border > max_border {
+        return None;
+    }
+    let (id, turns, corrected_bits) = dictionary.identify(code, max_errors)?;
+    // The printed top-left shows at candidate corner `turns`.
+    let corners = std::array::from_fn(|i| q.corners[(i + turns) % 4]);
+    Some(Marker {
+        id,
+        corners,
+        corrected_bits,
+    })
+}
+
+/// Groups candidates closer than `rate` times the smaller contour length (mean corner
+/// distance, best cyclic correspondence): one group per place, longest contour first (the
+/// others are tried when it does not decode).
+fn group_duplicates(mut quads: Vec<quad::Quad>, rate: f64) -> Vec<Vec<quad::Quad>> {
     quads.sort_by(|a, b| b.perimeter.cmp(&a.perimeter));
-    let mut kept: Vec<quad::Quad> = Vec::new();
+    let mut groups: Vec<Vec<quad::Quad>> = Vec::new();
     for q in quads {
-        let duplicate = kept.iter().any(|k| {
+        let close = |k: &quad::Quad| {
             let limit = rate * k.perimeter.min(q.perimeter) as f64;
             (0..4).any(|s| {
                 let mean = (0..4)
@@ -175,12 +213,13 @@ fn remove_duplicates(mut quads: Vec<quad::Quad>, rate: f64) -> Vec<quad::Quad> {
                     / 4.0;
                 mean < limit
             })
-        });
-        if !duplicate {
-            kept.push(q);
+        };
+        match groups.iter_mut().find(|g| close(&g[0])) {
+            Some(g) => g.push(q),
+            None => groups.push(vec![q]),
         }
     }
-    kept
+    groups
 }
 
 /// Refines the four corners with a window of `relative_half_window` bit cells (at most

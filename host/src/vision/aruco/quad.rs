@@ -17,13 +17,14 @@ pub(super) struct Quad {
     pub perimeter: usize,
 }
 
-/// Dark pixels: `img < mean over a window x window box - constant`.
+/// Dark pixels: `img <= mean over a window x window box - constant`, the mean rounded
+/// to a grey level as in 8-bit images.
 pub(super) fn adaptive_threshold(img: &GrayImage, window: usize, constant: f32) -> Vec<bool> {
     let mean = img.box_mean(window / 2);
     img.data()
         .iter()
         .zip(mean.data())
-        .map(|(&v, &m)| v < m - constant)
+        .map(|(&v, &m)| v <= m.round() - constant)
         .collect()
 }
 
