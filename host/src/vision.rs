@@ -5,6 +5,7 @@
 //! measured accuracy: docs/checkerboard.md.
 
 pub mod aruco;
+pub mod blobs;
 pub mod checkerboard;
 pub mod components;
 pub mod frames;

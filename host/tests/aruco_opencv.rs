@@ -9,6 +9,9 @@
 //! Prints a skip notice when they are absent. Paths can be overridden with
 //! `MSREG_OPENCV_DOC_HTML` and `MSREG_ARUCO_REFERENCE`.
 
+// A test crate: its helpers may panic on bad fixtures.
+#![allow(clippy::unwrap_used)]
+
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 

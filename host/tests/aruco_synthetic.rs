@@ -2,6 +2,9 @@
 //! ids, OpenCV corner order and sub-pixel accuracy against the true geometry
 //! (docs/aruco.md). Always runs.
 
+// A test crate: its helpers may panic on bad fixtures.
+#![allow(clippy::unwrap_used)]
+
 use msreg_host::vision::aruco::render::{render_marker, Ink};
 use msreg_host::vision::aruco::{detect_markers, ArucoParams, Dictionary};
 use msreg_host::vision::GrayImage;
@@ -12,7 +15,10 @@ use rand_distr::{Distribution, Normal};
 
 /// Markers laid out on a 3 x 2 grid of a 720 x 480 image, each with a random size
 /// (45-110 px), in-plane rotation and perspective (corners moved up to 12 % of the size).
-fn scene(dict: Dictionary, rng: &mut ChaCha8Rng) -> (GrayImage, Vec<(usize, [Vector2<f64>; 4])>) {
+/// Marker ids with their true corners.
+type Truth = Vec<(usize, [Vector2<f64>; 4])>;
+
+fn scene(dict: Dictionary, rng: &mut ChaCha8Rng) -> (GrayImage, Truth) {
     let mut img = GrayImage::new(720, 480, 0.0);
     // Uneven lighting: a ramp from 70 to 150.
     for (i, v) in img.data_mut().iter_mut().enumerate() {

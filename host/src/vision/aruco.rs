@@ -201,7 +201,7 @@ fn decode_quad(
 /// distance, best cyclic correspondence): one group per place, longest contour first (the
 /// others are tried when it does not decode).
 fn group_duplicates(mut quads: Vec<quad::Quad>, rate: f64) -> Vec<Vec<quad::Quad>> {
-    quads.sort_by(|a, b| b.perimeter.cmp(&a.perimeter));
+    quads.sort_by_key(|q| std::cmp::Reverse(q.perimeter));
     let mut groups: Vec<Vec<quad::Quad>> = Vec::new();
     for q in quads {
         let close = |k: &quad::Quad| {
