@@ -17,6 +17,7 @@ import os
 import sys
 
 import cv2
+import numpy as np
 
 HTML = "/tmp/opencv-doc/usr/share/doc/opencv-doc/opencv4/html"
 # The marker images of the package: photos of printed markers (singlemarkers*, gb*,
@@ -39,6 +40,16 @@ PHOTOS = [
 DICTS = ["DICT_4X4_50", "DICT_6X6_250", "DICT_ARUCO_ORIGINAL"]
 
 
+def grey_like_msreg(bgr):
+    """Colour to grey as msreg's image reader (the `image` crate) does it, Rec. 709 integer
+    weights (2126 R + 7152 G + 722 B) / 10000, so both detectors see the same pixels
+    (OpenCV's own IMREAD_GRAYSCALE weighs 0.299 / 0.587 / 0.114)."""
+    if bgr is None:
+        return None
+    b, g, r = (bgr[..., i].astype(np.uint32) for i in range(3))
+    return ((2126 * r + 7152 * g + 722 * b) // 10000).astype(np.uint8)
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--out", default="/tmp/aruco_reference.csv")
@@ -49,7 +60,7 @@ def main():
     lines = ["image,dictionary,id,u0,v0,u1,v1,u2,v2,u3,v3"]
     for name, dict_name in [(n, d) for n in PHOTOS for d in DICTS]:
         path = os.path.join(args.html, name)
-        img = cv2.imread(path, cv2.IMREAD_GRAYSCALE)
+        img = grey_like_msreg(cv2.imread(path, cv2.IMREAD_COLOR))
         if img is None:
             sys.exit(f"{path}: cannot read (see the setup in this script's docstring)")
         dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dict_name))
