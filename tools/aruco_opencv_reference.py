@@ -54,13 +54,21 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--out", default="/tmp/aruco_reference.csv")
     ap.add_argument("--html", default=HTML)
+    ap.add_argument(
+        "--opencv-grey",
+        action="store_true",
+        help="convert colour with OpenCV's IMREAD_GRAYSCALE weights instead of msreg's",
+    )
     args = ap.parse_args()
     params = cv2.aruco.DetectorParameters()
     params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
     lines = ["image,dictionary,id,u0,v0,u1,v1,u2,v2,u3,v3"]
     for name, dict_name in [(n, d) for n in PHOTOS for d in DICTS]:
         path = os.path.join(args.html, name)
-        img = grey_like_msreg(cv2.imread(path, cv2.IMREAD_COLOR))
+        if args.opencv_grey:
+            img = cv2.imread(path, cv2.IMREAD_GRAYSCALE)
+        else:
+            img = grey_like_msreg(cv2.imread(path, cv2.IMREAD_COLOR))
         if img is None:
             sys.exit(f"{path}: cannot read (see the setup in this script's docstring)")
         dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dict_name))
