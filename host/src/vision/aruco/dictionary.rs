@@ -148,6 +148,18 @@ mod tests {
             Dictionary::Dict4x4_50.codes()[0],
             grid(&["1011", "0101", "0011", "0010"])
         );
+        assert_eq!(
+            Dictionary::Dict4x4_50.codes()[49],
+            grid(&["0101", "0000", "0001", "0011"])
+        );
+        let six = ["000111", "100011", "110111", "011000", "001010", "100110"];
+        assert_eq!(Dictionary::Dict6x6_250.codes()[0], grid(&six));
+        let six = ["011100", "000011", "110100", "111000", "101001", "100000"];
+        assert_eq!(Dictionary::Dict6x6_250.codes()[249], grid(&six));
+        let five = ["10000"; 5];
+        assert_eq!(Dictionary::ArucoOriginal.codes()[0], grid(&five));
+        let five = ["01110"; 5];
+        assert_eq!(Dictionary::ArucoOriginal.codes()[1023], grid(&five));
         assert_eq!(Dictionary::Dict4x4_50.codes().len(), 50);
         assert_eq!(Dictionary::Dict6x6_250.codes().len(), 250);
         assert_eq!(Dictionary::ArucoOriginal.codes().len(), 1024);
