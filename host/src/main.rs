@@ -3,6 +3,7 @@
 //! Exit codes (CONVENTIONS.md): 0 success; 1 the calibration ran but did not converge or
 //! failed its checks (the result is still written, with the reason); 2 bad input.
 
+mod aruco_cmd;
 mod convert_cmd;
 mod demo_cmd;
 mod detect_cmd;
@@ -75,6 +76,10 @@ enum Command {
 enum DetectTarget {
     /// Inner corners of a Kalibr checkerboard, as CSV `image,corner_id,u,v`.
     Checkerboard(detect_cmd::DetectCheckerboardArgs),
+    /// ArUco markers, as CSV `image,id,u0,v0,...,u3,v3` (corners in OpenCV order).
+    Aruco(aruco_cmd::DetectArucoArgs),
+    /// Bright blobs (e.g. infrastructure cameras in the fisheye), as CSV `image,u,v,area,peak`.
+    Blobs(aruco_cmd::DetectBlobsArgs),
 }
 
 // The variants are the subcommand names (`pose-imu`, `lidar-imu`, `camera-imu`).
@@ -238,6 +243,16 @@ fn run(command: Command) -> Result<(), Failure> {
         Command::Detect {
             target: DetectTarget::Checkerboard(args),
         } => detect_cmd::run(&args)
+            .map(|_| ())
+            .map_err(Failure::BadInput),
+        Command::Detect {
+            target: DetectTarget::Aruco(args),
+        } => aruco_cmd::run_aruco(&args)
+            .map(|_| ())
+            .map_err(Failure::BadInput),
+        Command::Detect {
+            target: DetectTarget::Blobs(args),
+        } => aruco_cmd::run_blobs(&args)
             .map(|_| ())
             .map_err(Failure::BadInput),
         Command::Match(args) => match match_cmd::run(&args)? {

@@ -4,7 +4,10 @@
 //! [`msreg_estimator::camera::Camera`] for tests and the image simulator. Method and
 //! measured accuracy: docs/checkerboard.md.
 
+pub mod aruco;
+pub mod blobs;
 pub mod checkerboard;
+pub mod components;
 pub mod frames;
 pub mod gray;
 pub mod grid;
