@@ -145,7 +145,13 @@ fn motion_based_variant_runs_from_the_same_images() {
     assert!(run.status.success(), "{}", stderr(&run));
     assert!(stderr(&run).contains("MoCal has none"), "{}", stderr(&run));
     let e = errors(out.path());
-    assert!(e.rotation_deg < 0.5 && e.translation_m < 0.02, "{e:?}");
+    eprintln!(
+        "MoCal from images: {:.4} deg, {:.3} mm",
+        e.rotation_deg,
+        e.translation_m * 1e3
+    );
+    // Seed 11 measured 0.0114 deg / 0.505 mm (docs/camera_imu.md): bounds ~3x that.
+    assert!(e.rotation_deg < 0.035 && e.translation_m < 0.0015, "{e:?}");
 }
 
 fn assert_bad_input(data: &Path, expect: &str) {

@@ -20,11 +20,13 @@ struct Outcome {
     rot_deg: f64,
     trans_mm: f64,
     td_err_ms: f64,
+    td_sigma_ms: f64,
     sigma_rot_deg: f64,
     sigma_trans_mm: f64,
     inside: bool,
     nees: f64,
     nis: f64,
+    all_nis: f64,
     scale: f64,
     ndt_rot_err_deg: f64,
     ndt_trans_err_mm: f64,
@@ -156,11 +158,13 @@ fn run(sim_config: &LidarImuSimConfig, options: &LidarImuOptions) -> Outcome {
         trans_mm: (c.t_imu_sensor.translation.vector - sim.t_imu_lidar.translation.vector).norm()
             * 1e3,
         td_err_ms: (c.time_offset_s - sim.config.lidar.time_offset_s) * 1e3,
+        td_sigma_ms: c.time_offset_sigma_s * 1e3,
         sigma_rot_deg: (0..3).map(sd).fold(0.0, f64::max).to_degrees(),
         sigma_trans_mm: (3..6).map(sd).fold(0.0, f64::max) * 1e3,
         inside,
         nees,
         nis: c.report.settled_nis_per_dof,
+        all_nis: c.report.filter.mean_nis_per_dof,
         scale: c.report.final_covariance_scale,
         ndt_rot_err_deg,
         ndt_trans_err_mm,
@@ -173,8 +177,8 @@ fn run(sim_config: &LidarImuSimConfig, options: &LidarImuOptions) -> Outcome {
 
 fn print(o: &Outcome) {
     println!(
-        "seed {:3}: rot {:.4} deg (3sd {:.4})  trans {:.2} mm (3sd {:.2})  td err {:+.3} ms  \
-         inside 3 sigma {}  NEES {:.2}  settled NIS/dof {:.2} (scale {:.3})  NDT rms err {:.4} deg / {:.2} mm  \
+        "seed {:3}: rot {:.4} deg (3sd {:.4})  trans {:.2} mm (3sd {:.2})  td err {:+.3} ms (3sd {:.3})  \
+         inside 3 sigma {}  NEES {:.2}  settled NIS/dof {:.2} (all updates {:.3}, scale {:.3})  NDT rms err {:.4} deg / {:.2} mm  \
          lag-1 corr {:+.2} / {:+.2}  matched {}  {:.1} s  converged {}",
         o.seed,
         o.rot_deg,
@@ -182,9 +186,11 @@ fn print(o: &Outcome) {
         o.trans_mm,
         3.0 * o.sigma_trans_mm,
         o.td_err_ms,
+        3.0 * o.td_sigma_ms,
         o.inside,
         o.nees,
         o.nis,
+        o.all_nis,
         o.scale,
         o.ndt_rot_err_deg,
         o.ndt_trans_err_mm,
@@ -229,13 +235,20 @@ fn noise_override(options: &mut LidarImuOptions) {
     }
 }
 
+/// Upper bounds on one seed's errors: rotation (deg), translation (mm), |time offset| (ms).
+struct Bounds {
+    rot_deg: f64,
+    trans_mm: f64,
+    td_ms: f64,
+}
+
 /// The 25 s, 32 x 512 CI scenario on seeds 1-5 (`MSREG_SEED_LIST` overrides) with `base`
 /// options (`MSREG_NOISE` / `MSREG_LOCAL_MAP` override the noise model and the map for
 /// experiments), asserting what both matching modes must meet: every seed accurate,
 /// converged and inside 3 sigma per axis; the summed extrinsic NEES inside the 95 % band of
 /// chi-square with 6 x 5 dof; the settled NIS/dof near 1 (the adaptive noise scale targets
 /// it, the floor holds it somewhat below; a broken adaptation lands outside).
-fn short_recordings_are_consistent(base: LidarImuOptions) -> Vec<Outcome> {
+fn short_recordings_are_consistent(base: LidarImuOptions, bounds: &Bounds) -> Vec<Outcome> {
     let seeds: Vec<u64> = std::env::var("MSREG_SEED_LIST")
         .ok()
         .map(|v| v.split(',').filter_map(|x| x.parse().ok()).collect())
@@ -272,7 +285,17 @@ fn short_recordings_are_consistent(base: LidarImuOptions) -> Vec<Outcome> {
     for o in &outcomes {
         let seed = o.seed;
         assert!(o.inside, "seed {seed}: error outside 3 sigma");
-        assert!(o.rot_deg < 0.3 && o.trans_mm < 15.0, "seed {seed}");
+        assert!(
+            o.rot_deg < bounds.rot_deg && o.trans_mm < bounds.trans_mm,
+            "seed {seed}: {:.4} deg, {:.2} mm",
+            o.rot_deg,
+            o.trans_mm
+        );
+        assert!(
+            o.td_err_ms.abs() < bounds.td_ms,
+            "seed {seed}: time offset error {:+.3} ms",
+            o.td_err_ms
+        );
         assert!(o.converged, "seed {seed}: not converged");
     }
     assert!(
@@ -290,21 +313,32 @@ fn short_recordings_are_consistent(base: LidarImuOptions) -> Vec<Outcome> {
     outcomes
 }
 
-/// The default (scan-to-local-map, 5 scans, its floor 0.0025 deg / 0.25 mm) on the CI
-/// scenario (~25 s of CPU). Also asserts why its floor is half the scan-to-scan one: the
+/// The default matching and noise model (scan-to-local-map, 5 scans, its floor 0.0025 deg /
+/// 0.25 mm) on the CI scenario (~25 s of CPU), with one change: `anneal_updates` 45
+/// instead of the default 100. A 25 s recording has ~240 updates, fewer than the 300
+/// (3 x `anneal_updates`) after which the default settles and the settled NIS is measured,
+/// so with the default the NIS check would have no updates to judge; the defaults proper
+/// are run by the `#[ignore]`d 60 s acceptance test (docs/lidar_imu.md).
+/// Bounds ~3x the worst of seeds 1-5 (0.0120 deg, 0.88 mm, +0.064 ms; docs/lidar_imu.md,
+/// "Test bounds"); seeds 101-110, never used for tuning, stay inside them. Also asserts why its floor is half the scan-to-scan one: the
 /// errors of consecutive map-based increments are not positively correlated (the increment
 /// `T_map_prev^-1 T_map_this` differences two map-relative poses; mean lag-1
 /// autocorrelation negative in rotation and translation here, where scan-to-scan's is
 /// +0.17 to +0.30 in rotation), so there is less correlated error for the floor to stand
 /// for. With the scan-to-scan floor the local map is conservative here (NEES sum 13.2).
 #[test]
-fn default_local_map_is_accurate_and_consistent_over_five_seeds() {
+fn local_map_defaults_with_faster_anneal_are_accurate_and_consistent_over_five_seeds() {
     let options = LidarImuOptions::default();
     assert!(
         options.local_map_scans > 0,
         "the default matches a local map"
     );
-    let outcomes = short_recordings_are_consistent(options);
+    let bounds = Bounds {
+        rot_deg: 0.035,
+        trans_mm: 2.6,
+        td_ms: 0.2,
+    };
+    let outcomes = short_recordings_are_consistent(options, &bounds);
     let n = outcomes.len() as f64;
     for axis in 0..2 {
         let rho = outcomes.iter().map(|o| o.ndt_lag1[axis]).sum::<f64>() / n;
@@ -317,9 +351,15 @@ fn default_local_map_is_accurate_and_consistent_over_five_seeds() {
 
 /// Scan-to-scan matching (`LidarImuOptions::scan_to_scan`, its floor 0.005 deg / 0.5 mm) on
 /// the same scenario: the mode the noise model was first sized on stays consistent.
+/// Bounds ~3x the worst of seeds 1-5 (0.0154 deg, 1.39 mm, +0.144 ms).
 #[test]
 fn scan_to_scan_is_accurate_and_consistent_over_five_seeds() {
-    short_recordings_are_consistent(LidarImuOptions::scan_to_scan());
+    let bounds = Bounds {
+        rot_deg: 0.045,
+        trans_mm: 4.2,
+        td_ms: 0.45,
+    };
+    short_recordings_are_consistent(LidarImuOptions::scan_to_scan(), &bounds);
 }
 
 fn env_or(name: &str, default: usize) -> usize {
