@@ -173,8 +173,11 @@ fn gap_in_imu_data_is_exit_code_2_naming_the_stamp() {
     );
 }
 
+/// Rotation about one axis only (a yaw-only hand-held path): the planar path (docs/planar.md)
+/// finds the rotation and the lever arm across the axis, holds the lever arm along it at its
+/// prior, warns that it is not observable, and the result is inside its 3 sigma.
 #[test]
-fn rotation_about_one_axis_is_exit_code_1_with_result_and_reason() {
+fn rotation_about_one_axis_warns_of_the_unobservable_lever_arm() {
     let dir = tempfile::tempdir().expect("tempdir");
     let mut config = short(2);
     config.trajectory.max_roll_amplitude_rad = 0.0;
@@ -184,12 +187,22 @@ fn rotation_about_one_axis_is_exit_code_1_with_result_and_reason() {
         &["calibrate", "pose-imu", &data, "-o", "r.yaml"],
         dir.path(),
     );
-    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
-    assert!(stderr(&o).contains("two axes"), "{}", stderr(&o));
+    println!("{}", stderr(&o));
     assert!(
-        dir.path().join("r.yaml").exists(),
-        "the result is still written"
+        stderr(&o).contains("warning: translation along") && stderr(&o).contains("not observable"),
+        "{}",
+        stderr(&o)
     );
+    assert!(dir.path().join("r.yaml").exists(), "the result is written");
+    let e = msreg(&["eval", "r.yaml", &data], dir.path());
+    let table = String::from_utf8_lossy(&e.stdout).to_string();
+    println!("{table}");
+    let row = table
+        .lines()
+        .find(|l| l.starts_with("pose0"))
+        .unwrap_or_else(|| panic!("no pose0 row: {table}"));
+    assert!(row.ends_with("yes"), "{row}");
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
 }
 
 #[test]

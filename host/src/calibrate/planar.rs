@@ -32,6 +32,10 @@ use crate::dataset::{ImuRecord, PoseRecord};
 /// suspension roll and pitch (a few deg/s against tens of deg/s of yaw rate) stay below.
 pub const PLANAR_AXIS_RATIO: f64 = 0.1;
 
+/// A rotation increment of the IMU and of the sensor over the same interval, as rotation
+/// vectors `(r_I, r_S)`.
+pub type RotationPair = (Vector3<f64>, Vector3<f64>);
+
 /// Fewest rotation increments to call the motion planar.
 const MIN_PAIRS: usize = 20;
 
@@ -54,11 +58,11 @@ pub struct PlanarMotion {
 /// Planar motion from rotation-increment pairs `(r_I, r_S)` (rotation vectors of the IMU and
 /// the sensor over the same intervals, [`super::init::rotation_pairs`]); `None` when the
 /// motion turns about more than one axis or there are too few pairs.
-pub fn detect(pairs: &[(Vector3<f64>, Vector3<f64>)]) -> Option<PlanarMotion> {
+pub fn detect(pairs: &[RotationPair]) -> Option<PlanarMotion> {
     if pairs.len() < MIN_PAIRS {
         return None;
     }
-    let scatter = |f: fn(&(Vector3<f64>, Vector3<f64>)) -> Vector3<f64>| {
+    let scatter = |f: fn(&RotationPair) -> Vector3<f64>| {
         pairs
             .iter()
             .map(|p| {
@@ -186,7 +190,7 @@ pub fn fit_yaw(
     let mut costs: Vec<f64> = scan.iter().map(|s| s.1).collect();
     costs.sort_by(f64::total_cmp);
     let contrast = costs[costs.len() / 2] / best_cost.max(f64::MIN_POSITIVE);
-    if !best_cost.is_finite() || !(contrast >= MIN_CONTRAST) {
+    if !best_cost.is_finite() || contrast.is_nan() || contrast < MIN_CONTRAST {
         return Err(YawFitError::Flat { contrast });
     }
     let angle = golden_section(|a| cost(a).0, best - step, best + step);
