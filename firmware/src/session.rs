@@ -54,6 +54,10 @@ impl Pending {
 
 /// A camera message waiting for the IMU stream, with its frame's sequence number.
 #[derive(Clone, Copy)]
+#[allow(
+    clippy::large_enum_variant,
+    reason = "no heap: the queue's 4 fixed slots hold corner sets by value, sized for them"
+)]
 enum CameraPending {
     Target(TargetPose, u32),
     Corners(CornerSet, u32),
@@ -605,7 +609,7 @@ impl Session {
     fn zero_velocity<W: embedded_io::Write>(&mut self, w: &mut W, seq: u32, stamp_ns: u64) {
         let Some(c) = self.config else { return };
         let every = u32::from(c.zero_velocity_every.max(1));
-        if stamp_ns > c.zero_velocity_until_ns || self.imu_index % every != 0 {
+        if stamp_ns > c.zero_velocity_until_ns || !self.imu_index.is_multiple_of(every) {
             return;
         }
         let Some(filter) = self.filter.as_mut() else {

@@ -150,7 +150,12 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         let gain = Gain::compute(&self.cov, meas, threshold, &holds[..count])?;
         self.correct(&gain)?;
         let innovation = extrinsic_jacobian.map(|h_e| {
-            extrinsic_innovation(h_e, &gain.innovation_inverse, &gain.weighted_residual)
+            extrinsic_innovation(
+                &h_e.fixed_columns::<3>(0).clone_owned(),
+                &h_e.fixed_columns::<3>(3).clone_owned(),
+                &gain.innovation_inverse,
+                &gain.weighted_residual,
+            )
         });
         Ok(self.record_update(
             kind,
@@ -353,18 +358,20 @@ struct Corrected<T: Scalar, const S: usize, const C: usize, const F: usize> {
 }
 
 /// The innovation of one update projected on a sensor's extrinsic (for the step detector):
-/// `H_e^T S^-1 H_e` and `H_e^T S^-1 r`, split into rotation and translation.
+/// `H_e^T S^-1 H_e` and `H_e^T S^-1 r` for the rotation and the translation block of
+/// `H_e = [h_rotation h_translation]` (the off-diagonal blocks are not needed).
 pub(super) fn extrinsic_innovation<T: Scalar, const M: usize>(
-    h_e: &SMatrix<T, M, 6>,
+    h_rotation: &SMatrix<T, M, 3>,
+    h_translation: &SMatrix<T, M, 3>,
     innovation_inverse: &SMatrix<T, M, M>,
     weighted_residual: &SVector<T, M>,
 ) -> ExtrinsicInnovation<T> {
-    let info = h_e.transpose() * innovation_inverse * h_e;
-    let score = h_e.transpose() * weighted_residual;
+    let rotation_t = h_rotation.transpose();
+    let translation_t = h_translation.transpose();
     ExtrinsicInnovation {
-        rotation_info: info.fixed_view::<3, 3>(0, 0).clone_owned(),
-        rotation_score: score.fixed_rows::<3>(0).clone_owned(),
-        translation_info: info.fixed_view::<3, 3>(3, 3).clone_owned(),
-        translation_score: score.fixed_rows::<3>(3).clone_owned(),
+        rotation_info: rotation_t * innovation_inverse * h_rotation,
+        rotation_score: rotation_t * weighted_residual,
+        translation_info: translation_t * innovation_inverse * h_translation,
+        translation_score: translation_t * weighted_residual,
     }
 }

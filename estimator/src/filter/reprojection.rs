@@ -18,7 +18,7 @@ use crate::state::{imu, Layout};
 use crate::update::reprojection::{self, CornerSet};
 use crate::update::{Gain, Measurement, SparseJacobian, UpdateKind, UpdateReport};
 use crate::Error;
-use nalgebra::{Matrix2, Matrix3, SMatrix, Vector3};
+use nalgebra::{Matrix2, Matrix3, Vector3};
 
 impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> Ekf<T, S, C, N, F> {
     /// Fuses the corners of target frame `f` seen by camera sensor `s` (whose extrinsic is
@@ -130,13 +130,12 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
             )?;
             self.correct(&step)?;
             nis += step.nis;
-            let mut h_e = SMatrix::<T, 2, 6>::zeros();
-            h_e.fixed_view_mut::<2, 3>(0, 0)
-                .copy_from(&lin.extrinsic_rotation);
-            h_e.fixed_view_mut::<2, 3>(0, 3)
-                .copy_from(&lin.extrinsic_translation);
-            let part =
-                extrinsic_innovation(&h_e, &step.innovation_inverse, &step.weighted_residual);
+            let part = extrinsic_innovation(
+                &lin.extrinsic_rotation,
+                &lin.extrinsic_translation,
+                &step.innovation_inverse,
+                &step.weighted_residual,
+            );
             innovation.rotation_info += part.rotation_info;
             innovation.rotation_score += part.rotation_score;
             innovation.translation_info += part.translation_info;

@@ -64,15 +64,19 @@ impl<T: Scalar, const M: usize, const L: usize> SparseJacobian<T, M, L> {
         h
     }
 
-    /// `P H^T` from the stored columns of `P` only.
+    /// `P H^T` from the stored columns of `P` only (plain slices: nalgebra's strided
+    /// iterators cost several times more on the M4F).
     fn cov_times_transpose<const N: usize>(&self, cov: &SMatrix<T, N, N>) -> SMatrix<T, N, M> {
         let mut out = SMatrix::<T, N, M>::zeros();
+        let out_columns = out.as_mut_slice();
         for (l, &c) in self.columns.iter().enumerate() {
-            let p = cov.column(c);
-            for r in 0..M {
+            let p = &cov.as_slice()[c * N..(c + 1) * N];
+            for (r, o) in out_columns.chunks_exact_mut(N).enumerate() {
                 let h = self.values[(r, l)];
                 if h != T::zero() {
-                    out.column_mut(r).axpy(h, &p, T::one());
+                    for (o, x) in o.iter_mut().zip(p) {
+                        *o += h * *x;
+                    }
                 }
             }
         }
@@ -108,9 +112,10 @@ pub struct Measurement<T: Scalar, const M: usize, const L: usize> {
 
 impl<T: Scalar, const M: usize, const L: usize> Measurement<T, M, L> {
     fn is_finite(&self) -> bool {
-        self.residual.iter().all(|x| x.is_finite())
-            && self.jacobian.values.iter().all(|x| x.is_finite())
-            && self.noise.iter().all(|x| x.is_finite())
+        let finite = |m: &[T]| m.iter().all(|x| x.is_finite());
+        finite(self.residual.as_slice())
+            && finite(self.jacobian.values.as_slice())
+            && finite(self.noise.as_slice())
     }
 }
 
@@ -191,20 +196,15 @@ impl<T: Scalar, const M: usize, const N: usize> Gain<T, M, N> {
 
     /// True when the correction is finite and `P + K C^T + C K^T` cannot overflow: every
     /// entry of a covariance is at most its largest diagonal entry in magnitude, and every
-    /// entry of the update at most `2 M max|K| max|C|`.
+    /// entry of the update at most `2 M max|K| max|C|`. Sums of magnitudes bound the maxima
+    /// and carry any NaN or infinity along, in one pass and without `max` (a library call
+    /// on the M4F).
     fn fits(&self, cov: &SMatrix<T, N, N>) -> bool {
-        let amax = |m: &[T]| m.iter().fold(T::zero(), |a, x| a.max(x.abs()));
-        let finite = |m: &[T]| m.iter().all(|x| x.is_finite());
-        if !finite(self.correction.as_slice())
-            || !finite(self.gain.as_slice())
-            || !finite(self.cross.as_slice())
-        {
-            return false;
-        }
-        let diag = (0..N).fold(T::zero(), |a, i| a.max(cov[(i, i)].abs()));
+        let sum = |m: &[T]| m.iter().fold(T::zero(), |a, x| a + x.abs());
+        let diag = (0..N).fold(T::zero(), |a, i| a + cov[(i, i)].abs());
         let bound = T::lit(2.0) * diag
-            + T::lit(2.0 * M as f64) * amax(self.gain.as_slice()) * amax(self.cross.as_slice());
-        bound.is_finite()
+            + T::lit(2.0 * M as f64) * sum(self.gain.as_slice()) * sum(self.cross.as_slice());
+        bound.is_finite() && sum(self.correction.as_slice()).is_finite()
     }
 
     /// `P <- P + K C^T + C K^T` (the Joseph form, see the module doc), upper triangle then
@@ -213,16 +213,24 @@ impl<T: Scalar, const M: usize, const N: usize> Gain<T, M, N> {
         if !self.accepted {
             return;
         }
-        for j in 0..N {
-            for i in 0..=j {
+        // Rows of K and C as arrays: the inner loop runs over slices, without index checks.
+        let (gain, cross) = (self.gain.as_slice(), self.cross.as_slice());
+        let k: [[T; M]; N] = core::array::from_fn(|i| core::array::from_fn(|r| gain[r * N + i]));
+        let c: [[T; M]; N] = core::array::from_fn(|i| core::array::from_fn(|r| cross[r * N + i]));
+        for (j, column) in cov.as_mut_slice().chunks_exact_mut(N).enumerate() {
+            let (kj, cj) = (&k[j], &c[j]);
+            for ((p, ki), ci) in column[..=j].iter_mut().zip(&k).zip(&c) {
                 let mut d = T::zero();
                 for r in 0..M {
-                    d += self.gain[(i, r)] * self.cross[(j, r)]
-                        + self.cross[(i, r)] * self.gain[(j, r)];
+                    d += ki[r] * cj[r] + ci[r] * kj[r];
                 }
-                let value = cov[(i, j)] + d;
-                cov[(i, j)] = value;
-                cov[(j, i)] = value;
+                *p += d;
+            }
+        }
+        let p = cov.as_mut_slice();
+        for j in 1..N {
+            for i in 0..j {
+                p[i * N + j] = p[j * N + i];
             }
         }
     }
