@@ -219,10 +219,14 @@ fn bench(clock: InstructionClock) -> bool {
             return false;
         }
     }
-    for _ in 0..20 {
+    for k in 0..20 {
         let (outcome, ticks) = clock.measure(|| at_rest.update_zero_velocity());
         if !outcome.is_ok_and(|r| r.accepted) {
-            hprintln!("bench: zero-velocity update not accepted at rest");
+            hprintln!(
+                "bench: zero-velocity update {} not accepted at rest: {:?}",
+                k,
+                outcome.map(|r| (r.nis, r.threshold))
+            );
             return false;
         }
         zero_velocity.add(ticks);
