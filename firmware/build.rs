@@ -3,9 +3,10 @@
 
 use std::{env, fs, path::PathBuf};
 
-fn main() {
-    let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
-    fs::copy("memory.x", out.join("memory.x")).expect("copy memory.x to OUT_DIR");
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let out = PathBuf::from(env::var_os("OUT_DIR").ok_or("cargo did not set OUT_DIR")?);
+    fs::copy("memory.x", out.join("memory.x"))
+        .map_err(|e| format!("copy memory.x to {}: {e}", out.display()))?;
     println!("cargo:rustc-link-search={}", out.display());
     // Only `link` logs with defmt (to semihosting) and links a defmt logger; the library's
     // interned log strings still reach the other binaries' objects, and without defmt.x
@@ -13,4 +14,5 @@ fn main() {
     println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
     println!("cargo:rerun-if-changed=memory.x");
     println!("cargo:rerun-if-changed=build.rs");
+    Ok(())
 }

@@ -3,6 +3,8 @@
 # toolchain and build-std, on QEMU's mps2-an386 board (../shared/docs/EMBEDDED.md).
 #
 #   tools/firmware.sh build   build both binaries (release profile of firmware/Cargo.toml)
+#   tools/firmware.sh clippy  Debian's clippy over the firmware (all targets, -D warnings,
+#                             the [lints] table of firmware/Cargo.toml)
 #   tools/firmware.sh run     boot the self-test in QEMU; fails unless it prints
 #                             "firmware self-test: PASS" and exits 0
 #   tools/firmware.sh size    flash (.text+.rodata+.data), static RAM (.data+.bss+.uninit)
@@ -24,7 +26,7 @@ target=thumbv7em-none-eabihf
 timeout_s=${FIRMWARE_TIMEOUT:-120}
 
 usage() {
-  sed -n '2,15p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'
+  sed -n '2,17p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'
   exit 2
 }
 
@@ -246,6 +248,7 @@ command=$1
 shift
 case "$command" in
   build) build ;;
+  clippy) PATH=/usr/bin:$PATH debian_cargo clippy --release --all-targets -- -D warnings ;;
   run) cmd_run ;;
   size) cmd_size ;;
   bench) cmd_bench "$@" ;;

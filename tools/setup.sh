@@ -15,7 +15,7 @@ set -euo pipefail
 
 # fonts-dejavu-core: the font of the convergence plots (`--plot`; plotters renders text in pure
 # Rust with ab_glyph and reads DejaVuSans.ttf at run time, so no fontconfig/freetype build dep).
-packages=(rustc-web rust-web-src cargo-web lld qemu-system-arm fonts-dejavu-core)
+packages=(rustc-web rust-web-src cargo-web lld qemu-system-arm fonts-dejavu-core rust-web-clippy)
 # A file per package that proves it is usable, in the order of `packages`.
 witnesses=(
   /usr/bin/rustc
@@ -24,6 +24,7 @@ witnesses=(
   /usr/bin/ld.lld
   /usr/bin/qemu-system-arm
   /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf
+  /usr/bin/cargo-clippy
 )
 
 missing=()

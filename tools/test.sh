@@ -76,6 +76,9 @@ fi
 step "firmware build (tools/firmware.sh build)"
 tools/firmware.sh build
 
+step "firmware lint (tools/firmware.sh clippy: -D warnings)"
+tools/firmware.sh clippy
+
 step "firmware self-test in QEMU (tools/firmware.sh run)"
 tools/firmware.sh run
 

@@ -3,7 +3,6 @@
 use core::fmt;
 
 /// Why the filter refused an input. The state is unchanged whenever one is returned.
-#[non_exhaustive]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Error {
     /// A value was NaN or infinite.

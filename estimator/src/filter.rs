@@ -3,8 +3,10 @@
 //! (`N = 15 + 7 S + 6 C + 6 F`).
 //!
 //! Every public method either succeeds or returns an [`Error`] with the filter unchanged:
-//! updates run on a draft copy that is committed only when everything (gate, finiteness)
-//! went through.
+//! an update checks everything that can fail (gate, positive-definite innovation,
+//! finiteness) before it writes anything, and what has to move first (propagation and a new
+//! clone; the corners of an image before its gate) is taken back from an undo record, never
+//! from a copy of the filter (see `filter/undo.rs`).
 
 use crate::chi2::Confidence;
 use crate::health::{HealthConfig, HealthMonitor};
@@ -299,6 +301,13 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         Ok(())
     }
 
+    /// Spacing of the last two IMU samples, ns: the period one reading's white noise refers
+    /// to (the stream's own, no rate is assumed). `None` before the second sample, when a
+    /// zero-velocity update cannot run yet.
+    pub fn imu_period_ns(&self) -> Option<u64> {
+        (self.imu_period_ns > 0).then_some(self.imu_period_ns)
+    }
+
     /// The newest IMU stamp received, ns: measurements whose IMU time is at or before it can
     /// be fused. `None` before the first sample.
     pub fn imu_horizon_ns(&self) -> Option<u64> {
@@ -378,7 +387,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         let phi_p = propagate::transition_mul(&phi, &p_ii);
         let new_ii = propagate::transition_mul(&phi, &phi_p.transpose()).transpose() + step.noise;
         let new_ii = (new_ii + new_ii.transpose()) * T::lit(0.5);
-        let pending = propagate::transition_mul(&phi, &self.pending_transition);
+        let pending = propagate::transition_compose(&phi, &self.pending_transition);
         let finite = step.state.is_finite()
             && new_ii.iter().all(|x| x.is_finite())
             && pending.iter().all(|x| x.is_finite());
@@ -401,3 +410,4 @@ mod holds;
 mod reprojection;
 #[cfg(test)]
 mod tests;
+mod undo;

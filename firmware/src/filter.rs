@@ -97,6 +97,11 @@ impl Filter {
         on_ekf!(self, f => f.propagate(sample))
     }
 
+    /// The IMU stream's period once two samples are in (a ZUPT needs it).
+    pub fn imu_period_ns(&self) -> Option<u64> {
+        on_ekf!(self, f => f.imu_period_ns())
+    }
+
     /// Zero-velocity update with the latest sample (its own frame, as [`Filter::propagate`]).
     #[inline(never)]
     pub fn update_zero_velocity(&mut self) -> Result<UpdateReport<f32>, FilterError> {

@@ -54,6 +54,10 @@ impl Pending {
 
 /// A camera message waiting for the IMU stream, with its frame's sequence number.
 #[derive(Clone, Copy)]
+#[allow(
+    clippy::large_enum_variant,
+    reason = "no heap: the queue's 4 fixed slots hold corner sets by value, sized for them"
+)]
 enum CameraPending {
     Target(TargetPose, u32),
     Corners(CornerSet, u32),
@@ -250,7 +254,7 @@ impl Session {
             FrameError::Crc => ErrorKind::Crc,
             FrameError::Decode => ErrorKind::Decode,
             FrameError::Oversize => ErrorKind::Oversize,
-            _ => ErrorKind::Framing,
+            FrameError::Framing | FrameError::BufferTooSmall => ErrorKind::Framing,
         };
         self.fault(w, kind, 0, 0);
     }
@@ -291,7 +295,8 @@ impl Session {
             HostMsg::ImuBatch(b) => self.on_imu(w, seq, b),
             HostMsg::Anchor(a) => self.on_pose(w, seq, Pending::Anchor(*a, seq)),
             HostMsg::RelativePose(r) => self.on_pose(w, seq, Pending::Increment(*r, seq)),
-            msg @ (HostMsg::TargetPose(_) | HostMsg::CornerSet(_)) => self.on_camera(w, seq, msg),
+            HostMsg::TargetPose(t) => self.on_camera(w, seq, CameraPending::Target(*t, seq)),
+            HostMsg::CornerSet(c) => self.on_camera(w, seq, CameraPending::Corners(*c, seq)),
             HostMsg::GetStatus => {
                 let status = DeviceMsg::Status(self.status());
                 Self::tx(&mut self.tx_seq, w).send(&status);
@@ -382,13 +387,8 @@ impl Session {
         &mut self,
         w: &mut W,
         seq: u32,
-        msg: &HostMsg,
+        p: CameraPending,
     ) -> AckStatus {
-        let p = match msg {
-            HostMsg::TargetPose(t) => CameraPending::Target(*t, seq),
-            HostMsg::CornerSet(c) => CameraPending::Corners(*c, seq),
-            _ => return AckStatus::Rejected,
-        };
         let refused = match self.filter {
             None => Some(ErrorKind::NotConfigured),
             Some(Filter::PoseImu(_)) => Some(ErrorKind::WrongSensorSet),
@@ -426,7 +426,7 @@ impl Session {
             match filter.propagate(&sample) {
                 Ok(()) => {
                     self.counts.imu_samples += 1;
-                    self.zero_velocity(w, stamp_ns);
+                    self.zero_velocity(w, seq, stamp_ns);
                     self.imu_index += 1;
                     // The sample is the filter's look-ahead: what it makes due can be fused.
                     self.apply_due(w);
@@ -606,20 +606,27 @@ impl Session {
     }
 
     #[inline(never)]
-    fn zero_velocity<W: embedded_io::Write>(&mut self, w: &mut W, stamp_ns: u64) {
+    fn zero_velocity<W: embedded_io::Write>(&mut self, w: &mut W, seq: u32, stamp_ns: u64) {
         let Some(c) = self.config else { return };
         let every = u32::from(c.zero_velocity_every.max(1));
-        if stamp_ns > c.zero_velocity_until_ns || self.imu_index % every != 0 {
+        if stamp_ns > c.zero_velocity_until_ns || !self.imu_index.is_multiple_of(every) {
             return;
         }
         let Some(filter) = self.filter.as_mut() else {
             return;
         };
-        // As on the host, a gated-out zero-velocity update is not a fault.
-        if let Ok(report) = filter.update_zero_velocity() {
-            self.counts.zero_velocity += 1;
-            let diag = diagnostic(&report);
-            Self::tx(&mut self.tx_seq, w).send(&DeviceMsg::UpdateDiagnostic(diag));
+        // As on the host: the first sample gives the stream no period yet (no ZUPT then); a
+        // gated-out update is a diagnostic, an error is a fault.
+        if filter.imu_period_ns().is_none() {
+            return;
+        }
+        match filter.update_zero_velocity() {
+            Ok(report) => {
+                self.counts.zero_velocity += 1;
+                let diag = diagnostic(&report);
+                Self::tx(&mut self.tx_seq, w).send(&DeviceMsg::UpdateDiagnostic(diag));
+            }
+            Err(e) => self.fault(w, error_kind(&e), seq, stamp_ns),
         }
     }
 
@@ -740,7 +747,11 @@ fn error_kind(e: &FilterError) -> ErrorKind {
         FilterError::FrameNotInitialized => ErrorKind::TargetNotInitialized,
         FilterError::NotProjectable => ErrorKind::NotProjectable,
         FilterError::EmptyMeasurement => ErrorKind::OutOfRange,
-        _ => ErrorKind::Other,
+        // The session names its sensor and target itself and fuses only what is due: only a
+        // bug could make these.
+        FilterError::UnknownSensor | FilterError::UnknownFrame | FilterError::NotYetDue { .. } => {
+            ErrorKind::Other
+        }
     }
 }
 
@@ -750,7 +761,7 @@ fn diagnostic(r: &UpdateReport<f32>) -> UpdateDiagnostic {
         kind: match r.kind {
             msreg_estimator::UpdateKind::ZeroVelocity => UpdateKind::ZeroVelocity,
             msreg_estimator::UpdateKind::Reprojection => UpdateKind::Reprojection,
-            _ => UpdateKind::RelativePose,
+            msreg_estimator::UpdateKind::RelativePose => UpdateKind::RelativePose,
         },
         dof: r.dof as u8,
         nis: r.nis,

@@ -99,18 +99,22 @@ impl Uart {
     /// # Safety
     /// Takes over VTOR and UART0; must be called once with interrupts not yet in use.
     pub unsafe fn init(scb: &mut cortex_m::peripheral::SCB) -> Self {
-        let table = core::ptr::addr_of_mut!(RAM_VECTORS);
-        let flash_table = scb.vtor.read() as *const usize;
-        for i in 0..48 {
-            (*table).0[i] = read_volatile(flash_table.add(i));
+        // SAFETY: the caller's contract above (once, interrupts not yet in use); the table is
+        // a static sized for the 48 vectors copied.
+        unsafe {
+            let table = core::ptr::addr_of_mut!(RAM_VECTORS);
+            let flash_table = scb.vtor.read() as *const usize;
+            for i in 0..48 {
+                (*table).0[i] = read_volatile(flash_table.add(i));
+            }
+            (*table).0[16 + Irq::Uart0Rx as usize] = uart0_rx_isr as extern "C" fn() as usize;
+            scb.vtor.write(table as u32);
+            cortex_m::asm::dsb();
+            cortex_m::asm::isb();
+            write_reg(BAUDDIV, 16);
+            write_reg(CTRL, CTRL_TX_EN | CTRL_RX_EN | CTRL_RX_IRQ);
+            NVIC::unmask(Irq::Uart0Rx);
         }
-        (*table).0[16 + Irq::Uart0Rx as usize] = uart0_rx_isr as extern "C" fn() as usize;
-        scb.vtor.write(table as u32);
-        cortex_m::asm::dsb();
-        cortex_m::asm::isb();
-        write_reg(BAUDDIV, 16);
-        write_reg(CTRL, CTRL_TX_EN | CTRL_RX_EN | CTRL_RX_IRQ);
-        NVIC::unmask(Irq::Uart0Rx);
         Self { _private: () }
     }
 

@@ -35,7 +35,6 @@ pub const fn frame_max(packet_max: usize) -> usize {
 
 /// Why a frame could not be encoded or decoded.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[non_exhaustive]
 pub enum FrameError {
     /// The output buffer is too small (encode).
     BufferTooSmall,

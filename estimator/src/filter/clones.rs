@@ -101,14 +101,13 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         if s >= S {
             return Err(Error::UnknownSensor);
         }
-        let mut draft = self.clone();
-        let slot = draft.prepare_clone(s, stamp_ns)?;
-        if let Some(old) = draft.anchors[s] {
-            draft.drop_clone(old);
+        // Nothing after the (atomic) propagation can fail.
+        let slot = self.prepare_clone(s, stamp_ns)?;
+        if let Some(old) = self.anchors[s] {
+            self.drop_clone(old);
         }
-        draft.clone_imu_pose(s, slot, stamp_ns);
-        draft.anchors[s] = Some(slot);
-        *self = draft;
+        self.clone_imu_pose(s, slot, stamp_ns);
+        self.anchors[s] = Some(slot);
         Ok(())
     }
 

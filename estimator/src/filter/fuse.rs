@@ -1,13 +1,17 @@
 //! Measurement updates of the filter: relative pose, zero velocity, and the bookkeeping
 //! every update shares (correction, NIS record, health monitor and its reaction).
 
+use super::undo::CloneUndo;
 use super::Ekf;
+use crate::chi2;
 use crate::health::{ExtrinsicInnovation, HealthEvent};
 use crate::lie::Pose;
 use crate::propagate;
 use crate::scalar::Scalar;
-use crate::state::{Block, Layout};
-use crate::update::{self, relative_pose, zero_velocity, Linearization, UpdateKind, UpdateReport};
+use crate::state::{imu, Block, CloneState, ImuState, Layout, SensorState};
+use crate::update::{
+    relative_pose, zero_velocity, Gain, Measurement, SparseJacobian, UpdateKind, UpdateReport,
+};
 use crate::Error;
 use nalgebra::{SMatrix, SVector, Vector3};
 
@@ -39,45 +43,67 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
                 Error::NoAnchor
             });
         }
-        let mut draft = self.clone();
-        let to_slot = draft.prepare_clone(s, meas.stamp_to_ns)?;
-        draft.clone_imu_pose(s, to_slot, meas.stamp_to_ns);
-        let from = draft.clones[from_slot].ok_or(Error::OlderThanWindow)?;
-        let to = draft.clones[to_slot].ok_or(Error::OlderThanWindow)?;
+        let t = self.reachable_imu_time(s, meas.stamp_to_ns)?;
+        let to_slot = self.free_slot()?;
+        let undo = CloneUndo::save(self, to_slot);
+        self.advance_to(t)?;
+        self.clone_imu_pose(s, to_slot, meas.stamp_to_ns);
+        let report = self.fuse_relative_pose(s, from_slot, to_slot, meas);
+        if report.is_err() {
+            undo.restore(self);
+        }
+        let report = report?;
+        self.drop_clone(from_slot);
+        self.anchors[s] = Some(to_slot);
+        Ok(report)
+    }
+
+    /// The relative-pose update between two clones; changes the filter only on success.
+    fn fuse_relative_pose(
+        &mut self,
+        s: usize,
+        from_slot: usize,
+        to_slot: usize,
+        meas: &relative_pose::RelativePose<T>,
+    ) -> Result<UpdateReport<T>, Error> {
+        let from = self.clones[from_slot].ok_or(Error::OlderThanWindow)?;
+        let to = self.clones[to_slot].ok_or(Error::OlderThanWindow)?;
         let lin = relative_pose::linearize(
             &from.pose,
             &to.pose,
-            &draft.sensors[s].extrinsic,
+            &self.sensors[s].extrinsic,
             &meas.delta,
         );
-        let mut h = SMatrix::<T, 6, N>::zeros();
-        let ext = Layout::<S, C>::extrinsic(s).idx;
-        let cf = Layout::<S, C>::clone_orientation(from_slot).idx;
-        let ct = Layout::<S, C>::clone_orientation(to_slot).idx;
-        h.fixed_view_mut::<6, 6>(0, cf).copy_from(&lin.clone_from);
-        h.fixed_view_mut::<6, 6>(0, ct).copy_from(&lin.clone_to);
-        h.fixed_view_mut::<6, 6>(0, ext).copy_from(&lin.extrinsic);
-        let linearization = Linearization {
+        let mut jacobian = SparseJacobian::<T, 6, 18>::zeros();
+        jacobian.set(
+            0,
+            Layout::<S, C>::clone_orientation(from_slot).idx,
+            &lin.clone_from,
+        );
+        jacobian.set(
+            6,
+            Layout::<S, C>::clone_orientation(to_slot).idx,
+            &lin.clone_to,
+        );
+        jacobian.set(12, Layout::<S, C>::extrinsic(s).idx, &lin.extrinsic);
+        let measurement = Measurement {
             residual: lin.residual,
-            jacobian: h,
+            jacobian,
             noise: meas.covariance,
         };
-        let report = draft.fuse(
+        self.fuse(
             UpdateKind::RelativePose,
-            s,
+            Some(s),
             meas.stamp_to_ns,
-            &linearization,
+            &measurement,
             Some(&lin.extrinsic),
-        )?;
-        draft.drop_clone(from_slot);
-        draft.anchors[s] = Some(to_slot);
-        *self = draft;
-        Ok(report)
+        )
     }
 
     /// Zero-velocity update with the IMU reading at the filter time (the caller decided the
     /// platform is at rest). The reading's white noise is that of one sample at the stream's
-    /// own period.
+    /// own period ([`Ekf::imu_period_ns`]; `Error::NotInitialized` before the second
+    /// sample). It belongs to no sensor: its NIS enters no sensor's health window.
     pub fn update_zero_velocity(&mut self) -> Result<UpdateReport<T>, Error> {
         let sample = self.imu_now.ok_or(Error::NotInitialized)?;
         if self.imu_period_ns == 0 {
@@ -91,75 +117,95 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
             self.config.zero_velocity_sigma,
         );
         let (residual, h_imu) = zero_velocity::linearize(&self.imu, &sample);
-        let mut h = SMatrix::<T, { zero_velocity::DIM }, N>::zeros();
-        h.fixed_view_mut::<{ zero_velocity::DIM }, 15>(0, 0)
-            .copy_from(&h_imu);
-        let lin = Linearization {
+        let mut jacobian = SparseJacobian::<T, { zero_velocity::DIM }, 15>::zeros();
+        jacobian.set(0, imu::ORIENTATION.idx, &h_imu);
+        let measurement = Measurement {
             residual,
-            jacobian: h,
+            jacobian,
             noise,
         };
-        let mut draft = self.clone();
-        let report = draft.fuse(UpdateKind::ZeroVelocity, 0, sample.stamp_ns, &lin, None)?;
-        *self = draft;
-        Ok(report)
+        self.fuse(
+            UpdateKind::ZeroVelocity,
+            None,
+            sample.stamp_ns,
+            &measurement,
+            None,
+        )
     }
 
-    /// The shared Kalman step plus bookkeeping: applies the correction, records NIS and
-    /// feeds the health monitor (which may inflate the extrinsic covariance).
-    pub(super) fn fuse<const M: usize>(
+    /// The shared update core plus bookkeeping: applies the correction, records NIS and
+    /// feeds the health monitor (which may inflate the extrinsic covariance). On error the
+    /// state is unchanged (up to bringing `P_IX` up to date, which changes no value).
+    pub(super) fn fuse<const M: usize, const L: usize>(
         &mut self,
         kind: UpdateKind,
-        s: usize,
+        sensor: Option<usize>,
         stamp_ns: u64,
-        lin: &Linearization<T, M, N>,
+        meas: &Measurement<T, M, L>,
         extrinsic_jacobian: Option<&SMatrix<T, M, 6>>,
     ) -> Result<UpdateReport<T>, Error> {
         self.flush_transition();
         let (holds, count) = self.holds();
-        let step = update::kalman_step(&self.cov, lin, self.config.gate, &holds[..count])?;
-        if step.accepted {
-            self.apply_correction(&step.correction)?;
-            self.cov = step.covariance;
-        }
+        let threshold = chi2::quantile::<T>(M, self.config.gate);
+        let gain = Gain::compute(&self.cov, meas, threshold, &holds[..count])?;
+        self.correct(&gain)?;
         let innovation = extrinsic_jacobian.map(|h_e| {
-            extrinsic_innovation(h_e, &step.innovation_inverse, &step.weighted_residual)
+            extrinsic_innovation(
+                &h_e.fixed_columns::<3>(0).clone_owned(),
+                &h_e.fixed_columns::<3>(3).clone_owned(),
+                &gain.innovation_inverse,
+                &gain.weighted_residual,
+            )
         });
         Ok(self.record_update(
             kind,
-            s,
+            sensor,
             stamp_ns,
-            (step.nis, M, step.threshold),
-            step.accepted,
+            (gain.nis, M, gain.threshold),
+            gain.accepted,
             innovation.as_ref(),
         ))
     }
 
-    /// Records an update's NIS `(nis, dof, threshold)` with the health monitor, reacts to
-    /// what it detects, and builds the report.
+    /// Applies a computed update (state and covariance) if the gate accepted it; the state
+    /// is checked first, so an error changes nothing.
+    pub(super) fn correct<const M: usize>(&mut self, gain: &Gain<T, M, N>) -> Result<(), Error> {
+        if !gain.accepted {
+            return Ok(());
+        }
+        let corrected = self.corrected(&gain.correction)?;
+        gain.apply_to(&mut self.cov);
+        self.commit(corrected);
+        Ok(())
+    }
+
+    /// Records an update's NIS `(nis, dof, threshold)` with the health monitor of its
+    /// sensor (none for a sensor-less update), reacts to what it detects, and builds the
+    /// report.
     pub(super) fn record_update(
         &mut self,
         kind: UpdateKind,
-        s: usize,
+        sensor: Option<usize>,
         stamp_ns: u64,
         (nis, dof, threshold): (T, usize, T),
         accepted: bool,
         innovation: Option<&ExtrinsicInnovation<T>>,
     ) -> UpdateReport<T> {
-        // The step detectors see innovations only once the extrinsic has converged.
-        let (sr, st) = self.extrinsic_sigma(s);
-        let h = self.config.health;
-        let armed = sr.max() < h.arm_sigma_rotation && st.max() < h.arm_sigma_translation;
-        let innovation = innovation.filter(|_| armed);
-        let event = self
-            .health
-            .record(s, stamp_ns, nis, dof, accepted, innovation);
+        let event = sensor.and_then(|s| {
+            // The step detectors see innovations only once the extrinsic has converged.
+            let (sr, st) = self.extrinsic_sigma(s);
+            let h = self.config.health;
+            let armed = sr.max() < h.arm_sigma_rotation && st.max() < h.arm_sigma_translation;
+            let innovation = innovation.filter(|_| armed);
+            self.health
+                .record(s, stamp_ns, nis, dof, accepted, innovation)
+        });
         if let Some(event) = event {
             self.react_to(&event);
         }
         UpdateReport {
             kind,
-            sensor: s,
+            sensor,
             stamp_ns,
             dof,
             nis,
@@ -239,11 +285,19 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         Ok(())
     }
 
-    /// `x <- x ⊞ dx` over every block.
+    /// `x <- x ⊞ dx` over every block (the state only; the covariance is the caller's).
+    #[cfg(test)]
     pub(super) fn apply_correction(&mut self, dx: &SVector<T, N>) -> Result<(), Error> {
+        let corrected = self.corrected(dx)?;
+        self.commit(corrected);
+        Ok(())
+    }
+
+    /// `x ⊞ dx` over every block, checked finite, not yet committed.
+    fn corrected(&self, dx: &SVector<T, N>) -> Result<Corrected<T, S, C, F>, Error> {
         let v3 = |b: Block| Vector3::new(dx[b.idx], dx[b.idx + 1], dx[b.idx + 2]);
         let imu_dx = dx.fixed_rows::<15>(0).clone_owned();
-        let imu_state = propagate::boxplus(&self.imu, &imu_dx);
+        let imu = propagate::boxplus(&self.imu, &imu_dx);
         let mut sensors = self.sensors;
         for (s, sensor) in sensors.iter_mut().enumerate() {
             sensor.extrinsic = sensor.extrinsic.boxplus(
@@ -270,7 +324,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
                 );
             }
         }
-        let finite = imu_state.is_finite()
+        let finite = imu.is_finite()
             && sensors
                 .iter()
                 .all(|x| x.extrinsic.is_finite() && x.time_offset.is_finite())
@@ -279,27 +333,45 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         if !finite {
             return Err(Error::DivergentUpdate);
         }
-        self.imu = imu_state;
-        self.sensors = sensors;
-        self.clones = clones;
-        self.frames = frames;
-        Ok(())
+        Ok(Corrected {
+            imu,
+            sensors,
+            clones,
+            frames,
+        })
+    }
+
+    fn commit(&mut self, x: Corrected<T, S, C, F>) {
+        self.imu = x.imu;
+        self.sensors = x.sensors;
+        self.clones = x.clones;
+        self.frames = x.frames;
     }
 }
 
+/// A corrected state, checked, waiting to be committed.
+struct Corrected<T: Scalar, const S: usize, const C: usize, const F: usize> {
+    imu: ImuState<T>,
+    sensors: [SensorState<T>; S],
+    clones: [Option<CloneState<T>>; C],
+    frames: [Option<Pose<T>>; F],
+}
+
 /// The innovation of one update projected on a sensor's extrinsic (for the step detector):
-/// `H_e^T S^-1 H_e` and `H_e^T S^-1 r`, split into rotation and translation.
+/// `H_e^T S^-1 H_e` and `H_e^T S^-1 r` for the rotation and the translation block of
+/// `H_e = [h_rotation h_translation]` (the off-diagonal blocks are not needed).
 pub(super) fn extrinsic_innovation<T: Scalar, const M: usize>(
-    h_e: &SMatrix<T, M, 6>,
+    h_rotation: &SMatrix<T, M, 3>,
+    h_translation: &SMatrix<T, M, 3>,
     innovation_inverse: &SMatrix<T, M, M>,
     weighted_residual: &SVector<T, M>,
 ) -> ExtrinsicInnovation<T> {
-    let info = h_e.transpose() * innovation_inverse * h_e;
-    let score = h_e.transpose() * weighted_residual;
+    let rotation_t = h_rotation.transpose();
+    let translation_t = h_translation.transpose();
     ExtrinsicInnovation {
-        rotation_info: info.fixed_view::<3, 3>(0, 0).clone_owned(),
-        rotation_score: score.fixed_rows::<3>(0).clone_owned(),
-        translation_info: info.fixed_view::<3, 3>(3, 3).clone_owned(),
-        translation_score: score.fixed_rows::<3>(3).clone_owned(),
+        rotation_info: rotation_t * innovation_inverse * h_rotation,
+        rotation_score: rotation_t * weighted_residual,
+        translation_info: translation_t * innovation_inverse * h_translation,
+        translation_score: translation_t * weighted_residual,
     }
 }

@@ -8,6 +8,7 @@
 //! while no `2K x N` matrix is ever formed (K is unbounded, the stack is not).
 
 use super::fuse::extrinsic_innovation;
+use super::undo::Checkpoint;
 use super::Ekf;
 use crate::camera::Camera;
 use crate::chi2;
@@ -15,9 +16,9 @@ use crate::health::ExtrinsicInnovation;
 use crate::scalar::Scalar;
 use crate::state::{imu, Layout};
 use crate::update::reprojection::{self, CornerSet};
-use crate::update::{kalman_step_gated_at, Linearization, UpdateKind, UpdateReport};
+use crate::update::{Gain, Measurement, SparseJacobian, UpdateKind, UpdateReport};
 use crate::Error;
-use nalgebra::{Matrix2, Matrix2x3, Matrix3, SMatrix, Vector3};
+use nalgebra::{Matrix2, Matrix3, Vector3};
 
 impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> Ekf<T, S, C, N, F> {
     /// Fuses the corners of target frame `f` seen by camera sensor `s` (whose extrinsic is
@@ -50,14 +51,20 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         // loop reuses its slot), so the stack cost is that of a single pass.
         let mut scale = T::one();
         let mut first_nis = None;
+        let checkpoint = Checkpoint::save(self);
         let (nis, accepted, innovation) = loop {
-            let mut draft = self.clone();
-            let (nis, innovation) = draft.fuse_corners(s, f, camera, meas, t, scale)?;
+            let (nis, innovation) = match self.fuse_corners(s, f, camera, meas, t, scale) {
+                Ok(x) => x,
+                Err(e) => {
+                    checkpoint.restore(self);
+                    return Err(e);
+                }
+            };
             let raw = *first_nis.get_or_insert(nis);
             if nis <= threshold {
-                *self = draft;
                 break (raw, true, innovation);
             }
+            checkpoint.restore(self);
             let wanted = (nis / T::lit(dof as f64)).sqrt();
             if scale > T::one() || wanted > self.config.max_noise_scale {
                 break (raw, false, innovation);
@@ -66,7 +73,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         };
         Ok(self.record_update(
             UpdateKind::Reprojection,
-            s,
+            Some(s),
             meas.stamp_ns,
             (nis, dof, threshold),
             accepted,
@@ -110,28 +117,25 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
                 &corner.pixel,
             )
             .ok_or(Error::NotProjectable)?;
-            let h = self.reprojection_jacobian(s, f, &lin, &last.gyro);
-            let linearization = Linearization {
+            let measurement = Measurement {
                 residual: lin.residual,
-                jacobian: h,
+                jacobian: self.reprojection_jacobian(s, f, &lin, &last.gyro),
                 noise,
             };
-            let step = kalman_step_gated_at(
+            let step = Gain::compute(
                 &self.cov,
-                &linearization,
+                &measurement,
                 T::lit(f64::INFINITY),
                 &holds[..count],
             )?;
-            self.apply_correction(&step.correction)?;
-            self.cov = step.covariance;
+            self.correct(&step)?;
             nis += step.nis;
-            let mut h_e = SMatrix::<T, 2, 6>::zeros();
-            h_e.fixed_view_mut::<2, 3>(0, 0)
-                .copy_from(&lin.extrinsic_rotation);
-            h_e.fixed_view_mut::<2, 3>(0, 3)
-                .copy_from(&lin.extrinsic_translation);
-            let part =
-                extrinsic_innovation(&h_e, &step.innovation_inverse, &step.weighted_residual);
+            let part = extrinsic_innovation(
+                &lin.extrinsic_rotation,
+                &lin.extrinsic_translation,
+                &step.innovation_inverse,
+                &step.weighted_residual,
+            );
             innovation.rotation_info += part.rotation_info;
             innovation.rotation_score += part.rotation_score;
             innovation.translation_info += part.translation_info;
@@ -140,39 +144,41 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         Ok((nis, innovation))
     }
 
-    /// The 2 x N Jacobian of one corner. The time offset enters through the IMU pose at the
-    /// image's true IMU time: `d/dt_d = H_theta w + H_p v` (as the clones carry it).
+    /// The Jacobian of one corner: its 19 non-zero columns (IMU pose, extrinsic, time offset,
+    /// target pose) of the 2 x N. The time offset enters through the IMU pose at the image's
+    /// true IMU time: `d/dt_d = H_theta w + H_p v` (as the clones carry it).
     pub(super) fn reprojection_jacobian(
         &self,
         s: usize,
         f: usize,
         lin: &reprojection::ReprojectionJacobians<T>,
         held_gyro: &Vector3<T>,
-    ) -> SMatrix<T, 2, N> {
+    ) -> SparseJacobian<T, 2, 19> {
         let w = held_gyro - self.imu.gyro_bias;
         let v = self.imu.velocity;
-        let mut h = SMatrix::<T, 2, N>::zeros();
-        let mut put = |idx: usize, block: &Matrix2x3<T>| {
-            h.fixed_view_mut::<2, 3>(0, idx).copy_from(block);
-        };
-        put(imu::ORIENTATION.idx, &lin.imu_rotation);
-        put(imu::POSITION.idx, &lin.imu_position);
-        put(
-            Layout::<S, C>::extrinsic_rotation(s).idx,
-            &lin.extrinsic_rotation,
-        );
-        put(
-            Layout::<S, C>::extrinsic_translation(s).idx,
-            &lin.extrinsic_translation,
-        );
-        put(
-            Layout::<S, C>::frame_orientation(f).idx,
-            &lin.target_rotation,
-        );
-        put(Layout::<S, C>::frame_position(f).idx, &lin.target_position);
+        let mut h = SparseJacobian::zeros();
+        let blocks = [
+            (imu::ORIENTATION.idx, &lin.imu_rotation),
+            (imu::POSITION.idx, &lin.imu_position),
+            (
+                Layout::<S, C>::extrinsic_rotation(s).idx,
+                &lin.extrinsic_rotation,
+            ),
+            (
+                Layout::<S, C>::extrinsic_translation(s).idx,
+                &lin.extrinsic_translation,
+            ),
+            (
+                Layout::<S, C>::frame_orientation(f).idx,
+                &lin.target_rotation,
+            ),
+            (Layout::<S, C>::frame_position(f).idx, &lin.target_position),
+        ];
+        for (k, (idx, block)) in blocks.into_iter().enumerate() {
+            h.set(3 * k, idx, block);
+        }
         let td = lin.imu_rotation * w + lin.imu_position * v;
-        h.fixed_view_mut::<2, 1>(0, Layout::<S, C>::time_offset(s).idx)
-            .copy_from(&td);
+        h.set(18, Layout::<S, C>::time_offset(s).idx, &td);
         h
     }
 }

@@ -131,6 +131,64 @@ fn covariance_stays_symmetric_and_positive_through_updates() {
 }
 
 #[test]
+fn relative_pose_failing_after_propagation_and_cloning_takes_both_back() {
+    // Given an anchored filter and a measurement whose noise is not positive definite
+    // (valid diagonal, so it is found only at the Cholesky of S, after the filter
+    // propagated to its end stamp and cloned the IMU pose there)
+    let mut ekf = moving_filter(0.0);
+    let t = ekf.time_ns();
+    ekf.anchor(0, t).expect("anchor");
+    let stamp = t + 15_000_000;
+    let mut bad = RelativePose::with_sigmas(t, stamp, Pose::identity(), 1e-4, 1e-4);
+    bad.covariance[(0, 1)] = 1.0;
+    bad.covariance[(1, 0)] = 1.0;
+    let before = ekf.clone();
+    // When it is fused
+    let result = ekf.update_relative_pose(0, &bad);
+    // Then it is a typed error and nothing moved: time, state, covariance, clones
+    assert_eq!(result, Err(Error::SingularInnovation));
+    assert_eq!(ekf.time_ns(), before.time_ns());
+    assert_eq!(ekf.imu(), before.imu());
+    assert_eq!(ekf.covariance(), before.covariance());
+    assert_eq!(ekf.clones, before.clones);
+    assert_eq!(ekf.anchors, before.anchors);
+    // and the same measurement with valid noise gives bit for bit what it gives on the copy.
+    let good = RelativePose::with_sigmas(t, stamp, Pose::identity(), 0.05, 0.05);
+    let mut copy = before.clone();
+    assert_eq!(
+        ekf.update_relative_pose(0, &good),
+        copy.update_relative_pose(0, &good)
+    );
+    assert_eq!(ekf.covariance(), copy.covariance());
+    assert_eq!(ekf.imu(), copy.imu());
+}
+
+#[test]
+fn zero_velocity_belongs_to_no_sensor_and_needs_the_stream_period() {
+    // Given a filter at rest with one IMU sample: no period yet, so no zero-velocity update
+    let init = InitialState::<f64, 1>::at_rest(Vector3::new(0.0, 0.0, 9.81)).expect("gravity");
+    let mut ekf = PoseImuEkf::new(&FilterConfig::new(ImuNoise::vn300()), &init).expect("prior");
+    let at_rest = |stamp_ns| ImuSample {
+        stamp_ns,
+        gyro: Vector3::zeros(),
+        accel: Vector3::new(0.0, 0.0, 9.81),
+    };
+    ekf.propagate(&at_rest(T0)).expect("sample");
+    assert_eq!(ekf.imu_period_ns(), None);
+    assert_eq!(ekf.update_zero_velocity(), Err(Error::NotInitialized));
+    // When a second sample 5 ms on gives the stream its period and the update runs
+    ekf.propagate(&at_rest(T0 + 5_000_000)).expect("sample");
+    assert_eq!(ekf.imu_period_ns(), Some(5_000_000));
+    let report = ekf.update_zero_velocity().expect("update");
+    // Then it is accepted, booked on no sensor, and sensor 0's health saw nothing
+    assert!(report.accepted);
+    assert_eq!(report.sensor, None);
+    assert_eq!(report.dof, 9);
+    let health = ekf.health().sensor(0).expect("sensor 0");
+    assert_eq!((health.accepted, health.rejected), (0, 0));
+}
+
+#[test]
 fn held_translation_axis_keeps_its_prior_through_relative_pose_updates() {
     // Given a moving filter holding the lever arm along a tilted axis
     let mut ekf = moving_filter(0.0);
@@ -354,7 +412,8 @@ mod reprojection {
         )
         .expect("in view");
         let gyro = at_image.imu_now.expect("imu").gyro;
-        let analytic = at_image.reprojection_jacobian(0, 0, &lin, &gyro);
+        let analytic: SMatrix<f64, 2, 28> =
+            at_image.reprojection_jacobian(0, 0, &lin, &gyro).to_dense();
         // Pixels per unit error are O(500); the time-offset column carries the midpoint
         // integrator's O(|w| |a| dt^2) velocity inconsistency, as in the clone test.
         assert_mat_close(&(analytic / 1000.0), &(numeric / 1000.0), 2e-4);

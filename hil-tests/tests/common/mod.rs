@@ -203,6 +203,24 @@ pub fn truth_errors(device: &Estimate, truth: &Isometry3<f64>, truth_td_s: f64) 
     }
 }
 
+/// The host's f64 reference against the truth, per axis in units of its own sigma (rx, ry,
+/// rz, tx, ty, tz, t_d): the device can only be as consistent as what it reproduces.
+pub fn host_truth_normalised(
+    t_imu_sensor: &Isometry3<f64>,
+    covariance: &nalgebra::Matrix6<f64>,
+    (time_offset_s, time_offset_sigma_s): (f64, f64),
+    truth: &Isometry3<f64>,
+    truth_td_s: f64,
+) -> [f64; 7] {
+    let e = error6(t_imu_sensor, truth);
+    let mut out = [0.0; 7];
+    for (i, o) in out.iter_mut().take(6).enumerate() {
+        *o = e[i] / covariance[(i, i)].sqrt();
+    }
+    out[6] = (truth_td_s - time_offset_s) / time_offset_sigma_s;
+    out
+}
+
 /// A replay driven step by step, for fault injection.
 pub struct FaultRun {
     /// The client.

@@ -377,6 +377,8 @@ pub(crate) trait ImuFilter<T: Scalar> {
     fn propagate(&mut self, sample: &ImuSample<T>) -> Result<(), FilterError>;
     /// Zero-velocity update with the latest sample.
     fn update_zero_velocity(&mut self) -> Result<UpdateReport<T>, FilterError>;
+    /// The IMU stream's period, once two samples are in (a ZUPT needs it).
+    fn imu_period_ns(&self) -> Option<u64>;
 }
 
 impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> ImuFilter<T>
@@ -388,6 +390,10 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
 
     fn update_zero_velocity(&mut self) -> Result<UpdateReport<T>, FilterError> {
         Ekf::update_zero_velocity(self)
+    }
+
+    fn imu_period_ns(&self) -> Option<u64> {
+        Ekf::imu_period_ns(self)
     }
 }
 
@@ -412,9 +418,16 @@ pub(crate) fn drive_imu<T: Scalar, E: ImuFilter<T>>(
                 i + 1
             ))
         })?;
-        if standstill.is_some_and(|s| rec.stamp_ns <= s.until_ns) && i % 20 == 0 {
-            // Errors here only mean the gate rejected a ZUPT; nothing to report.
-            let _ = ekf.update_zero_velocity();
+        let at_rest = standstill.is_some_and(|s| rec.stamp_ns <= s.until_ns);
+        if at_rest && i % 20 == 0 && ekf.imu_period_ns().is_some() {
+            // A gated-out ZUPT is a report, not an error; an error is one.
+            ekf.update_zero_velocity().map_err(|e| {
+                PoseImuError::BadInput(format!(
+                    "imu0/data.csv: zero-velocity update at the sample stamped {} ns (sample {} of the file): {e}",
+                    rec.stamp_ns,
+                    i + 1
+                ))
+            })?;
         }
         hooks.after_sample(ekf, rec);
         hooks.fuse_due(ekf, i, rec)?;
