@@ -70,17 +70,8 @@ pub fn compare(
 /// inverse transform (`T_imu_cam` under `T_cam_imu`), or a time shift far beyond any
 /// sensor latency (ms or ns where seconds are meant). One line each, for warnings.
 pub fn convention_hints(result: &CalibrationResult, truth: &CalibrationResult) -> Vec<String> {
-    let pairs = [
-        ("cam0", &result.cam0, &truth.cam0),
-        ("lidar0", &result.lidar0, &truth.lidar0),
-        ("pose0", &result.pose0, &truth.pose0),
-        ("cam0_lidar0", &result.cam0_lidar0, &truth.cam0_lidar0),
-    ];
     let mut hints = Vec::new();
-    for (name, est, truth) in pairs {
-        let (Some(est), Some(truth)) = (est, truth) else {
-            continue;
-        };
+    for (name, est, truth) in common_sections(result, truth) {
         if let Some(h) = inverted_hint(name, est, truth) {
             hints.push(h);
         }
@@ -93,6 +84,21 @@ pub fn convention_hints(result: &CalibrationResult, truth: &CalibrationResult) -
         }
     }
     hints
+}
+
+/// The sections present in both files: (name, estimate, truth).
+fn common_sections<'a>(
+    result: &'a CalibrationResult,
+    truth: &'a CalibrationResult,
+) -> impl Iterator<Item = (&'static str, &'a ExtrinsicEstimate, &'a ExtrinsicEstimate)> {
+    [
+        ("cam0", &result.cam0, &truth.cam0),
+        ("lidar0", &result.lidar0, &truth.lidar0),
+        ("pose0", &result.pose0, &truth.pose0),
+        ("cam0_lidar0", &result.cam0_lidar0, &truth.cam0_lidar0),
+    ]
+    .into_iter()
+    .filter_map(|(name, e, t)| Some((name, e.as_ref()?, t.as_ref()?)))
 }
 
 /// Largest time shift (s) taken as a time shift in seconds rather than a unit mistake.
@@ -116,15 +122,8 @@ fn inverted_hint(name: &str, est: &ExtrinsicEstimate, truth: &ExtrinsicEstimate)
 
 /// Errors of every section present in both files.
 pub fn evaluate(result: &CalibrationResult, truth: &CalibrationResult) -> Vec<SectionErrors> {
-    let pairs = [
-        ("cam0", &result.cam0, &truth.cam0),
-        ("lidar0", &result.lidar0, &truth.lidar0),
-        ("pose0", &result.pose0, &truth.pose0),
-        ("cam0_lidar0", &result.cam0_lidar0, &truth.cam0_lidar0),
-    ];
-    pairs
-        .into_iter()
-        .filter_map(|(name, e, t)| Some(compare(name, e.as_ref()?, t.as_ref()?)))
+    common_sections(result, truth)
+        .map(|(name, e, t)| compare(name, e, t))
         .collect()
 }
 

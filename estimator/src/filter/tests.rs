@@ -97,6 +97,18 @@ fn slightly_late_measurement_is_fused_at_the_filter_time_and_a_late_one_is_refus
     assert_eq!(late.covariance(), before);
 }
 
+/// Feeds the constant spinning reading at 400 Hz until a measurement at `stamp` is due.
+fn spin_until_due(ekf: &mut PoseImuEkf<f64>, stamp: u64) {
+    while !ekf.is_due(0, stamp) {
+        ekf.propagate(&ImuSample {
+            stamp_ns: ekf.imu_horizon_ns().expect("imu") + 2_500_000,
+            gyro: Vector3::new(1.2, -0.8, 0.5),
+            accel: Vector3::new(0.5, 1.0, 9.0),
+        })
+        .expect("sample");
+    }
+}
+
 #[test]
 fn covariance_stays_symmetric_and_positive_through_updates() {
     let mut ekf = moving_filter(0.0);
@@ -104,14 +116,7 @@ fn covariance_stays_symmetric_and_positive_through_updates() {
     ekf.anchor(0, t).expect("anchor");
     for k in 1..=20u64 {
         let stamp = t + k * 100_000_000;
-        while !ekf.is_due(0, stamp) {
-            ekf.propagate(&ImuSample {
-                stamp_ns: ekf.imu_horizon_ns().expect("imu") + 2_500_000,
-                gyro: Vector3::new(1.2, -0.8, 0.5),
-                accel: Vector3::new(0.5, 1.0, 9.0),
-            })
-            .expect("sample");
-        }
+        spin_until_due(&mut ekf, stamp);
         let m = RelativePose::with_sigmas(stamp - 100_000_000, stamp, Pose::identity(), 0.5, 0.5);
         ekf.update_relative_pose(0, &m).expect("update");
     }
@@ -224,14 +229,7 @@ fn held_translation_axis_keeps_its_prior_through_relative_pose_updates() {
     let mut from = ekf.imu().pose();
     for k in 1..=6u64 {
         let stamp = t + k * 100_000_000;
-        while !ekf.is_due(0, stamp) {
-            ekf.propagate(&ImuSample {
-                stamp_ns: ekf.imu_horizon_ns().expect("imu") + 2_500_000,
-                gyro: Vector3::new(1.2, -0.8, 0.5),
-                accel: Vector3::new(0.5, 1.0, 9.0),
-            })
-            .expect("sample");
-        }
+        spin_until_due(&mut ekf, stamp);
         let mut probe = ekf.clone();
         probe.anchor(0, stamp).expect("probe");
         let to = probe.imu().pose();
