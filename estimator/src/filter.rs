@@ -215,6 +215,12 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         self.cov.fixed_view::<6, 6>(b, b).clone_owned()
     }
 
+    /// Prior 1-sigma of sensor `s` (rotation x, y, z in rad, translation x, y, z in m,
+    /// time offset in s), as the filter was started; zeros for an unknown sensor.
+    pub fn prior_sigma(&self, s: usize) -> [T; 7] {
+        self.prior_sigma.get(s).copied().unwrap_or([T::zero(); 7])
+    }
+
     /// Per-DoF excitation of sensor `s`: `1 - sigma / sigma_prior` for rotation x, y, z,
     /// translation x, y, z and time offset (0 = nothing learned, -> 1 = well observed).
     pub fn excitation(&self, s: usize) -> [T; 7] {

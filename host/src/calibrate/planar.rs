@@ -250,6 +250,10 @@ pub struct PlanarStart {
 /// The window the yaw scan aligns over, s: longer than the dynamic initialisation's, since
 /// a vehicle accelerates and turns less often than a hand-held rig.
 const YAW_WINDOW_S: f64 = 15.0;
+/// Smallest prior 1-sigma of the rotation after a yaw fit, deg: the fit's curvature sigma
+/// ignores the drift of the odometry's absolute orientation over the window, and its
+/// errors on the simulated drives reach 11 deg (docs/planar.md).
+const MIN_YAW_PRIOR_SIGMA_DEG: f64 = 10.0;
 /// Shortest pose interval of the yaw scan, s: 0.2 s keeps the alignment small (75
 /// intervals over the window) while each interval still integrates a measurable turn.
 const YAW_MIN_INTERVAL_S: f64 = 0.2;
@@ -263,10 +267,13 @@ impl PlanarStart {
     }
 
     /// Prior 1-sigma of the extrinsic rotation (isotropic): `default`, widened to three
-    /// sigma of the yaw fit; a quarter turn when the yaw is unknown.
+    /// sigma of the yaw fit and at least [`MIN_YAW_PRIOR_SIGMA_DEG`]; a quarter turn when
+    /// the yaw is unknown.
     pub fn rotation_sigma(&self, default: f64) -> f64 {
         self.yaw.as_ref().map_or(0.5 * PI, |y| {
-            default.max(3.0 * y.sigma_rad).max(10f64.to_radians())
+            default
+                .max(3.0 * y.sigma_rad)
+                .max(MIN_YAW_PRIOR_SIGMA_DEG.to_radians())
         })
     }
 
@@ -311,22 +318,18 @@ impl PlanarStart {
     }
 }
 
-/// Detects planar motion in the rotation `increments` and, when it is, fits what the
-/// planar case needs (see the module docs). `bias` is the standstill's gyro mean or a
-/// motion fit; without a standstill the bias is refitted through the axis alignment, which
-/// planar motion leaves well defined where the full hand-eye rotation is not.
+/// Detects planar motion in `pairs` (the rotation `increments` integrated at gyro bias
+/// `bias`: the standstill's mean or a motion fit) and, when it is, fits what the planar case
+/// needs (see the module docs). Without a standstill the bias is refitted through the
+/// yaw-fitted rotation, which planar motion leaves well defined where the full hand-eye
+/// rotation is not, and the axis and yaw are found again with it.
 pub fn planar_start(
-    imu: &[ImuRecord],
-    poses: &[PoseRecord],
-    increments: &[RotationIncrement],
+    (imu, poses): (&[ImuRecord], &[PoseRecord]),
+    (increments, pairs): (&[RotationIncrement], &[RotationPair]),
     (bias, at_rest): (Vector3<f64>, bool),
     accel_noise_density: f64,
 ) -> Option<PlanarStart> {
-    let mut motion = detect(&init::rotation_pairs(
-        imu,
-        increments.iter().copied(),
-        &bias,
-    ))?;
+    let mut motion = detect(pairs)?;
     let options = DynamicInitOptions {
         window_s: YAW_WINDOW_S,
         min_interval_s: YAW_MIN_INTERVAL_S,

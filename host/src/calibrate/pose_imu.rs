@@ -193,7 +193,15 @@ pub fn calibrate<T: Scalar>(
     let max_interval_ns = period_ns.saturating_mul(3) / 2;
     let increments = init::pose_increments(poses, max_interval_ns);
     let (rotation, gyro_bias) = hand_eye_and_gyro_bias(imu, &increments, standstill.as_ref());
-    let planar = planar_start(input, &increments, standstill.as_ref(), gyro_bias.as_ref());
+    let bias = starting_gyro_bias(standstill.as_ref(), gyro_bias.as_ref());
+    let pairs = init::rotation_pairs(imu, increments.iter().copied(), &bias);
+    let scale_problem = rotation_scale_problem(&pairs);
+    let planar = planar::planar_start(
+        (imu, poses),
+        (&increments, &pairs),
+        (bias, standstill.is_some()),
+        input.imu_noise.accelerometer_noise_density,
+    );
     let (rotation, gyro_bias) = match &planar {
         Some(p) => (Ok(p.rotation_init()), p.gyro_bias.or(gyro_bias)),
         None => (rotation, gyro_bias),
@@ -245,9 +253,7 @@ pub fn calibrate<T: Scalar>(
         calibration.report.reasons.insert(0, problem);
         calibration.report.converged = false;
     }
-    if let Some(problem) =
-        rotation_scale_problem(imu, &increments, gyro_bias.as_ref(), standstill.as_ref())
-    {
+    if let Some(problem) = scale_problem {
         calibration.report.reasons.insert(0, problem);
         calibration.report.converged = false;
     }
@@ -264,18 +270,8 @@ const MAX_ROTATION_SCALE: f64 = 1.25;
 
 /// The reason to distrust the result when the pose sensor and the gyro disagree on how much
 /// the body turned (see [`init::rotation_scale`]).
-fn rotation_scale_problem(
-    imu: &[ImuRecord],
-    increments: &[init::RotationIncrement],
-    fitted: Option<&GyroBiasEstimate>,
-    standstill: Option<&Standstill>,
-) -> Option<String> {
-    let bias = standstill.map_or_else(
-        || fitted.map_or_else(Vector3::zeros, |f| f.bias),
-        |s| s.gyro_mean,
-    );
-    let pairs = init::rotation_pairs(imu, increments.iter().copied(), &bias);
-    let scale = init::rotation_scale(&pairs)?;
+fn rotation_scale_problem(pairs: &[planar::RotationPair]) -> Option<String> {
+    let scale = init::rotation_scale(pairs)?;
     (!(1.0 / MAX_ROTATION_SCALE..=MAX_ROTATION_SCALE).contains(&scale)).then(|| {
         format!(
             "pose0 turns {scale:.2}x as much as the gyro over the same intervals: the odometry's \
@@ -285,25 +281,17 @@ fn rotation_scale_problem(
     })
 }
 
-/// [`planar::planar_start`] with the gyro bias this pipeline knows at that point.
-fn planar_start(
-    input: &PoseImuInput<'_>,
-    increments: &[init::RotationIncrement],
+/// The gyro bias known before the filter: the standstill's mean, else the motion fit, else
+/// zero.
+fn starting_gyro_bias(
     standstill: Option<&Standstill>,
     fitted: Option<&GyroBiasEstimate>,
-) -> Option<PlanarStart> {
-    let bias = match (standstill, fitted) {
+) -> Vector3<f64> {
+    match (standstill, fitted) {
         (Some(s), _) => s.gyro_mean,
         (None, Some(f)) => f.bias,
         (None, None) => Vector3::zeros(),
-    };
-    planar::planar_start(
-        input.imu,
-        input.poses,
-        increments,
-        (bias, standstill.is_some()),
-        input.imu_noise.accelerometer_noise_density,
-    )
+    }
 }
 
 /// The hand-eye rotation from the rotation `increments` and the gyro bias: at a standstill
@@ -920,8 +908,7 @@ pub(crate) fn finish<T: Scalar, const S: usize, const C: usize, const N: usize, 
     let rv = rotation_init.rotation.scaled_axis();
     let excitation = ekf.excitation(0).map(|x| x.to_f64());
     let sigma = [sr.x, sr.y, sr.z, st.x, st.y, st.z, ekf.time_offset_sigma(0)].map(|x| x.to_f64());
-    // The prior from the excitation `1 - sigma / prior` (clipped at 0, where sigma >= prior).
-    let prior: [f64; 7] = std::array::from_fn(|k| sigma[k] / (1.0 - excitation[k]).max(1e-9));
+    let prior = ekf.prior_sigma(0).map(|x| x.to_f64());
     let report = PoseImuReport {
         converged: reasons.is_empty(),
         reasons,
