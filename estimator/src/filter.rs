@@ -19,8 +19,11 @@ use nalgebra::{SMatrix, Vector3};
 
 /// Filter for one pose sensor and an IMU, with the two clones relative poses need.
 pub type PoseImuEkf<T> = Ekf<T, 1, 2, 34>;
-/// Filter for two sensors (e.g. LiDAR and camera) and an IMU, with four clones.
-pub type JointEkf<T> = Ekf<T, 2, 4, 53>;
+/// The joint layout (issue 13): an IMU, two sensors (LiDAR 0, camera 1: extrinsic and time
+/// offset each), four clones (two per relative-pose sensor: a LiDAR's odometry and a
+/// camera's visual odometry on the vehicle) and one static target frame (the board of a
+/// joint calibration): `15 + 2 * 7 + 4 * 6 + 6 = 59` error states.
+pub type JointEkf<T> = Ekf<T, 2, 4, 59, 1>;
 /// Filter for a camera and an IMU observing one static target (RepErrCal): the target pose
 /// is a state, no clones are needed.
 pub type CameraImuEkf<T> = Ekf<T, 1, 0, 28, 1>;
@@ -413,6 +416,9 @@ mod clones;
 mod frames;
 mod fuse;
 mod holds;
+#[cfg(test)]
+mod joint_tests;
+mod plane;
 mod reprojection;
 #[cfg(test)]
 mod tests;

@@ -2,6 +2,7 @@
 //! one generic Kalman step they all share (gain, chi-square gate, Joseph-form covariance
 //! update, NIS record).
 
+pub mod board_plane;
 pub mod relative_pose;
 pub mod reprojection;
 mod sparse;
@@ -19,6 +20,9 @@ pub enum UpdateKind {
     ZeroVelocity,
     /// Known target corners reprojected into a camera (eq. 4.2, 4.15; RepErrCal).
     Reprojection,
+    /// A LiDAR's board points against the target plane (joint calibration; eq. 5.12 in
+    /// its target-frame form, see `update::board_plane`).
+    BoardPlane,
 }
 
 /// The per-update diagnostic record read by the health monitor, reports, the firmware link

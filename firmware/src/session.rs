@@ -762,6 +762,7 @@ fn diagnostic(r: &UpdateReport<f32>) -> UpdateDiagnostic {
             msreg_estimator::UpdateKind::ZeroVelocity => UpdateKind::ZeroVelocity,
             msreg_estimator::UpdateKind::Reprojection => UpdateKind::Reprojection,
             msreg_estimator::UpdateKind::RelativePose => UpdateKind::RelativePose,
+            msreg_estimator::UpdateKind::BoardPlane => UpdateKind::BoardPlane,
         },
         dof: r.dof as u8,
         nis: r.nis,

@@ -361,6 +361,8 @@ pub enum UpdateKind {
     ZeroVelocity,
     /// Target-corner reprojection.
     Reprojection,
+    /// A LiDAR's board points against the target plane (joint calibration).
+    BoardPlane,
 }
 
 /// Per-update record.

@@ -10,7 +10,7 @@ use crate::RelativePose;
 use nalgebra::{SMatrix, Vector3};
 use nalgebra::{SVector, UnitQuaternion};
 
-const T0: u64 = 1_700_000_000_000_000_000;
+pub(super) const T0: u64 = 1_700_000_000_000_000_000;
 
 /// A filter spinning and accelerating with the given time-offset prior.
 fn moving_filter(time_offset: f64) -> PoseImuEkf<f64> {

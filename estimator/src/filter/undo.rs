@@ -4,6 +4,8 @@
 //! - [`CloneUndo`]: a relative-pose update propagates to its end stamp and clones the IMU
 //!   pose before it linearises, so it saves what those two steps write (the IMU and clone-slot
 //!   columns of the covariance, `N x 21`, and the small state), O(N m).
+//! - [`PropagationUndo`]: a single update at the measurement's IMU time (a board plane)
+//!   propagates first; it saves the small state and the IMU columns, `N x 15`.
 //! - [`Checkpoint`]: a reprojection update fuses its corners one by one and gates the image as
 //!   a whole afterwards, so a rejected image takes back 2 K corner steps; it keeps the
 //!   covariance itself (`N^2` entries, fewer than the `N x 2K` of the image's gain at K = 42).
@@ -61,6 +63,40 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     }
 }
 
+/// Undo of a propagation to a measurement's time: the small state and the IMU columns of
+/// the covariance (propagation and bringing `P_IX` up to date write nothing else), O(N).
+pub(super) struct PropagationUndo<
+    T: Scalar,
+    const S: usize,
+    const C: usize,
+    const N: usize,
+    const F: usize,
+> {
+    small: Small<T, S, C, F>,
+    imu_columns: SMatrix<T, N, 15>,
+}
+
+impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize>
+    PropagationUndo<T, S, C, N, F>
+{
+    /// Saves what a propagation will overwrite.
+    pub(super) fn save(ekf: &Ekf<T, S, C, N, F>) -> Self {
+        Self {
+            small: ekf.small(),
+            imu_columns: ekf
+                .cov
+                .fixed_view::<N, 15>(0, imu::ORIENTATION.idx)
+                .clone_owned(),
+        }
+    }
+
+    /// Puts the filter back as it was at [`PropagationUndo::save`].
+    pub(super) fn restore(&self, ekf: &mut Ekf<T, S, C, N, F>) {
+        ekf.restore_small(&self.small);
+        ekf.restore_columns(imu::ORIENTATION.idx, &self.imu_columns);
+    }
+}
+
 /// Undo of "propagate, then clone the IMU pose into `slot`".
 pub(super) struct CloneUndo<
     T: Scalar,
@@ -69,9 +105,8 @@ pub(super) struct CloneUndo<
     const N: usize,
     const F: usize,
 > {
-    small: Small<T, S, C, F>,
+    propagation: PropagationUndo<T, S, C, N, F>,
     slot: usize,
-    imu_columns: SMatrix<T, N, 15>,
     slot_columns: SMatrix<T, N, 6>,
 }
 
@@ -82,20 +117,15 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize>
     pub(super) fn save(ekf: &Ekf<T, S, C, N, F>, slot: usize) -> Self {
         let c = Layout::<S, C>::clone_orientation(slot).idx;
         Self {
-            small: ekf.small(),
+            propagation: PropagationUndo::save(ekf),
             slot,
-            imu_columns: ekf
-                .cov
-                .fixed_view::<N, 15>(0, imu::ORIENTATION.idx)
-                .clone_owned(),
             slot_columns: ekf.cov.fixed_view::<N, 6>(0, c).clone_owned(),
         }
     }
 
     /// Puts the filter back as it was at [`CloneUndo::save`].
     pub(super) fn restore(&self, ekf: &mut Ekf<T, S, C, N, F>) {
-        ekf.restore_small(&self.small);
-        ekf.restore_columns(imu::ORIENTATION.idx, &self.imu_columns);
+        self.propagation.restore(ekf);
         let c = Layout::<S, C>::clone_orientation(self.slot).idx;
         ekf.restore_columns(c, &self.slot_columns);
     }

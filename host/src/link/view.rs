@@ -202,6 +202,7 @@ fn diagnostic_text(d: &UpdateDiagnostic, origin_ns: u64) -> String {
         UpdateKind::RelativePose => "relative pose",
         UpdateKind::ZeroVelocity => "zero velocity",
         UpdateKind::Reprojection => "reprojection",
+        UpdateKind::BoardPlane => "board plane",
     };
     format!(
         "{kind} at t+{:.2} s: NIS {:.2} vs gate {:.2} ({} dof), {}",
