@@ -29,13 +29,13 @@ pub mod state;
 pub mod update;
 
 pub use error::Error;
-pub use filter::{CameraImuEkf, Ekf, FilterConfig, PoseImuEkf};
+pub use filter::{CameraImuEkf, Ekf, FilterConfig, JointEkf, PoseImuEkf};
 pub use hand_eye::{HandEye, HandEyeError};
 pub use health::{HealthConfig, HealthEvent, HealthMonitor, SensorHealth};
 pub use lie::Pose;
 pub use propagate::{ImuNoise, ImuSample};
 pub use scalar::Scalar;
-pub use state::{Block, ImuState, InitialState, Layout, SensorState};
+pub use state::{Block, ImuState, InitialState, Layout, SensorPrior, SensorState};
 pub use update::relative_pose::RelativePose;
 pub use update::reprojection::{CornerObservation, CornerSet};
 pub use update::{UpdateKind, UpdateReport};

@@ -10,7 +10,7 @@
 mod initial;
 mod layout;
 
-pub use initial::InitialState;
+pub use initial::{InitialState, SensorPrior};
 pub use layout::{imu, Block, Layout, CLONE_DIM, FRAME_DIM, SENSOR_DIM};
 
 use crate::lie::Pose;

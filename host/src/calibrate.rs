@@ -7,6 +7,7 @@ pub mod dynamic_init;
 pub mod extrinsic;
 pub mod gyro_bias;
 pub mod init;
+pub mod joint;
 pub mod lidar_imu;
 pub mod observability;
 pub mod planar;

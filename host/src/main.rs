@@ -94,6 +94,9 @@ enum Scenario {
     CameraImu(msreg_host::sim::camera_cli::SimulateCameraImu),
     /// Static LiDAR + camera suite and a plain board at many still poses.
     LidarCamera(msreg_host::lidar_camera::cli::SimulateLidarCamera),
+    /// IMU + camera + spinning LiDAR on one hand-held rig, in front of a checkerboard on a
+    /// board both sensors see (joint calibration, both time offsets).
+    Joint(msreg_host::sim::joint_cli::SimulateJoint),
     /// Robot with an upward fisheye and a marker driving a loop under ~40 static
     /// infrastructure cameras (marker corners, blobs, COLMAP VO model).
     Infra(msreg_host::infra::cli::SimulateInfra),
@@ -207,6 +210,9 @@ fn run(command: Command) -> Result<(), Failure> {
         Command::Simulate {
             scenario: Scenario::CameraImu(args),
         } => Ok(msreg_host::sim::camera_cli::simulate(&args)?),
+        Command::Simulate {
+            scenario: Scenario::Joint(args),
+        } => Ok(msreg_host::sim::joint_cli::simulate(&args)?),
         Command::Calibrate {
             task: Task::LidarImu(args),
         } => exit_code_of(msreg_host::lidar::cli::calibrate(&args)?),

@@ -28,9 +28,12 @@ pub mod drive;
 mod drive_tests;
 mod extrinsic;
 mod imu;
+pub mod joint;
+pub mod joint_cli;
 pub mod lidar;
 mod odometry;
 mod output;
+mod plate;
 mod signal;
 mod trajectory;
 
@@ -46,9 +49,11 @@ pub use config::{ImuSimConfig, Knock, PoseSimConfig, SimConfig, SimError, DEFAUL
 pub use drive::DriveConfig;
 pub use extrinsic::{random_mounting, random_pose};
 pub use imu::{imu_noise_yaml, synthesize_imu, ImuSynthesis};
+pub use joint::{simulate_joint, JointSim, JointSimConfig};
 pub use lidar::{simulate_lidar_imu, Environment, LidarImuSim, LidarImuSimConfig, LidarSimConfig};
 pub use odometry::{pose_sensor_yaml, synthesize_odometry};
 pub use output::SimDataset;
+pub use plate::Plate;
 pub use signal::{EnvelopedSignal, Jet, Sinusoid, SmoothStep};
 pub use trajectory::{
     gravity_in_g, LookAtConfig, MotionKind, Mount, Trajectory, TrajectoryConfig, GRAVITY,
@@ -66,6 +71,7 @@ enum Stream {
     CameraMounting = 7,
     CameraScene = 8,
     CameraNoise = 9,
+    JointLidarMounting = 10,
 }
 
 fn rng_for(seed: u64, stream: Stream) -> ChaCha8Rng {

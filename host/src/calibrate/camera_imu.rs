@@ -17,7 +17,8 @@ use std::time::Instant;
 
 use msreg_estimator::camera::Camera;
 use msreg_estimator::{
-    CameraImuEkf, CornerObservation, CornerSet, Error as FilterError, FilterConfig, Scalar,
+    CameraImuEkf, CornerObservation, CornerSet, Ekf, Error as FilterError, FilterConfig,
+    InitialState, Scalar,
 };
 use nalgebra::{Isometry3, Matrix6, Vector2, Vector3};
 use serde::Serialize;
@@ -107,6 +108,8 @@ impl Default for CameraImuOptions {
 const MIN_PIXEL_SIGMA: f64 = 0.05;
 /// Fewest corners an image needs for PnP and the update.
 pub const MIN_CORNERS: usize = 6;
+/// The filter's static frame of the target.
+const TARGET: usize = 0;
 
 /// Reprojection statistics of one image, after its update.
 #[derive(Debug, Clone, Serialize)]
@@ -210,7 +213,7 @@ pub fn invert_with_covariance(
 }
 
 /// A PnP pose of one image.
-struct FramePose {
+pub(crate) struct FramePose {
     stamp_ns: u64,
     /// Corners the PnP used.
     points: usize,
@@ -302,7 +305,7 @@ pub fn target_prior_sigmas(prior: &PoseImuOptions, distance_m: f64) -> (f64, f64
 
 /// MoCal (the pose-IMU pipeline on the PnP poses of the camera in the target) and the
 /// corner noise.
-fn motion_calibration<T: Scalar>(
+pub(crate) fn motion_calibration<T: Scalar>(
     input: &CameraImuInput<'_>,
     poses: &[FramePose],
     options: &CameraImuOptions,
@@ -346,7 +349,7 @@ fn motion_calibration<T: Scalar>(
 
 /// How RepErrCal's extrinsic and time-offset prior is set around its starting estimate.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum ExtrinsicPrior {
+pub(crate) enum ExtrinsicPrior {
     /// The start's covariance, floored by [`REPROJECTION_PRIOR_FLOOR`]: calibrate.
     AroundStart,
     /// [`HELD_SIGMA`]: the extrinsic and time offset stay at the start (verification).
@@ -383,14 +386,14 @@ fn reprojection_calibration<T: Scalar>(
     let Start {
         motion,
         pixel_sigma,
-        poses,
+        ..
     } = *start;
     let imu = input.imu;
-    let Some(first_imu) = imu.first() else {
+    if imu.is_empty() {
         return Err(PoseImuError::BadInput(
             "imu0/data.csv: no IMU samples".into(),
         ));
-    };
+    }
     let standstill = init::detect_standstill(imu, options.prior.min_standstill_s);
     let StartFromMotion {
         mut ekf,
@@ -401,26 +404,7 @@ fn reprojection_calibration<T: Scalar>(
     let init_s = started.elapsed().as_secs_f64();
 
     let started = Instant::now();
-    let camera = input.camera.cast::<T>();
-    let mut feed = CornerFeed {
-        run: Run::new(first_imu.stamp_ns, nominal_frame_period_ns(input.frames)),
-        frames: input.frames,
-        next: 0,
-        camera,
-        pixel_sigma: T::lit(pixel_sigma),
-        frame_sigma: match options.image_noise {
-            ImageNoise::PerImage => poses
-                .iter()
-                .filter_map(|p| Some((p.stamp_ns, frame_pixel_sigma(p)?)))
-                .collect(),
-            ImageNoise::Uniform => Default::default(),
-        },
-        prior,
-        reprojection: Vec::new(),
-        buffer: Vec::new(),
-        sample_from_ns: input.frames[input.frames.len() / 2].stamp_ns,
-        sample: None,
-    };
+    let mut feed = CornerFeed::new(input, options, start, prior, 0);
     drive_imu(&mut ekf, imu, standstill.as_ref(), progress, &mut feed)?;
     let CornerFeed {
         mut run,
@@ -475,10 +459,10 @@ fn reprojection_calibration<T: Scalar>(
 /// What RepErrCal starts from: the MoCal (or final) estimate, the recording's corner noise
 /// and every image's PnP pose (computed once per calibration).
 #[derive(Clone, Copy)]
-struct Start<'a> {
-    motion: &'a CameraImuCalibration,
-    pixel_sigma: f64,
-    poses: &'a [FramePose],
+pub(crate) struct Start<'a> {
+    pub(crate) motion: &'a CameraImuCalibration,
+    pub(crate) pixel_sigma: f64,
+    pub(crate) poses: &'a [FramePose],
 }
 
 /// The RepErrCal filter at the MoCal estimate, with its prior.
@@ -490,6 +474,17 @@ struct StartFromMotion<T: Scalar> {
     gyro_bias_init: String,
 }
 
+/// RepErrCal's prior at the MoCal estimate: the IMU state and the camera as sensor 0, the
+/// filter configuration, and what the report says of them.
+pub(crate) struct PriorFromMotion<T: Scalar> {
+    pub(crate) initial: InitialState<T, 1>,
+    pub(crate) config: FilterConfig<T>,
+    pub(crate) prior: PoseImuOptions,
+    pub(crate) rotation_init: init::RotationInit,
+    /// Where the starting gyro bias came from (report words).
+    pub(crate) gyro_bias_init: String,
+}
+
 fn start_from_motion<T: Scalar>(
     input: &CameraImuInput<'_>,
     options: &CameraImuOptions,
@@ -497,6 +492,30 @@ fn start_from_motion<T: Scalar>(
     start: &Start<'_>,
     extrinsic_prior: ExtrinsicPrior,
 ) -> Result<StartFromMotion<T>, PoseImuError> {
+    let PriorFromMotion {
+        initial,
+        config,
+        prior,
+        rotation_init,
+        gyro_bias_init,
+    } = prior_from_motion(input, options, standstill, start, extrinsic_prior)?;
+    let ekf = CameraImuEkf::<T>::new(&config, &initial)
+        .map_err(|e| PoseImuError::BadInput(format!("imu0/imu.yaml: invalid noise ({e})")))?;
+    Ok(StartFromMotion {
+        ekf,
+        prior,
+        rotation_init,
+        gyro_bias_init,
+    })
+}
+
+pub(crate) fn prior_from_motion<T: Scalar>(
+    input: &CameraImuInput<'_>,
+    options: &CameraImuOptions,
+    standstill: Option<&init::Standstill>,
+    start: &Start<'_>,
+    extrinsic_prior: ExtrinsicPrior,
+) -> Result<PriorFromMotion<T>, PoseImuError> {
     let imu = input.imu;
     let motion = start.motion;
     let m = &motion.report.filter;
@@ -554,10 +573,9 @@ fn start_from_motion<T: Scalar>(
         }),
         ..FilterConfig::new(convert::imu_noise::<T>(input.imu_noise))
     };
-    let ekf = CameraImuEkf::<T>::new(&config, &initial)
-        .map_err(|e| PoseImuError::BadInput(format!("imu0/imu.yaml: invalid noise ({e})")))?;
-    Ok(StartFromMotion {
-        ekf,
+    Ok(PriorFromMotion {
+        initial,
+        config,
         prior,
         rotation_init,
         gyro_bias_init,
@@ -612,7 +630,9 @@ fn nominal_frame_period_ns(frames: &[CornerFrame]) -> u64 {
 
 /// The RepErrCal measurement feed: fuses every image whose IMU time has come, initialising
 /// the target pose from the first image's PnP.
-struct CornerFeed<'a, T: Scalar> {
+pub(crate) struct CornerFeed<'a, T: Scalar> {
+    /// The filter's index of the camera (its target is static frame 0).
+    sensor: usize,
     run: Run,
     frames: &'a [CornerFrame],
     next: usize,
@@ -630,58 +650,129 @@ struct CornerFeed<'a, T: Scalar> {
     sample: Option<ReprojectionSample>,
 }
 
-impl<T: Scalar> ImuHooks<T, CameraImuEkf<T>> for CornerFeed<'_, T> {
+impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize>
+    ImuHooks<T, Ekf<T, S, C, N, F>> for CornerFeed<'_, T>
+{
     fn fuse_due(
         &mut self,
-        ekf: &mut CameraImuEkf<T>,
+        ekf: &mut Ekf<T, S, C, N, F>,
         index: usize,
         _rec: &ImuRecord,
     ) -> Result<(), PoseImuError> {
-        while let Some(frame) = self.frames.get(self.next) {
-            if !ekf.is_due(0, frame.stamp_ns) {
-                break;
-            }
-            self.next += 1;
-            if index == 0 {
-                self.run
-                    .skip_measurement("cam0", frame.stamp_ns, "before the first IMU sample");
-                continue;
-            }
-            if frame.corners.len() < MIN_CORNERS {
-                self.run
-                    .skip_measurement("cam0", frame.stamp_ns, "too few corners");
-                continue;
-            }
-            if ekf.frame(0).is_none() {
-                if let Err(why) = self.init_target(ekf, frame) {
-                    self.run.skip_measurement("cam0", frame.stamp_ns, &why);
-                    continue;
-                }
-            }
-            self.fuse(ekf, frame);
+        while self.next_due(ekf).is_some() {
+            self.fuse_next(ekf, index);
         }
         Ok(())
     }
 }
 
-impl<T: Scalar> CornerFeed<'_, T> {
+impl<'a, T: Scalar> CornerFeed<'a, T> {
+    /// The feed of the camera that is sensor `sensor` of the filter, over `input`'s images.
+    pub(crate) fn new(
+        input: &CameraImuInput<'a>,
+        options: &CameraImuOptions,
+        start: &Start<'_>,
+        prior: PoseImuOptions,
+        sensor: usize,
+    ) -> Self {
+        let frames = input.frames;
+        Self {
+            sensor,
+            run: Run::new(
+                input.imu.first().map_or(0, |r| r.stamp_ns),
+                nominal_frame_period_ns(frames),
+            )
+            .for_sensor(sensor),
+            frames,
+            next: 0,
+            camera: input.camera.cast::<T>(),
+            pixel_sigma: T::lit(start.pixel_sigma),
+            frame_sigma: match options.image_noise {
+                ImageNoise::PerImage => start
+                    .poses
+                    .iter()
+                    .filter_map(|p| Some((p.stamp_ns, frame_pixel_sigma(p)?)))
+                    .collect(),
+                ImageNoise::Uniform => Default::default(),
+            },
+            prior,
+            reprojection: Vec::new(),
+            buffer: Vec::new(),
+            sample_from_ns: frames.get(frames.len() / 2).map_or(0, |f| f.stamp_ns),
+            sample: None,
+        }
+    }
+
+    /// The stamp of the next image when it is due (its IMU time is within reach).
+    pub(crate) fn next_due<const S: usize, const C: usize, const N: usize, const F: usize>(
+        &self,
+        ekf: &Ekf<T, S, C, N, F>,
+    ) -> Option<u64> {
+        let frame = self.frames.get(self.next)?;
+        ekf.is_due(self.sensor, frame.stamp_ns)
+            .then_some(frame.stamp_ns)
+    }
+
+    /// The run's bookkeeping, every image not reached booked as after the last IMU sample.
+    pub(crate) fn into_run(self) -> Run {
+        let mut run = self.run;
+        for frame in &self.frames[self.next..] {
+            run.skip_measurement("cam0", frame.stamp_ns, "after the last IMU sample");
+        }
+        run
+    }
+
+    /// Fuses the image [`CornerFeed::next_due`] found due (`index`: the IMU sample fed
+    /// last), initialising the target from it when none is yet.
+    pub(crate) fn fuse_next<const S: usize, const C: usize, const N: usize, const F: usize>(
+        &mut self,
+        ekf: &mut Ekf<T, S, C, N, F>,
+        index: usize,
+    ) {
+        let Some(frame) = self.frames.get(self.next) else {
+            return;
+        };
+        self.next += 1;
+        if index == 0 {
+            self.run
+                .skip_measurement("cam0", frame.stamp_ns, "before the first IMU sample");
+            return;
+        }
+        if frame.corners.len() < MIN_CORNERS {
+            self.run
+                .skip_measurement("cam0", frame.stamp_ns, "too few corners");
+            return;
+        }
+        if ekf.frame(TARGET).is_none() {
+            if let Err(why) = self.init_target(ekf, frame) {
+                self.run.skip_measurement("cam0", frame.stamp_ns, &why);
+                return;
+            }
+        }
+        self.fuse(ekf, frame);
+    }
+
     /// `T_G_T = T_G_I T_I_C T_C_T(PnP)` at the current estimate, with sigmas covering the
     /// extrinsic prior's error seen at the target's distance.
-    fn init_target(&self, ekf: &mut CameraImuEkf<T>, frame: &CornerFrame) -> Result<(), String> {
+    fn init_target<const S: usize, const C: usize, const N: usize, const F: usize>(
+        &self,
+        ekf: &mut Ekf<T, S, C, N, F>,
+        frame: &CornerFrame,
+    ) -> Result<(), String> {
         let camera = self.camera.cast::<f64>();
         let pnp = pnp_of(&camera, frame).map_err(|e| format!("no PnP pose for the target: {e}"))?;
         // The IMU pose at the image's IMU time (the image is due, so it is within reach).
         let t_imu = ekf
-            .imu_time(0, frame.stamp_ns)
+            .imu_time(self.sensor, frame.stamp_ns)
             .map_err(|e| e.to_string())?
             .max(ekf.time_ns());
         let imu_pose = ekf.predict_imu(t_imu).map_err(|e| e.to_string())?.pose();
-        let t_g_c = convert::isometry(&imu_pose) * convert::isometry(&ekf.extrinsic(0));
+        let t_g_c = convert::isometry(&imu_pose) * convert::isometry(&ekf.extrinsic(self.sensor));
         let t_g_t = t_g_c * convert::isometry(&pnp.t_cam_target);
         let (sigma_rotation, sigma_position) =
             target_prior_sigmas(&self.prior, pnp.t_cam_target.translation.norm());
         ekf.init_frame(
-            0,
+            TARGET,
             convert::pose::<T>(&t_g_t),
             T::lit(sigma_rotation),
             T::lit(sigma_position),
@@ -689,7 +780,11 @@ impl<T: Scalar> CornerFeed<'_, T> {
         .map_err(|e| format!("cannot initialise the target: {e}"))
     }
 
-    fn fuse(&mut self, ekf: &mut CameraImuEkf<T>, frame: &CornerFrame) {
+    fn fuse<const S: usize, const C: usize, const N: usize, const F: usize>(
+        &mut self,
+        ekf: &mut Ekf<T, S, C, N, F>,
+        frame: &CornerFrame,
+    ) {
         self.buffer.clear();
         self.buffer
             .extend(frame.corners.iter().map(|c| CornerObservation {
@@ -707,7 +802,7 @@ impl<T: Scalar> CornerFeed<'_, T> {
             corners: &self.buffer,
             pixel_sigma: self.pixel_sigma.max(T::lit(own)),
         };
-        match ekf.update_reprojection(0, 0, &self.camera, &meas) {
+        match ekf.update_reprojection(self.sensor, TARGET, &self.camera, &meas) {
             Ok(report) => {
                 self.run.record_update(ekf, frame.stamp_ns, &report);
                 let after = self.mean_error(ekf);
@@ -735,12 +830,12 @@ impl<T: Scalar> CornerFeed<'_, T> {
     }
 
     /// The buffered corners and their reprojection at the current state.
-    fn reprojection_sample(
+    fn reprojection_sample<const S: usize, const C: usize, const N: usize, const F: usize>(
         &self,
-        ekf: &CameraImuEkf<T>,
+        ekf: &Ekf<T, S, C, N, F>,
         stamp_ns: u64,
     ) -> Option<ReprojectionSample> {
-        let target = ekf.frame(0)?;
+        let target = ekf.frame(TARGET)?;
         let pixel = |p: &Vector2<T>| Vector2::new(p.x.to_f64(), p.y.to_f64());
         let reprojected = self
             .buffer
@@ -748,7 +843,7 @@ impl<T: Scalar> CornerFeed<'_, T> {
             .map(|c| {
                 let p = msreg_estimator::update::reprojection::point_in_camera(
                     &ekf.imu().pose(),
-                    &ekf.extrinsic(0),
+                    &ekf.extrinsic(self.sensor),
                     &target,
                     &c.point_in_target,
                 );
@@ -764,12 +859,15 @@ impl<T: Scalar> CornerFeed<'_, T> {
 
     /// Mean distance between the buffered corners and their projection at the filter's
     /// current state (NaN when one does not project).
-    fn mean_error(&self, ekf: &CameraImuEkf<T>) -> f64 {
-        let Some(target) = ekf.frame(0) else {
+    fn mean_error<const S: usize, const C: usize, const N: usize, const F: usize>(
+        &self,
+        ekf: &Ekf<T, S, C, N, F>,
+    ) -> f64 {
+        let Some(target) = ekf.frame(TARGET) else {
             return f64::NAN;
         };
         let imu = ekf.imu().pose();
-        let extrinsic = ekf.extrinsic(0);
+        let extrinsic = ekf.extrinsic(self.sensor);
         let mut sum = 0.0;
         for c in &self.buffer {
             let p = msreg_estimator::update::reprojection::point_in_camera(
@@ -795,7 +893,7 @@ pub fn pnp_of(camera: &Camera<f64>, frame: &CornerFrame) -> Result<PnpSolution, 
 }
 
 /// PnP of every image with enough corners.
-fn frame_poses(camera: &Camera<f64>, frames: &[CornerFrame]) -> Vec<FramePose> {
+pub(crate) fn frame_poses(camera: &Camera<f64>, frames: &[CornerFrame]) -> Vec<FramePose> {
     use rayon::prelude::*;
     frames
         .par_iter()

@@ -33,7 +33,7 @@
 
 use std::time::Instant;
 
-use msreg_estimator::{Error as FilterError, PoseImuEkf, RelativePose, Scalar};
+use msreg_estimator::{Ekf, Error as FilterError, RelativePose, Scalar};
 use nalgebra::{Isometry3, Matrix6, Vector3, Vector6};
 use serde::Serialize;
 
@@ -388,7 +388,7 @@ pub fn calibrate<T: Scalar>(
     )?;
 
     let started = Instant::now();
-    let mut feed = LidarFeed::new(input.scans, options, first_imu.stamp_ns);
+    let mut feed = LidarFeed::new(input.scans, options, first_imu.stamp_ns, (0, false));
     drive_imu(&mut ekf, imu, standstill.as_ref(), progress, &mut feed)?;
     if let Some(p) = feed.pending.take() {
         feed.skip(p.index, p.stamp_ns, "after the last IMU sample");
@@ -485,7 +485,7 @@ type RotationStart = (
 
 /// Hand-eye rotation and, without a standstill, the gyro bias from raw-scan NDT rotations
 /// over the first `init_duration_s`.
-fn rotation_init(
+pub(crate) fn rotation_init(
     imu: &[ImuRecord],
     scans: &dyn ScanSource,
     standstill: Option<&Standstill>,
@@ -575,7 +575,13 @@ struct Previous {
 }
 
 /// The LiDAR front-end of the filter loop.
-struct LidarFeed<'a> {
+pub(crate) struct LidarFeed<'a> {
+    /// The filter's index of the LiDAR.
+    sensor: usize,
+    /// Keep every deskewed scan for [`LidarFeed::take_deskewed`] (the joint calibration's
+    /// board planes).
+    keep_deskewed: bool,
+    deskewed: Option<(u64, PointCloud)>,
     run: Run,
     scans: &'a dyn ScanSource,
     options: &'a LidarImuOptions,
@@ -604,76 +610,41 @@ struct LidarFeed<'a> {
     inflation: f64,
 }
 
-impl<T: Scalar> ImuHooks<T> for LidarFeed<'_> {
+impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize>
+    ImuHooks<T, Ekf<T, S, C, N, F>> for LidarFeed<'_>
+{
     fn fuse_due(
         &mut self,
-        ekf: &mut PoseImuEkf<T>,
+        ekf: &mut Ekf<T, S, C, N, F>,
         index: usize,
         _rec: &ImuRecord,
     ) -> Result<(), PoseImuError> {
-        loop {
-            if self.pending.is_none() {
-                if self.next >= self.scans.len() {
-                    return Ok(());
-                }
-                let k = self.next;
-                let stamp = self.scans.stamp_ns(k);
-                if !ekf.is_due(0, stamp) {
-                    return Ok(());
-                }
-                self.next += 1;
-                let started = Instant::now();
-                let cloud = load(self.scans, k);
-                self.timing.load += started.elapsed().as_secs_f64();
-                let Some(cloud) = cloud? else {
-                    self.skip(k, stamp, "zero points");
-                    continue;
-                };
-                let last = last_firing_ns(&cloud);
-                let ref_offset_ns = if self.options.deskew { last } else { last / 2 };
-                let ref_stamp = stamp.saturating_add(ref_offset_ns);
-                if self.last_end_ns.is_some_and(|e| ref_stamp <= e) {
-                    self.skip(
-                        k,
-                        stamp,
-                        "stamp not after the previous scan's (out of order)",
-                    );
-                    continue;
-                }
-                self.pending = Some(Pending {
-                    index: k,
-                    stamp_ns: stamp,
-                    ref_offset_ns,
-                    cloud,
-                });
-            }
-            let Some(p) = self.pending.as_ref() else {
-                return Ok(());
-            };
-            if !ekf.is_due(0, p.stamp_ns.saturating_add(p.ref_offset_ns)) {
-                return Ok(());
-            }
-            let Some(p) = self.pending.take() else {
-                return Ok(());
-            };
-            if index > 0 {
-                self.process(ekf, p);
-            } else {
-                self.skip(p.index, p.stamp_ns, "before the first IMU sample");
-            }
+        while self.next_due(ekf)?.is_some() {
+            self.fuse_next(ekf, index);
         }
+        Ok(())
     }
 
-    fn after_sample(&mut self, ekf: &PoseImuEkf<T>, _rec: &ImuRecord) {
+    fn after_sample(&mut self, ekf: &Ekf<T, S, C, N, F>, _rec: &ImuRecord) {
         self.buffer
             .push(ekf.time_ns(), convert::isometry(&ekf.imu().pose()));
     }
 }
 
 impl<'a> LidarFeed<'a> {
-    fn new(scans: &'a dyn ScanSource, options: &'a LidarImuOptions, first_imu_ns: u64) -> Self {
+    /// The feed of sensor `sensor` of the filter; `keep_deskewed` keeps each deskewed scan
+    /// for [`LidarFeed::take_deskewed`].
+    pub(crate) fn new(
+        scans: &'a dyn ScanSource,
+        options: &'a LidarImuOptions,
+        first_imu_ns: u64,
+        (sensor, keep_deskewed): (usize, bool),
+    ) -> Self {
         Self {
-            run: Run::new(first_imu_ns, 100_000_000),
+            sensor,
+            keep_deskewed,
+            deskewed: None,
+            run: Run::new(first_imu_ns, 100_000_000).for_sensor(sensor),
             scans,
             options,
             next: 0,
@@ -702,6 +673,112 @@ impl<'a> LidarFeed<'a> {
         }
     }
 
+    /// Reads the next scan once its stamp is due and returns its reference stamp (LiDAR
+    /// clock) when that is due too: the scan can be processed now ([`LidarFeed::fuse_next`]).
+    pub(crate) fn next_due<
+        T: Scalar,
+        const S: usize,
+        const C: usize,
+        const N: usize,
+        const F: usize,
+    >(
+        &mut self,
+        ekf: &Ekf<T, S, C, N, F>,
+    ) -> Result<Option<u64>, PoseImuError> {
+        loop {
+            if let Some(p) = self.pending.as_ref() {
+                let reference = p.stamp_ns.saturating_add(p.ref_offset_ns);
+                return Ok(ekf.is_due(self.sensor, reference).then_some(reference));
+            }
+            if self.next >= self.scans.len() {
+                return Ok(None);
+            }
+            let k = self.next;
+            let stamp = self.scans.stamp_ns(k);
+            if !ekf.is_due(self.sensor, stamp) {
+                return Ok(None);
+            }
+            self.next += 1;
+            let started = Instant::now();
+            let cloud = load(self.scans, k);
+            self.timing.load += started.elapsed().as_secs_f64();
+            let Some(cloud) = cloud? else {
+                self.skip(k, stamp, "zero points");
+                continue;
+            };
+            let last = last_firing_ns(&cloud);
+            let ref_offset_ns = if self.options.deskew { last } else { last / 2 };
+            let ref_stamp = stamp.saturating_add(ref_offset_ns);
+            if self.last_end_ns.is_some_and(|e| ref_stamp <= e) {
+                self.skip(
+                    k,
+                    stamp,
+                    "stamp not after the previous scan's (out of order)",
+                );
+                continue;
+            }
+            self.pending = Some(Pending {
+                index: k,
+                stamp_ns: stamp,
+                ref_offset_ns,
+                cloud,
+            });
+        }
+    }
+
+    /// Processes the scan [`LidarFeed::next_due`] found due (`index`: the IMU sample fed
+    /// last).
+    pub(crate) fn fuse_next<
+        T: Scalar,
+        const S: usize,
+        const C: usize,
+        const N: usize,
+        const F: usize,
+    >(
+        &mut self,
+        ekf: &mut Ekf<T, S, C, N, F>,
+        index: usize,
+    ) {
+        let Some(p) = self.pending.take() else {
+            return;
+        };
+        if index > 0 {
+            self.process(ekf, p);
+        } else {
+            self.skip(p.index, p.stamp_ns, "before the first IMU sample");
+        }
+    }
+
+    /// Another sensor's update moved the filter's pose at `time_ns` from `before` to
+    /// `after`: the buffered poses move with it, so that deskewing sees one continuous
+    /// motion (as after the LiDAR's own updates).
+    pub(crate) fn filter_corrected(
+        &mut self,
+        time_ns: u64,
+        before: &Isometry3<f64>,
+        after: &Isometry3<f64>,
+    ) {
+        self.buffer.reanchor(&(after * before.inverse()));
+        self.buffer.push(time_ns, *after);
+    }
+
+    /// The run's bookkeeping, every scan not reached booked as after the last IMU sample.
+    pub(crate) fn into_run(mut self) -> Run {
+        if let Some(p) = self.pending.take() {
+            self.skip(p.index, p.stamp_ns, "after the last IMU sample");
+        }
+        for k in self.next..self.scans.len() {
+            self.skip(k, self.scans.stamp_ns(k), "after the last IMU sample");
+        }
+        self.run
+    }
+
+    /// The last processed scan, deskewed to its reference stamp (LiDAR clock), when the feed
+    /// keeps them.
+    pub(crate) fn take_deskewed(&mut self) -> Option<(u64, PointCloud)> {
+        self.deskewed.take()
+    }
+
     fn skip(&mut self, index: usize, stamp_ns: u64, why: &str) {
         self.run.skipped.push(format!(
             "lidar0 scan {} ({}): {why}",
@@ -720,8 +797,12 @@ impl<'a> LidarFeed<'a> {
 
     /// Predict -> deskew -> NDT -> update for one scan whose reference time has come.
     #[allow(clippy::too_many_lines)]
-    fn process<T: Scalar>(&mut self, ekf: &mut PoseImuEkf<T>, p: Pending) {
-        let td_ns = (ekf.time_offset(0).to_f64() * 1e9).round() as i64;
+    fn process<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize>(
+        &mut self,
+        ekf: &mut Ekf<T, S, C, N, F>,
+        p: Pending,
+    ) {
+        let td_ns = (ekf.time_offset(self.sensor).to_f64() * 1e9).round() as i64;
         let ref_stamp = p.stamp_ns.saturating_add(p.ref_offset_ns);
         let due = imu_time(p.stamp_ns, p.ref_offset_ns, td_ns);
         // Predict: the filter's pose at `due`, over the same interpolated IMU readings the
@@ -731,7 +812,7 @@ impl<'a> LidarFeed<'a> {
             Err(_) => convert::isometry(&ekf.imu().pose()),
         };
         self.buffer.push(due, predicted);
-        let t_i_l = convert::isometry(&ekf.extrinsic(0));
+        let t_i_l = convert::isometry(&ekf.extrinsic(self.sensor));
 
         let t_s = due.saturating_sub(self.first_imu_ns) as f64 * 1e-9;
         let mut record =
@@ -756,6 +837,9 @@ impl<'a> LidarFeed<'a> {
         };
         let started = Instant::now();
         let filtered = voxel_downsample(&deskewed, self.options.voxel_m);
+        if self.keep_deskewed {
+            self.deskewed = Some((ref_stamp, deskewed));
+        }
         let points = filtered.positions();
         record.points_filtered = points.len();
         let target = NdtTarget::build(&points, &self.options.ndt);
@@ -863,7 +947,7 @@ impl<'a> LidarFeed<'a> {
             delta: convert::pose::<T>(&delta),
             covariance: Matrix6::from_fn(|r, c| T::lit(covariance[(r, c)])),
         };
-        match ekf.update_relative_pose(0, &meas) {
+        match ekf.update_relative_pose(self.sensor, &meas) {
             Ok(report) => {
                 // The update moved the current pose: keep the buffer continuous.
                 let after = convert::isometry(&ekf.imu().pose());
@@ -991,14 +1075,14 @@ impl<'a> LidarFeed<'a> {
     }
 
     /// Starts a new odometry chain at this scan (first scan, or after a failed match).
-    fn start_chain<T: Scalar>(
+    fn start_chain<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize>(
         &mut self,
-        ekf: &mut PoseImuEkf<T>,
+        ekf: &mut Ekf<T, S, C, N, F>,
         mut record: ScanRecord,
         mut this: Previous,
         why: &str,
     ) {
-        match ekf.anchor(0, this.ref_stamp_ns) {
+        match ekf.anchor(self.sensor, this.ref_stamp_ns) {
             Ok(()) => {
                 // A new chain: the local map restarts in this scan's frame.
                 this.t_map = Isometry3::identity();
@@ -1026,9 +1110,9 @@ impl<'a> LidarFeed<'a> {
     }
 
     /// Skips a processed scan and breaks the odometry chain.
-    fn reject<T: Scalar>(
+    fn reject<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize>(
         &mut self,
-        _ekf: &mut PoseImuEkf<T>,
+        _ekf: &mut Ekf<T, S, C, N, F>,
         mut record: ScanRecord,
         ref_stamp: u64,
         why: &str,

@@ -684,6 +684,8 @@ pub(crate) fn initial_state<T: Scalar>(
 
 /// Bookkeeping of one run over the recording.
 pub(crate) struct Run {
+    /// The filter's index of the sensor whose measurements this run books.
+    sensor: usize,
     start_ns: u64,
     max_interval_ns: u64,
     period_ns: u64,
@@ -701,6 +703,7 @@ pub(crate) struct Run {
 impl Run {
     pub(crate) fn new(start_ns: u64, period_ns: u64) -> Self {
         Self {
+            sensor: 0,
             start_ns,
             max_interval_ns: period_ns.saturating_mul(10),
             period_ns,
@@ -713,6 +716,12 @@ impl Run {
             nis_sum: 0.0,
             nis_dof: 0,
         }
+    }
+
+    /// The same run booking sensor `s` of the filter (0 unless the filter has several).
+    pub(crate) fn for_sensor(mut self, s: usize) -> Self {
+        self.sensor = s;
+        self
     }
 
     pub(crate) fn seconds(&self, stamp_ns: u64) -> f64 {
@@ -800,6 +809,7 @@ impl Run {
         }
         self.history.push(history_point(
             ekf,
+            self.sensor,
             self.seconds(stamp_ns),
             report.nis.to_f64(),
             report.accepted,
@@ -836,12 +846,13 @@ impl Run {
 
 fn history_point<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize>(
     ekf: &Ekf<T, S, C, N, F>,
+    s: usize,
     t_s: f64,
     nis: f64,
     accepted: bool,
 ) -> HistoryPoint {
-    let x = convert::isometry(&ekf.extrinsic(0));
-    let (sr, st) = ekf.extrinsic_sigma(0);
+    let x = convert::isometry(&ekf.extrinsic(s));
+    let (sr, st) = ekf.extrinsic_sigma(s);
     let rv = x.rotation.scaled_axis();
     HistoryPoint {
         t_s,
@@ -849,8 +860,8 @@ fn history_point<T: Scalar, const S: usize, const C: usize, const N: usize, cons
         translation_m: [x.translation.x, x.translation.y, x.translation.z],
         sigma_rot_deg: [0, 1, 2].map(|i| sr[i].to_f64().to_degrees()),
         sigma_trans_m: [0, 1, 2].map(|i| st[i].to_f64()),
-        time_offset_s: ekf.time_offset(0).to_f64(),
-        sigma_time_offset_s: ekf.time_offset_sigma(0).to_f64(),
+        time_offset_s: ekf.time_offset(s).to_f64(),
+        sigma_time_offset_s: ekf.time_offset_sigma(s).to_f64(),
         nis,
         accepted,
     }
@@ -868,11 +879,12 @@ pub(crate) fn finish<T: Scalar, const S: usize, const C: usize, const N: usize, 
     rotation_init: &init::RotationInit,
     timing: Timing,
 ) -> PoseImuCalibration {
-    let covariance = Matrix6::from_fn(|r, c| ekf.extrinsic_covariance(0)[(r, c)].to_f64());
-    let (sr, st) = ekf.extrinsic_sigma(0);
+    let s = run.sensor;
+    let covariance = Matrix6::from_fn(|r, c| ekf.extrinsic_covariance(s)[(r, c)].to_f64());
+    let (sr, st) = ekf.extrinsic_sigma(s);
     let mut reasons = Vec::new();
     let max_sr = sr.amax().to_f64().to_degrees();
-    let held = ekf.held_translation_axis(0).map(|a| HeldDirection {
+    let held = ekf.held_translation_axis(s).map(|a| HeldDirection {
         axis: convert::vec3_f64(&a),
         reason: "planar motion (rotation about one axis)".to_string(),
     });
@@ -906,9 +918,9 @@ pub(crate) fn finish<T: Scalar, const S: usize, const C: usize, const N: usize, 
     }
     let mean_nis = run.nis_sum / run.nis_dof.max(1) as f64;
     let rv = rotation_init.rotation.scaled_axis();
-    let excitation = ekf.excitation(0).map(|x| x.to_f64());
-    let sigma = [sr.x, sr.y, sr.z, st.x, st.y, st.z, ekf.time_offset_sigma(0)].map(|x| x.to_f64());
-    let prior = ekf.prior_sigma(0).map(|x| x.to_f64());
+    let excitation = ekf.excitation(s).map(|x| x.to_f64());
+    let sigma = [sr.x, sr.y, sr.z, st.x, st.y, st.z, ekf.time_offset_sigma(s)].map(|x| x.to_f64());
+    let prior = ekf.prior_sigma(s).map(|x| x.to_f64());
     let report = PoseImuReport {
         converged: reasons.is_empty(),
         reasons,
@@ -932,9 +944,9 @@ pub(crate) fn finish<T: Scalar, const S: usize, const C: usize, const N: usize, 
         history: run.history,
     };
     PoseImuCalibration {
-        t_imu_sensor: convert::isometry(&ekf.extrinsic(0)),
-        time_offset_s: ekf.time_offset(0).to_f64(),
-        time_offset_sigma_s: ekf.time_offset_sigma(0).to_f64(),
+        t_imu_sensor: convert::isometry(&ekf.extrinsic(s)),
+        time_offset_s: ekf.time_offset(s).to_f64(),
+        time_offset_sigma_s: ekf.time_offset_sigma(s).to_f64(),
         covariance,
         report,
     }

@@ -31,6 +31,7 @@ use rayon::prelude::*;
 use super::clock::Clock;
 use super::config::{ImuSimConfig, SimError, DEFAULT_START_STAMP_NS};
 use super::imu::imu_noise_yaml;
+use super::plate::Plate;
 use super::trajectory::{Trajectory, TrajectoryConfig};
 use super::{rng_for, simulate_motion, Stream};
 use crate::dataset::{
@@ -257,6 +258,8 @@ pub struct LidarImuSim {
     /// First-firing stamp of every scan (LiDAR clock), ns.
     pub scan_stamps: Vec<u64>,
     world: BoxWorld,
+    /// Plates in the room besides its boxes (the board of a joint rig).
+    plates: Vec<Plate>,
 }
 
 /// Simulates the LiDAR-IMU recording described by `config` (IMU now, scans on demand).
@@ -272,18 +275,7 @@ pub fn simulate_lidar_imu(config: &LidarImuSimConfig) -> Result<LidarImuSim, Sim
     let t_imu_lidar = config
         .t_imu_lidar
         .unwrap_or_else(|| random_lidar_mounting(&mut rng_for(config.seed, Stream::LidarMounting)));
-    let lidar = &config.lidar;
-    let period_ns = (1e9 / lidar.scan_rate_hz).round() as u64;
-    let td_ns = (lidar.time_offset_s * 1e9).round() as i64;
-    // First scan 0.1 s after the IMU starts and every firing inside the IMU record.
-    let first = (config.start_stamp_ns as i128 + 100_000_000 - i128::from(td_ns.min(0))) as u64;
-    let last_ok = config.start_stamp_ns as i128 + (config.duration_s * 1e9) as i128
-        - 20_000_000
-        - i128::from(td_ns.max(0));
-    let scan_stamps = (0u64..)
-        .map(|k| first + k * period_ns)
-        .take_while(|s| (*s + period_ns) as i128 <= last_ok)
-        .collect();
+    let scan_stamps = scan_stamps(config);
     Ok(LidarImuSim {
         config: config.clone(),
         trajectory,
@@ -292,11 +284,70 @@ pub fn simulate_lidar_imu(config: &LidarImuSimConfig) -> Result<LidarImuSim, Sim
         groundtruth: imu.groundtruth,
         t_imu_lidar,
         scan_stamps,
-        world: lidar.environment.world(),
+        world: config.lidar.environment.world(),
+        plates: Vec::new(),
     })
 }
 
+/// First-firing stamp of every scan: the first 0.1 s after the IMU starts, and every firing
+/// inside the IMU record.
+fn scan_stamps(config: &LidarImuSimConfig) -> Vec<u64> {
+    let lidar = &config.lidar;
+    let period_ns = (1e9 / lidar.scan_rate_hz).round() as u64;
+    let td_ns = (lidar.time_offset_s * 1e9).round() as i64;
+    let first = (config.start_stamp_ns as i128 + 100_000_000 - i128::from(td_ns.min(0))) as u64;
+    let last_ok = config.start_stamp_ns as i128 + (config.duration_s * 1e9) as i128
+        - 20_000_000
+        - i128::from(td_ns.max(0));
+    (0u64..)
+        .map(|k| first + k * period_ns)
+        .take_while(|s| (*s + period_ns) as i128 <= last_ok)
+        .collect()
+}
+
 impl LidarImuSim {
+    /// A LiDAR on a motion made elsewhere (the trajectory, IMU record and ground truth of
+    /// another simulator, e.g. the camera-IMU one of a joint rig), mounted at `t_imu_lidar`,
+    /// seeing the room of `config.lidar.environment` and `plates`. `config.trajectory` and
+    /// `config.imu` only describe that motion (they are not drawn again).
+    pub fn on_motion(
+        config: &LidarImuSimConfig,
+        motion: (Trajectory, Vec<ImuRecord>, Vec<GroundTruthRecord>),
+        t_imu_lidar: Isometry3<f64>,
+        plates: Vec<Plate>,
+    ) -> Result<Self, SimError> {
+        config.validate()?;
+        let (trajectory, imu, groundtruth) = motion;
+        Ok(Self {
+            config: config.clone(),
+            trajectory,
+            imu,
+            imu_noise: imu_noise_yaml(&config.imu),
+            groundtruth,
+            t_imu_lidar,
+            scan_stamps: scan_stamps(config),
+            world: config.lidar.environment.world(),
+            plates,
+        })
+    }
+
+    /// First hit of a unit ray from `origin` in G: range, reflectivity and the cosine of
+    /// the incidence angle.
+    fn first_hit(&self, origin: &Vector3<f64>, dir: &Vector3<f64>) -> Option<(f64, f32, f32)> {
+        let boxes = cast(&self.world, origin, dir).map(|(range, index, normal_axis)| {
+            let cos_incidence = dir[normal_axis].abs() as f32;
+            (range, Environment::reflectivity(index), cos_incidence)
+        });
+        self.plates
+            .iter()
+            .filter_map(|p| {
+                p.hit(origin, dir)
+                    .map(|(range, cos)| (range, p.reflectivity, cos))
+            })
+            .chain(boxes)
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+    }
+
     /// Seconds after the start stamp of an IMU-clock stamp.
     pub fn seconds(&self, stamp_ns: u64) -> f64 {
         Clock {
@@ -342,9 +393,9 @@ impl LidarImuSim {
                         let (se, ce) = el.sin_cos();
                         let dir_l = Vector3::new(ce * ca, ce * sa, se);
                         let dir_g = pose.rotation * dir_l;
-                        let (range, index, normal_axis) = cast(&self.world, &origin, &dir_g)?;
-                        let cos_incidence = dir_g[normal_axis].abs() as f32;
-                        let intensity = Environment::reflectivity(index) * cos_incidence.max(0.05);
+                        let (range, reflectivity, cos_incidence) =
+                            self.first_hit(&origin, &dir_g)?;
+                        let intensity = reflectivity * cos_incidence.max(0.05);
                         Some((r, range, intensity))
                     })
                     .collect()
@@ -430,17 +481,29 @@ impl LidarImuSim {
         progress: &mut dyn FnMut(f64),
     ) -> Result<(), DatasetError> {
         let dir = dir.as_ref();
-        for sub in ["imu0", LIDAR_DIR, "groundtruth"] {
+        for sub in ["imu0", "groundtruth"] {
             let path = dir.join(sub);
             std::fs::create_dir_all(&path).map_err(|source| DatasetError::Io { path, source })?;
         }
         self.metadata().write(dir.join(DATASET_YAML))?;
         write_imu_csv(dir.join(IMU_CSV), &self.imu)?;
         self.imu_noise.write(dir.join(IMU_YAML))?;
-        self.lidar_yaml().write(dir.join(LIDAR_YAML))?;
         write_groundtruth_csv(dir.join(GROUNDTRUTH_TRAJECTORY_CSV), &self.groundtruth)?;
         self.extrinsics()
             .write(dir.join(GROUNDTRUTH_EXTRINSICS_YAML))?;
+        self.write_lidar(dir, progress)
+    }
+
+    /// Writes `lidar0/` (lidar.yaml and every scan) under `dir`; `progress` gets the fraction
+    /// of scans written.
+    pub fn write_lidar(
+        &self,
+        dir: &Path,
+        progress: &mut dyn FnMut(f64),
+    ) -> Result<(), DatasetError> {
+        let path = dir.join(LIDAR_DIR);
+        std::fs::create_dir_all(&path).map_err(|source| DatasetError::Io { path, source })?;
+        self.lidar_yaml().write(dir.join(LIDAR_YAML))?;
         for (k, stamp) in self.scan_stamps.iter().enumerate() {
             let path = dir.join(LIDAR_DIR).join(format!("{stamp}.pcd"));
             write_pcd(&path, &self.scan(k), PcdWriteOptions::default()).map_err(|e| {

@@ -1,0 +1,440 @@
+//! Joint LiDAR-IMU-camera calibration (issue 13, the dissertation's chapter 5): one EKF
+//! (`JointEkf`: the IMU, the LiDAR as sensor 0, the camera as sensor 1, clones and the board
+//! as a static frame) estimates `T_imu_lidar`, `T_imu_cam` and both time offsets from
+//!
+//! - the LiDAR's relative poses (NDT on deskewed scans: the LiDAR-IMU pipeline's feed),
+//! - the camera's checkerboard corners (RepErrCal: the camera-IMU pipeline's feed),
+//! - the board plane: the board points of each deskewed scan against the target frame the
+//!   corners observe (`msreg_estimator::update::board_plane`), which ties the two
+//!   extrinsics together (eq. 5.12 in target-frame form).
+//!
+//! Start: the camera-IMU pipeline's (MoCal on the PnP poses, the IMU state and the camera
+//! prior around its estimate) and the LiDAR-IMU pipeline's hand-eye rotation with its
+//! standard prior. Measurements are fused in the order of their IMU times, whichever sensor
+//! they come from. `T_cam_lidar` is derived with its covariance from the joint covariance,
+//! cross terms included.
+
+mod plane;
+
+use std::time::Instant;
+
+use msreg_estimator::{Ekf, InitialState, JointEkf, Scalar, SensorPrior, SensorState};
+use nalgebra::{Isometry3, Matrix3, Matrix6};
+
+use super::camera_imu::{
+    frame_poses, motion_calibration, prior_from_motion, CameraImuInput, CameraImuOptions,
+    CornerFeed, CornerFrame, ExtrinsicPrior, PriorFromMotion, Start,
+};
+use super::convert;
+use super::init;
+use super::lidar_imu::{rotation_init, LidarFeed, LidarImuOptions};
+use super::pose_imu::{drive_imu, finish, ImuHooks, PoseImuCalibration, PoseImuError, Timing};
+use crate::camera_yaml::CheckerboardTarget;
+use crate::dataset::{ImuNoiseYaml, ImuRecord};
+use crate::lidar::ScanSource;
+use msreg_estimator::camera::Camera;
+
+pub use plane::{BoardExtent, PlaneOptions, PlaneStats};
+
+/// The filter's index of the LiDAR.
+pub const LIDAR: usize = 0;
+/// The filter's index of the camera.
+pub const CAMERA: usize = 1;
+
+/// What the pipeline reads.
+#[derive(Clone, Copy)]
+pub struct JointInput<'a> {
+    /// IMU samples, strictly increasing stamps.
+    pub imu: &'a [ImuRecord],
+    /// IMU noise densities.
+    pub imu_noise: &'a ImuNoiseYaml,
+    /// The LiDAR's scans.
+    pub scans: &'a dyn ScanSource,
+    /// The camera model.
+    pub camera: &'a Camera<f64>,
+    /// Detected corners per image, increasing stamps.
+    pub frames: &'a [CornerFrame],
+    /// The checkerboard, with the physical board's `width_m` / `height_m`.
+    pub target: &'a CheckerboardTarget,
+}
+
+/// Tuning of the pipeline: each sensor's as in its pairwise pipeline, and the planes'.
+#[derive(Debug, Clone, Default)]
+pub struct JointOptions {
+    /// The camera's start and feed.
+    pub camera: CameraImuOptions,
+    /// The LiDAR's start and feed.
+    pub lidar: LidarImuOptions,
+    /// Board segmentation and the plane update.
+    pub plane: PlaneOptions,
+}
+
+/// The joint result.
+#[derive(Debug, Clone)]
+pub struct JointCalibration {
+    /// `T_imu_lidar`, its time offset and the LiDAR's report.
+    pub lidar: PoseImuCalibration,
+    /// `T_imu_cam`, its time offset and the camera's report.
+    pub camera: PoseImuCalibration,
+    /// `T_cam_lidar` derived from the two.
+    pub t_cam_lidar: Isometry3<f64>,
+    /// Its covariance `[dtheta (right); dp]`, from the joint covariance (cross terms in).
+    pub cam_lidar_covariance: Matrix6<f64>,
+    /// The board planes.
+    pub planes: PlaneStats,
+    /// Every board plane fused or gated (the LiDAR's board-point moments at each scan).
+    pub plane_measurements: Vec<msreg_estimator::update::board_plane::BoardPlane<f64>>,
+    /// Wall time of the start (MoCal, hand-eye) and of the filter pass, s.
+    pub timing_s: Timing,
+}
+
+impl JointCalibration {
+    /// True when both sensors' results passed their checks.
+    pub fn converged(&self) -> bool {
+        self.lidar.report.converged && self.camera.report.converged
+    }
+}
+
+/// Runs the joint calibration with the filter in scalar type `T`; `progress` gets the
+/// fraction done.
+pub fn calibrate<T: Scalar>(
+    input: &JointInput<'_>,
+    options: &JointOptions,
+    progress: &mut dyn FnMut(f64),
+) -> Result<JointCalibration, PoseImuError> {
+    let imu = input.imu;
+    let Some(first_imu) = imu.first() else {
+        return Err(PoseImuError::BadInput(
+            "imu0/data.csv: no IMU samples".into(),
+        ));
+    };
+    let board = BoardExtent::of(input.target)?;
+    let started = Instant::now();
+    let camera_input = CameraImuInput {
+        imu,
+        imu_noise: input.imu_noise,
+        camera: input.camera,
+        frames: input.frames,
+    };
+    let poses = frame_poses(input.camera, input.frames);
+    let (motion, pixel_sigma) =
+        motion_calibration::<T>(&camera_input, &poses, &options.camera, &mut |f| {
+            progress(0.2 * f)
+        })?;
+    let start = Start {
+        motion: &motion,
+        pixel_sigma,
+        poses: &poses,
+    };
+    let standstill = init::detect_standstill(imu, options.camera.prior.min_standstill_s);
+    let camera_start = prior_from_motion::<T>(
+        &camera_input,
+        &options.camera,
+        standstill.as_ref(),
+        &start,
+        ExtrinsicPrior::AroundStart,
+    )?;
+    let (lidar_rotation, _, _) =
+        rotation_init(imu, input.scans, standstill.as_ref(), &options.lidar)?;
+    let lidar_rotation = lidar_rotation.map_err(|e| {
+        PoseImuError::BadInput(format!(
+            "lidar0/: hand-eye rotation initialisation failed ({e:?}): the recording needs \
+             rotation about at least two axes"
+        ))
+    })?;
+    let camera_rotation_init = camera_start.rotation_init;
+    let camera_prior = camera_start.prior;
+    let mut ekf = joint_filter::<T>(camera_start, &lidar_rotation, &options.lidar)?;
+    let init_s = started.elapsed().as_secs_f64();
+
+    let started = Instant::now();
+    let mut feed = JointFeed {
+        lidar: LidarFeed::new(
+            input.scans,
+            &options.lidar,
+            first_imu.stamp_ns,
+            (LIDAR, true),
+        ),
+        corners: CornerFeed::new(&camera_input, &options.camera, &start, camera_prior, CAMERA),
+        planes: plane::PlaneFeed::new(board, options.plane),
+    };
+    drive_imu(
+        &mut ekf,
+        imu,
+        standstill.as_ref(),
+        &mut |f| progress(0.2 + 0.8 * f),
+        &mut feed,
+    )?;
+    let timing = Timing {
+        init: init_s,
+        filter: started.elapsed().as_secs_f64(),
+    };
+    let (t_cam_lidar, cam_lidar_covariance) = cam_lidar(&ekf);
+    let JointFeed {
+        lidar,
+        corners,
+        planes,
+    } = feed;
+    Ok(JointCalibration {
+        lidar: finish(
+            &ekf,
+            lidar.into_run(),
+            standstill.as_ref(),
+            &lidar_rotation,
+            timing,
+        ),
+        camera: finish(
+            &ekf,
+            corners.into_run(),
+            standstill.as_ref(),
+            &camera_rotation_init,
+            timing,
+        ),
+        t_cam_lidar,
+        cam_lidar_covariance,
+        planes: planes.stats(),
+        plane_measurements: planes.measurements,
+        timing_s: timing,
+    })
+}
+
+/// The joint filter: the camera start's IMU state and camera prior (as sensor 1), and the
+/// LiDAR at its hand-eye rotation with the LiDAR pipeline's prior (sensor 0).
+fn joint_filter<T: Scalar>(
+    camera: PriorFromMotion<T>,
+    lidar_rotation: &init::RotationInit,
+    options: &LidarImuOptions,
+) -> Result<JointEkf<T>, PoseImuError> {
+    let prior = &options.filter;
+    let lidar = SensorPrior {
+        state: SensorState {
+            extrinsic: convert::pose::<T>(&Isometry3::from_parts(
+                Default::default(),
+                lidar_rotation.rotation,
+            )),
+            time_offset: T::zero(),
+        },
+        sigma_rotation: T::lit(prior.rotation_sigma_rad),
+        sigma_translation: T::lit(prior.translation_sigma_m),
+        sigma_time_offset: T::lit(if prior.estimate_time_offset {
+            prior.time_offset_sigma_s
+        } else {
+            0.0
+        }),
+    };
+    let c = camera.initial;
+    let initial = InitialState::<T, 2> {
+        imu: c.imu,
+        sigma_orientation: c.sigma_orientation,
+        sigma_position: c.sigma_position,
+        sigma_velocity: c.sigma_velocity,
+        sigma_gyro_bias: c.sigma_gyro_bias,
+        sigma_accel_bias: c.sigma_accel_bias,
+        sensors: [lidar, c.sensors[0]],
+    };
+    JointEkf::<T>::new(&camera.config, &initial)
+        .map_err(|e| PoseImuError::BadInput(format!("imu0/imu.yaml: invalid noise ({e})")))
+}
+
+/// `T_cam_lidar = T_imu_cam^-1 T_imu_lidar` and its covariance `[dtheta (right); dp]`
+/// through the Jacobians of the composition, with the filter's cross-covariance of the two
+/// extrinsics.
+pub fn cam_lidar<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize>(
+    ekf: &Ekf<T, S, C, N, F>,
+) -> (Isometry3<f64>, Matrix6<f64>) {
+    let t_i_c = convert::isometry(&ekf.extrinsic(CAMERA));
+    let t_i_l = convert::isometry(&ekf.extrinsic(LIDAR));
+    let t_c_l = t_i_c.inverse() * t_i_l;
+    let p = ekf.covariance();
+    let block = |a: usize, b: usize| {
+        let (a, b) = (
+            msreg_estimator::Layout::<S, C>::extrinsic(a).idx,
+            msreg_estimator::Layout::<S, C>::extrinsic(b).idx,
+        );
+        Matrix6::from_fn(|r, c| p[(a + r, b + c)].to_f64())
+    };
+    // Joint covariance of [camera extrinsic; LiDAR extrinsic], 12 x 12, as 6 x 6 blocks.
+    let (cc, cl, ll) = (
+        block(CAMERA, CAMERA),
+        block(CAMERA, LIDAR),
+        block(LIDAR, LIDAR),
+    );
+    let (j_c, j_l) = cam_lidar_jacobians(&t_i_c, &t_c_l);
+    let cov = j_c * cc * j_c.transpose()
+        + j_c * cl * j_l.transpose()
+        + j_l * cl.transpose() * j_c.transpose()
+        + j_l * ll * j_l.transpose();
+    (t_c_l, (cov + cov.transpose()) * 0.5)
+}
+
+/// Derivatives of `T_cam_lidar`'s error w.r.t. the camera's and the LiDAR's extrinsic errors
+/// (right rotation perturbations, additive translations).
+fn cam_lidar_jacobians(
+    t_i_c: &Isometry3<f64>,
+    t_c_l: &Isometry3<f64>,
+) -> (Matrix6<f64>, Matrix6<f64>) {
+    let r_ic = t_i_c.rotation.to_rotation_matrix().into_inner();
+    let r_cl = t_c_l.rotation.to_rotation_matrix().into_inner();
+    let mut j_c = Matrix6::zeros();
+    j_c.fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&(-r_cl.transpose()));
+    j_c.fixed_view_mut::<3, 3>(3, 0)
+        .copy_from(&msreg_estimator::lie::skew(&t_c_l.translation.vector));
+    j_c.fixed_view_mut::<3, 3>(3, 3)
+        .copy_from(&(-r_ic.transpose()));
+    let mut j_l = Matrix6::zeros();
+    j_l.fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&Matrix3::identity());
+    j_l.fixed_view_mut::<3, 3>(3, 3)
+        .copy_from(&r_ic.transpose());
+    (j_c, j_l)
+}
+
+impl<T: Scalar> JointFeed<'_, T> {
+    /// Fuses the next image, due at IMU time `t`, and moves the LiDAR's pose history with
+    /// the update's correction.
+    fn fuse_image(&mut self, ekf: &mut JointEkf<T>, index: usize, t: u64) {
+        let before = predicted_pose(ekf, t);
+        self.corners.fuse_next(ekf, index);
+        self.pose_moved(ekf, &before);
+    }
+
+    /// An update at IMU time `t` changed the pose there from `before` (a failed update
+    /// that left the filter elsewhere moved nothing).
+    fn pose_moved(&mut self, ekf: &JointEkf<T>, before: &Option<(u64, Isometry3<f64>)>) {
+        if let Some((t, before)) = before.filter(|(t, _)| *t == ekf.time_ns()) {
+            let after = convert::isometry(&ekf.imu().pose());
+            self.lidar.filter_corrected(t, &before, &after);
+        }
+    }
+}
+
+/// The time an update at IMU time `t` would be fused at (`t`, or the filter's time if later)
+/// and the filter's IMU pose there before it.
+fn predicted_pose<T: Scalar>(ekf: &JointEkf<T>, t: u64) -> Option<(u64, Isometry3<f64>)> {
+    let t = t.max(ekf.time_ns());
+    ekf.predict_imu(t)
+        .ok()
+        .map(|s| (t, convert::isometry(&s.pose())))
+}
+
+/// The three feeds of the joint filter, fused in the order of their IMU times.
+struct JointFeed<'a, T: Scalar> {
+    lidar: LidarFeed<'a>,
+    corners: CornerFeed<'a, T>,
+    planes: plane::PlaneFeed,
+}
+
+impl<T: Scalar> ImuHooks<T, JointEkf<T>> for JointFeed<'_, T> {
+    fn fuse_due(
+        &mut self,
+        ekf: &mut JointEkf<T>,
+        index: usize,
+        _rec: &ImuRecord,
+    ) -> Result<(), PoseImuError> {
+        loop {
+            let imu_time =
+                |s: usize, stamp: Option<u64>| stamp.and_then(|t| ekf.imu_time(s, t).ok());
+            let scan = imu_time(LIDAR, self.lidar.next_due(ekf)?);
+            let image = imu_time(CAMERA, self.corners.next_due(ekf));
+            match (scan, image) {
+                (None, None) => return Ok(()),
+                (Some(l), Some(c)) if c < l => self.fuse_image(ekf, index, c),
+                (Some(l), _) => {
+                    self.lidar.fuse_next(ekf, index);
+                    if let Some((stamp, cloud)) = self.lidar.take_deskewed() {
+                        let before = predicted_pose(ekf, l);
+                        self.planes.fuse(ekf, stamp, &cloud);
+                        self.pose_moved(ekf, &before);
+                    }
+                }
+                (None, Some(c)) => self.fuse_image(ekf, index, c),
+            }
+        }
+    }
+
+    fn after_sample(&mut self, ekf: &JointEkf<T>, rec: &ImuRecord) {
+        ImuHooks::<T, JointEkf<T>>::after_sample(&mut self.lidar, ekf, rec);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use msreg_estimator::{FilterConfig, ImuNoise, Pose};
+    use nalgebra::{UnitQuaternion, Vector3, Vector6};
+
+    /// The derived covariance's Jacobians against central differences of the composition.
+    #[test]
+    fn cam_lidar_jacobians_match_central_differences() {
+        let t_i_c = Isometry3::from_parts(
+            Vector3::new(0.05, -0.02, 0.1).into(),
+            UnitQuaternion::from_euler_angles(-1.5, 0.1, -1.6),
+        );
+        let t_i_l = Isometry3::from_parts(
+            Vector3::new(0.1, 0.2, -0.05).into(),
+            UnitQuaternion::from_euler_angles(0.1, -0.2, 0.7),
+        );
+        let t_c_l = t_i_c.inverse() * t_i_l;
+        let (j_c, j_l) = cam_lidar_jacobians(&t_i_c, &t_c_l);
+        let perturb = |t: &Isometry3<f64>, d: &Vector6<f64>| {
+            let p = convert::pose::<f64>(t).boxplus(
+                &Vector3::new(d[0], d[1], d[2]),
+                &Vector3::new(d[3], d[4], d[5]),
+            );
+            convert::isometry(&p)
+        };
+        let error = |t: &Isometry3<f64>| {
+            let r = (t_c_l.rotation.inverse() * t.rotation).scaled_axis();
+            let p = t.translation.vector - t_c_l.translation.vector;
+            Vector6::new(r.x, r.y, r.z, p.x, p.y, p.z)
+        };
+        let h = 1e-6;
+        for (which, analytic) in [(0, j_c), (1, j_l)] {
+            for k in 0..6 {
+                let mut d = Vector6::zeros();
+                d[k] = h;
+                let shifted = |d: Vector6<f64>| {
+                    if which == 0 {
+                        error(&(perturb(&t_i_c, &d).inverse() * t_i_l))
+                    } else {
+                        error(&(t_i_c.inverse() * perturb(&t_i_l, &d)))
+                    }
+                };
+                let numeric = (shifted(d) - shifted(-d)) / (2.0 * h);
+                assert!(
+                    (numeric - analytic.column(k)).norm() < 1e-6,
+                    "{which} {k}: {numeric} vs {}",
+                    analytic.column(k)
+                );
+            }
+        }
+    }
+
+    /// With independent extrinsic priors the derived covariance is the sum of the two
+    /// propagated ones; the filter's values go through unchanged.
+    #[test]
+    fn cam_lidar_of_a_fresh_filter_composes_the_priors() {
+        let mut init = InitialState::<f64, 2>::at_rest(Vector3::new(0.0, 0.0, 9.81))
+            .expect("gravity")
+            .with_extrinsic(
+                CAMERA,
+                Pose::new(
+                    UnitQuaternion::from_euler_angles(-1.5, 0.0, -1.6),
+                    Vector3::new(0.05, 0.0, 0.1),
+                ),
+                0.01,
+                0.02,
+            )
+            .with_extrinsic(LIDAR, Pose::identity(), 0.03, 0.05);
+        init.imu.velocity = Vector3::zeros();
+        let ekf = JointEkf::new(&FilterConfig::new(ImuNoise::vn300()), &init).expect("prior");
+        let (t, cov) = cam_lidar(&ekf);
+        let expected = convert::isometry(&ekf.extrinsic(CAMERA)).inverse();
+        assert!((t.to_homogeneous() - expected.to_homogeneous()).abs().max() < 1e-12);
+        // Rotation: 0.01^2 (camera, rotated) + 0.03^2 (LiDAR) per axis.
+        for k in 0..3 {
+            assert!((cov[(k, k)] - (1e-4 + 9e-4)).abs() < 1e-12, "{cov}");
+        }
+    }
+}

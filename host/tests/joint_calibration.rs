@@ -1,0 +1,316 @@
+//! Joint LiDAR-IMU-camera calibration (issue 13) on the joint simulator: a hand-held rig in
+//! front of a checkerboard on a board both sensors see, both time offsets drawn in +-20 ms.
+//! Judged per sensor (`T_cam_imu`, `T_imu_lidar`, time offsets), on the derived
+//! `T_cam_lidar`, and against chaining the two pairwise pipelines on the same data.
+//!
+//! CI runs one seed on 30 s; the acceptance run (10 seeds, 60 s, with the pairwise runs) is
+//! `cargo test --release -p msreg --test joint_calibration -- --ignored --nocapture`
+//! (`MSREG_SEEDS`, `MSREG_DURATION` shorten it; `MSREG_NO_PLANES=1` runs the joint filter
+//! without the board-plane update, for comparison).
+//!
+//! Known and not yet fixed (docs/joint.md): the board planes the pipeline extracts sit
+//! +0.4-0.5 mm off the true board on average (`plane rows at the truth`, printed), which
+//! the 270 planes of a 30 s run turn into an overconfident `T_cam_lidar` (NEES far above
+//! its band). The CI test asserts the accuracy and the camera's consistency, not that.
+
+#[path = "support/common.rs"]
+mod common;
+#[path = "support/corners.rs"]
+mod corners;
+
+use common::{chi_square_band, par_map};
+use msreg_host::calibrate::camera_imu::{self, CameraImuInput, CameraImuOptions};
+use msreg_host::calibrate::joint::{self, JointCalibration, JointInput, JointOptions};
+use msreg_host::calibrate::lidar_imu::{self, LidarImuInput, LidarImuOptions};
+use msreg_host::sim::{simulate_joint, JointSim, JointSimConfig};
+use nalgebra::{Isometry3, Matrix6, Vector6};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// Corner noise of the simulated detections, px.
+const PIXEL_SIGMA: f64 = 0.1;
+
+fn config(seed: u64, duration_s: f64) -> JointSimConfig {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x101_7ed);
+    let mut c = JointSimConfig::default();
+    c.camera.seed = seed;
+    c.camera.duration_s = duration_s;
+    c.camera.time_offset_s = rng.gen_range(-0.020..0.020);
+    c.lidar.time_offset_s = rng.gen_range(-0.020..0.020);
+    c.lidar.rings = 32;
+    c.lidar.columns = 512;
+    c
+}
+
+/// An estimate against its truth: rotation (deg), translation (mm), NEES (6 dof) and
+/// whether every axis is inside 3 sigma.
+#[derive(Debug, Clone, Copy)]
+struct Error6 {
+    rotation_deg: f64,
+    translation_mm: f64,
+    nees: f64,
+    inside: bool,
+}
+
+fn error6(estimate: &Isometry3<f64>, covariance: &Matrix6<f64>, truth: &Isometry3<f64>) -> Error6 {
+    let r = (estimate.rotation.inverse() * truth.rotation).scaled_axis();
+    let p = truth.translation.vector - estimate.translation.vector;
+    let e = Vector6::new(r.x, r.y, r.z, p.x, p.y, p.z);
+    Error6 {
+        rotation_deg: r.norm().to_degrees(),
+        translation_mm: p.norm() * 1e3,
+        nees: covariance
+            .try_inverse()
+            .map_or(f64::NAN, |info| e.dot(&(info * e))),
+        inside: (0..6).all(|i| e[i].abs() <= 3.0 * covariance[(i, i)].sqrt()),
+    }
+}
+
+/// One seed's joint run judged.
+#[derive(Debug, Clone, Copy)]
+struct Outcome {
+    seed: u64,
+    camera: Error6,
+    lidar: Error6,
+    cam_lidar: Error6,
+    /// (error, sigma) of the camera's and the LiDAR's time offset, ms.
+    camera_offset_ms: (f64, f64),
+    lidar_offset_ms: (f64, f64),
+    converged: bool,
+    planes_fused: usize,
+    /// Chained pairwise `T_cam_lidar` errors (deg, mm), when run.
+    chained: Option<(f64, f64)>,
+}
+
+fn judge(seed: u64, sim: &JointSim, c: &JointCalibration) -> Outcome {
+    let offset = |est: f64, sigma: f64, truth: f64| ((est - truth) * 1e3, sigma * 1e3);
+    Outcome {
+        seed,
+        camera: error6(
+            &c.camera.t_imu_sensor,
+            &c.camera.covariance,
+            &sim.camera.t_cam_imu.inverse(),
+        ),
+        lidar: error6(
+            &c.lidar.t_imu_sensor,
+            &c.lidar.covariance,
+            &sim.lidar.t_imu_lidar,
+        ),
+        cam_lidar: error6(&c.t_cam_lidar, &c.cam_lidar_covariance, &sim.t_cam_lidar()),
+        camera_offset_ms: offset(
+            c.camera.time_offset_s,
+            c.camera.time_offset_sigma_s,
+            sim.camera.config.time_offset_s,
+        ),
+        lidar_offset_ms: offset(
+            c.lidar.time_offset_s,
+            c.lidar.time_offset_sigma_s,
+            sim.lidar.config.lidar.time_offset_s,
+        ),
+        converged: c.converged(),
+        planes_fused: c.planes.fused,
+        chained: None,
+    }
+}
+
+/// The mean of each board-plane row at the true state (whitened rows over sqrt(K) and
+/// sqrt(lambda): mm of distance, mrad of tilt), printed.
+fn plane_bias(sim: &JointSim, c: &JointCalibration) {
+    use msreg_estimator::update::board_plane;
+    use msreg_estimator::Pose;
+    let pose = |t: &Isometry3<f64>| Pose::new(t.rotation, t.translation.vector);
+    let lidar = &sim.lidar;
+    let mut sum = nalgebra::Vector3::zeros();
+    for p in &c.plane_measurements {
+        let t = lidar.seconds(p.stamp_ns) + lidar.config.lidar.time_offset_s;
+        let h = board_plane::predict(
+            &pose(&sim.camera.trajectory.isometry(t)),
+            &pose(&lidar.t_imu_lidar),
+            &pose(&sim.camera.t_g_target),
+            p,
+        );
+        let w = [
+            f64::from(p.count).sqrt(),
+            p.spread[0].sqrt(),
+            p.spread[1].sqrt(),
+        ];
+        sum += nalgebra::Vector3::new(h[0] / w[0], h[1] / w[1], h[2] / w[2]) * 1e3;
+    }
+    println!(
+        "  plane rows at the truth, mean over {}: {:?}",
+        c.plane_measurements.len(),
+        (sum / c.plane_measurements.len().max(1) as f64).as_slice()
+    );
+}
+
+fn run(seed: u64, duration_s: f64, pairwise: bool) -> Outcome {
+    let sim = simulate_joint(&config(seed, duration_s)).expect("valid simulation");
+    let frames = corners::noisy_corner_frames(&sim.camera, PIXEL_SIGMA, seed);
+    let target = sim.target();
+    let input = JointInput {
+        imu: &sim.camera.imu,
+        imu_noise: &sim.camera.imu_noise,
+        scans: &sim.lidar,
+        camera: &sim.camera.config.camera,
+        frames: &frames,
+        target: &target,
+    };
+    let mut options = JointOptions::default();
+    if std::env::var_os("MSREG_NO_PLANES").is_some() {
+        options.plane.arm_sigma_translation_m = 0.0;
+    }
+    let c = joint::calibrate::<f64>(&input, &options, &mut |_| {}).expect("joint calibration runs");
+    println!("seed {seed}: planes {:?}", c.planes);
+    plane_bias(&sim, &c);
+    let mut outcome = judge(seed, &sim, &c);
+    if pairwise {
+        outcome.chained = Some(chained_pairwise(&sim, &input));
+    }
+    print(&outcome);
+    outcome
+}
+
+/// `T_cam_lidar` from the camera-IMU and LiDAR-IMU pipelines run separately on the same
+/// data, chained: its rotation (deg) and translation (mm) errors.
+fn chained_pairwise(sim: &JointSim, input: &JointInput<'_>) -> (f64, f64) {
+    let camera = camera_imu::calibrate::<f64>(
+        &CameraImuInput {
+            imu: input.imu,
+            imu_noise: input.imu_noise,
+            camera: input.camera,
+            frames: input.frames,
+        },
+        &CameraImuOptions::default(),
+        &mut |_| {},
+    )
+    .expect("camera-IMU runs");
+    let lidar = lidar_imu::calibrate::<f64>(
+        &LidarImuInput {
+            imu: input.imu,
+            imu_noise: input.imu_noise,
+            scans: input.scans,
+        },
+        &LidarImuOptions::default(),
+        &mut |_| {},
+    )
+    .expect("LiDAR-IMU runs");
+    let chained = camera.t_imu_sensor.inverse() * lidar.t_imu_sensor;
+    let e = error6(&chained, &Matrix6::identity(), &sim.t_cam_lidar());
+    (e.rotation_deg, e.translation_mm)
+}
+
+fn print(o: &Outcome) {
+    let row = |name: &str, e: &Error6| {
+        format!(
+            "{name} {:.4} deg {:.2} mm NEES {:.1}{}",
+            e.rotation_deg,
+            e.translation_mm,
+            e.nees,
+            if e.inside { "" } else { " (outside 3 sigma)" }
+        )
+    };
+    println!(
+        "seed {}: {}; {}; {}; t_d cam {:+.3} ms (sigma {:.3}), lidar {:+.3} ms (sigma {:.3}); \
+         planes {}; converged {}; chained pairwise {:?}",
+        o.seed,
+        row("cam", &o.camera),
+        row("lidar", &o.lidar),
+        row("cam_lidar", &o.cam_lidar),
+        o.camera_offset_ms.0,
+        o.camera_offset_ms.1,
+        o.lidar_offset_ms.0,
+        o.lidar_offset_ms.1,
+        o.planes_fused,
+        o.converged,
+        o.chained
+    );
+}
+
+/// Seed 3, 30 s, measured: camera 0.0053 deg / 0.34 mm, LiDAR 0.029 deg / 0.53 mm,
+/// `T_cam_lidar` 0.032 deg / 0.59 mm, time offsets -0.007 ms (camera) and +0.093 ms
+/// (LiDAR), 267 planes; bounds about 3x.
+#[test]
+fn joint_calibration_one_seed() {
+    let o = run(3, 30.0, false);
+    assert!(o.converged, "{o:?}");
+    assert!(o.planes_fused > 200, "{o:?}");
+    assert!(o.camera.inside, "{o:?}");
+    assert!(
+        o.camera.rotation_deg < 0.016 && o.camera.translation_mm < 1.0,
+        "{o:?}"
+    );
+    assert!(
+        o.lidar.rotation_deg < 0.09 && o.lidar.translation_mm < 1.6,
+        "{o:?}"
+    );
+    assert!(
+        o.cam_lidar.rotation_deg < 0.1 && o.cam_lidar.translation_mm < 1.8,
+        "{o:?}"
+    );
+    assert!(o.camera_offset_ms.0.abs() < 0.03, "{o:?}");
+    assert!(o.lidar_offset_ms.0.abs() < 0.3, "{o:?}");
+}
+
+/// The acceptance run of issue 13 (10 seeds, 60 s).
+#[test]
+#[ignore = "acceptance run, ~15 min on 2 cores"]
+fn ten_seeds_joint_against_chained_pairwise() {
+    // `MSREG_SEEDS` / `MSREG_DURATION` shorten the run while investigating.
+    let env = |key: &str, default: f64| {
+        std::env::var(key)
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(default)
+    };
+    let seeds: Vec<u64> = (100..100 + env("MSREG_SEEDS", 10.0) as u64).collect();
+    let duration = env("MSREG_DURATION", 60.0);
+    let outcomes = par_map(&seeds, |s| run(s, duration, true));
+    let nees = |f: fn(&Outcome) -> f64| outcomes.iter().map(f).sum::<f64>();
+    let band = chi_square_band(6.0 * outcomes.len() as f64);
+    let better = outcomes
+        .iter()
+        .filter(|o| {
+            o.chained.is_some_and(|(r, t)| {
+                o.cam_lidar.rotation_deg <= r && o.cam_lidar.translation_mm <= t
+            })
+        })
+        .count();
+    println!(
+        "NEES sums (band {band:?}): camera {:.1}, lidar {:.1}, cam_lidar {:.1}; joint at least \
+         as accurate as chained pairwise (rotation and translation) on {better}/{}",
+        nees(|o| o.camera.nees),
+        nees(|o| o.lidar.nees),
+        nees(|o| o.cam_lidar.nees),
+        outcomes.len()
+    );
+    for o in &outcomes {
+        assert!(o.converged, "{o:?}");
+        assert!(
+            o.camera.rotation_deg < 0.05 && o.camera.translation_mm < 2.0,
+            "{o:?}"
+        );
+        assert!(
+            o.lidar.rotation_deg < 0.1 && o.lidar.translation_mm < 5.0,
+            "{o:?}"
+        );
+        assert!(
+            o.cam_lidar.rotation_deg < 0.1 && o.cam_lidar.translation_mm < 3.0,
+            "{o:?}"
+        );
+        assert!(
+            o.camera_offset_ms.0.abs() < 0.5 && o.lidar_offset_ms.0.abs() < 0.5,
+            "{o:?}"
+        );
+    }
+    for f in [
+        (|o: &Outcome| o.camera.nees) as fn(&Outcome) -> f64,
+        |o| o.lidar.nees,
+        |o| o.cam_lidar.nees,
+    ] {
+        let sum = nees(f);
+        assert!(
+            (band.0..=band.1).contains(&sum),
+            "NEES sum {sum}, band {band:?}"
+        );
+    }
+}
