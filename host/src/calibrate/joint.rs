@@ -127,24 +127,12 @@ pub fn calibrate<T: Scalar>(
         poses: &poses,
     };
     let standstill = init::detect_standstill(imu, options.camera.prior.min_standstill_s);
-    let camera_start = prior_from_motion::<T>(
-        &camera_input,
-        &options.camera,
-        standstill.as_ref(),
-        &start,
-        ExtrinsicPrior::AroundStart,
-    )?;
-    let (lidar_rotation, _, _) =
-        rotation_init(imu, input.scans, standstill.as_ref(), &options.lidar)?;
-    let lidar_rotation = lidar_rotation.map_err(|e| {
-        PoseImuError::BadInput(format!(
-            "lidar0/: hand-eye rotation initialisation failed ({e:?}): the recording needs \
-             rotation about at least two axes"
-        ))
-    })?;
-    let camera_rotation_init = camera_start.rotation_init;
-    let camera_prior = camera_start.prior;
-    let mut ekf = joint_filter::<T>(camera_start, &lidar_rotation, &options.lidar)?;
+    let JointStart {
+        mut ekf,
+        camera_prior,
+        camera_rotation_init,
+        lidar_rotation,
+    } = joint_start::<T>(input, options, &camera_input, &start, standstill.as_ref())?;
     let init_s = started.elapsed().as_secs_f64();
 
     let started = Instant::now();
@@ -195,6 +183,47 @@ pub fn calibrate<T: Scalar>(
         planes: planes.stats(),
         plane_measurements: planes.measurements,
         timing_s: timing,
+    })
+}
+
+/// The joint filter at its start and what the report says of it.
+struct JointStart<T: Scalar> {
+    ekf: JointEkf<T>,
+    camera_prior: super::pose_imu::PoseImuOptions,
+    camera_rotation_init: init::RotationInit,
+    lidar_rotation: init::RotationInit,
+}
+
+/// The camera's start (RepErrCal's, around MoCal's estimate) and the LiDAR's hand-eye
+/// rotation, in one filter.
+fn joint_start<T: Scalar>(
+    input: &JointInput<'_>,
+    options: &JointOptions,
+    camera_input: &CameraImuInput<'_>,
+    start: &Start<'_>,
+    standstill: Option<&init::Standstill>,
+) -> Result<JointStart<T>, PoseImuError> {
+    let camera_start = prior_from_motion::<T>(
+        camera_input,
+        &options.camera,
+        standstill,
+        start,
+        ExtrinsicPrior::AroundStart,
+    )?;
+    let (lidar_rotation, _, _) = rotation_init(input.imu, input.scans, standstill, &options.lidar)?;
+    let lidar_rotation = lidar_rotation.map_err(|e| {
+        PoseImuError::BadInput(format!(
+            "lidar0/: hand-eye rotation initialisation failed ({e:?}): the recording needs \
+             rotation about at least two axes"
+        ))
+    })?;
+    let camera_rotation_init = camera_start.rotation_init;
+    let camera_prior = camera_start.prior;
+    Ok(JointStart {
+        ekf: joint_filter::<T>(camera_start, &lidar_rotation, &options.lidar)?,
+        camera_prior,
+        camera_rotation_init,
+        lidar_rotation,
     })
 }
 
