@@ -196,7 +196,7 @@ fn targetless_refinement_returns_to_the_reference_on_18_of_20() {
 /// reference is 0.27 deg off in pitch by the lane markings, docs/prior_map.md). Prints the
 /// same summary; asserts only that it runs.
 #[test]
-#[ignore = "diagnostic (~20 s): cargo test --release -p msreg --test mi_targetless_real -- --ignored --nocapture"]
+#[ignore = "diagnostic (~20-50 s): cargo test --release -p msreg --test mi_targetless_real -- --ignored --nocapture"]
 fn targetless_refinement_around_the_marking_aligned_pose() {
     let Some(draws) = run_around(20, 20, Centre::MarkingAligned) else {
         eprintln!("SKIP: ../shared/data/real/calibanything-1 absent");
