@@ -9,9 +9,12 @@
 //! - [`search`]: the parallel coarse-to-fine grid, the continuous 6-DoF refinement and
 //!   the curvature sigmas with a per-DoF observability statement.
 //! - [`targetless`]: the LiDAR-camera dataset, run and overlay; [`cli`]: the command.
+//! - [`markings`]: lane-marking crossings, an independent geometric check of an extrinsic
+//!   on a road scene (used to judge the real reference).
 
 pub mod cli;
 pub mod histogram;
+pub mod markings;
 pub mod scene;
 pub mod search;
 pub mod synthetic;

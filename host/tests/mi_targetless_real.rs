@@ -8,6 +8,7 @@
 
 use msreg_host::camera_yaml::read_camera_yaml;
 use msreg_host::dataset::CalibrationResult;
+use msreg_host::mi::markings::{align_rotation, MarkingOptions};
 use msreg_host::mi::scene::{highpass, MiScene, PoseParam};
 use msreg_host::mi::targetless::{
     calibrate_targetless, ground_band, visible_points, TargetlessOptions,
@@ -53,7 +54,21 @@ fn errors(a: &Isometry3<f64>, b: &Isometry3<f64>) -> (f64, f64) {
     )
 }
 
+/// Which pose the draws perturb and are judged against.
+#[derive(Clone, Copy, PartialEq)]
+enum Centre {
+    /// The published reference.
+    Reference,
+    /// The reference with its rotation aligned to the lane markings
+    /// (`msreg_host::mi::markings`; translation unchanged).
+    MarkingAligned,
+}
+
 fn run(draws: usize, seed: u64) -> Option<Vec<Draw>> {
+    run_around(draws, seed, Centre::Reference)
+}
+
+fn run_around(draws: usize, seed: u64, centre: Centre) -> Option<Vec<Draw>> {
     let dir = dir_or_skip("real/calibanything-1")?;
     let camera = read_camera_yaml(&dir.join("cam0/camera.yaml")).expect("camera.yaml");
     let image = GrayImage::load(&dir.join("cam0/data/1700000000000000000.png")).expect("png");
@@ -63,6 +78,21 @@ fn run(draws: usize, seed: u64) -> Option<Vec<Draw>> {
         .cam0_lidar0
         .expect("cam0_lidar0")
         .transform;
+    let reference = match centre {
+        Centre::Reference => reference,
+        Centre::MarkingAligned => {
+            align_rotation(
+                &cloud,
+                &image,
+                &camera,
+                &reference,
+                &MarkingOptions::default(),
+                3,
+            )
+            .expect("marking crossings")
+            .t_cam_lidar
+        }
+    };
     let options = TargetlessOptions::default();
     // The MI of the final image level at any pose, on the points visible at the reference.
     let (p, i) = visible_points(&cloud, &camera, &reference, options.margin_px);
@@ -120,10 +150,20 @@ fn summary(draws: &[Draw]) -> usize {
         .filter(|d| d.rot_err_deg < d.start_rot_deg && d.trans_err_m < d.start_trans_m)
         .count();
     let above_ref = draws.iter().filter(|d| d.mi_end > d.mi_ref).count();
+    let rot_ok = draws.iter().filter(|d| d.rot_err_deg <= 0.3).count();
+    let trans_ok = draws.iter().filter(|d| d.trans_err_m <= 0.05).count();
+    let median = |f: fn(&Draw) -> f64| {
+        let mut v: Vec<f64> = draws.iter().map(f).collect();
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
     println!(
-        "{ok} of {} within 0.3 deg / 5 cm; {better} closer than their start in both; \
-         {above_ref} end with a higher MI than the reference",
-        draws.len()
+        "{ok} of {} within 0.3 deg / 5 cm ({rot_ok} within 0.3 deg, {trans_ok} within 5 cm; \
+         median {:.2} deg, {:.1} cm); {better} closer than their start in both; \
+         {above_ref} end with a higher MI than the centre pose",
+        draws.len(),
+        median(|d| d.rot_err_deg),
+        median(|d| d.trans_err_m) * 100.0
     );
     ok
 }
@@ -150,6 +190,20 @@ fn targetless_refinement_returns_to_the_reference_on_18_of_20() {
     };
     let ok = summary(&draws);
     assert!(ok >= 18, "only {ok} of 20 within 0.3 deg / 5 cm");
+}
+
+/// Diagnostic, not the acceptance: the same draws around the marking-aligned pose (the
+/// reference is 0.27 deg off in pitch by the lane markings, docs/prior_map.md). Prints the
+/// same summary; asserts only that it runs.
+#[test]
+#[ignore = "diagnostic (~20-50 s): cargo test --release -p msreg --test mi_targetless_real -- --ignored --nocapture"]
+fn targetless_refinement_around_the_marking_aligned_pose() {
+    let Some(draws) = run_around(20, 20, Centre::MarkingAligned) else {
+        eprintln!("SKIP: ../shared/data/real/calibanything-1 absent");
+        return;
+    };
+    summary(&draws);
+    assert!(draws.iter().all(|d| d.rot_err_deg.is_finite()));
 }
 
 #[test]

@@ -110,30 +110,36 @@ pub fn visible_points(
         .unzip()
 }
 
-/// The points within `band` (m) of the densest 0.2 m layer of LiDAR z among the lower
-/// half of the points (the road surface for a level-mounted LiDAR).
-pub fn ground_band(
-    points: &[Vector3<f64>],
-    intensities: &[f32],
-    band: f64,
-) -> (Vec<Vector3<f64>>, Vec<f32>) {
+/// Centre of the densest 0.2 m layer of z among the lower half of the points (the road
+/// surface for a level-mounted LiDAR); `None` for an empty set.
+pub fn ground_height(points: &[Vector3<f64>]) -> Option<f64> {
     let mut zs: Vec<f64> = points.iter().map(|p| p.z).collect();
     zs.sort_by(f64::total_cmp);
     let lower = &zs[..zs.len() / 2];
-    let mut best = (0, f64::NAN);
+    let mut best = (0, None);
     let mut hi = 0;
     for (lo, &z) in lower.iter().enumerate() {
         while hi < lower.len() && lower[hi] < z + 0.2 {
             hi += 1;
         }
         if hi - lo > best.0 {
-            best = (hi - lo, z + 0.1);
+            best = (hi - lo, Some(z + 0.1));
         }
     }
+    best.1
+}
+
+/// The points within `band` (m) of [`ground_height`].
+pub fn ground_band(
+    points: &[Vector3<f64>],
+    intensities: &[f32],
+    band: f64,
+) -> (Vec<Vector3<f64>>, Vec<f32>) {
+    let ground = ground_height(points).unwrap_or(f64::NAN);
     points
         .iter()
         .zip(intensities)
-        .filter(|(p, _)| (p.z - best.1).abs() < band)
+        .filter(|(p, _)| (p.z - ground).abs() < band)
         .map(|(p, v)| (*p, *v))
         .unzip()
 }
