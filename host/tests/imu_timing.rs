@@ -326,7 +326,9 @@ fn check_cell(label: &str, outcomes: &[Outcome]) -> Vec<String> {
     let nees: f64 = outcomes.iter().map(|o| o.nees).sum();
     let (lo, hi) = chi_square_band(6.0 * n);
     if !(lo..=hi).contains(&nees) {
-        failures.push(format!("{label}: NEES sum {nees:.1} outside {lo:.1}-{hi:.1}"));
+        failures.push(format!(
+            "{label}: NEES sum {nees:.1} outside {lo:.1}-{hi:.1}"
+        ));
     }
     let worst = |f: fn(&Outcome) -> f64| outcomes.iter().map(f).fold(0.0, f64::max);
     let count = |f: fn(&Outcome) -> bool| outcomes.iter().filter(|o| f(o)).count();

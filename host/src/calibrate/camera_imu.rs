@@ -29,8 +29,7 @@ use super::gyro_bias;
 use super::init;
 use super::pose_imu::{
     self, describe_moving_start, drive_imu, finish, initial_state, moving_start, with_gyro_bias,
-    with_moving_start,
-    ImuHooks, PoseImuError, PoseImuOptions, PoseImuReport, Run, Timing,
+    with_moving_start, ImuHooks, PoseImuError, PoseImuOptions, PoseImuReport, Run, Timing,
 };
 use crate::dataset::{ExtrinsicEstimate, ImuNoiseYaml, ImuRecord, PoseRecord, PoseSensorYaml};
 use crate::vision::pnp::{solve_pnp, PnpSolution};
