@@ -277,15 +277,22 @@ fn camera_imu_time_offset_is_unbiased_at_400_and_200_hz() {
 }
 
 /// Moving starts (issue 11): the pose-IMU and camera-IMU runs cut to start at peak motion
-/// (no standstill: dynamic initialisation) meet the same bounds. One seed per pipeline and
-/// rate here; `ten_seeds_moving_start` is the acceptance run.
+/// (no standstill: dynamic initialisation) meet the same bounds, with no health alarm. One
+/// seed per pipeline here, plus camera-IMU seed 2000, which diverged (first image NIS 1.4e6,
+/// rotation 12 deg off) while RepErrCal's time-offset prior was floored at 5 ms; the
+/// `ten_seeds_moving_start_*` tests are the acceptance runs.
 #[test]
 fn moving_start_at_peak_motion_is_unbiased() {
-    for pipeline in [Pipeline::PoseImu, Pipeline::CameraImu] {
-        let outcomes = run_from(pipeline, 400.0, &[5], 30.0, Start::PeakMotion);
+    for (pipeline, seeds) in [
+        (Pipeline::PoseImu, &[5][..]),
+        (Pipeline::CameraImu, &[5, 2000][..]),
+    ] {
+        let outcomes = run_from(pipeline, 400.0, seeds, 30.0, Start::PeakMotion);
         assert_unbiased(&outcomes);
         assert!(
-            outcomes.iter().all(|o| o.inside_three_sigma),
+            outcomes
+                .iter()
+                .all(|o| o.inside_three_sigma && o.alarms == 0),
             "{outcomes:?}"
         );
     }
