@@ -376,19 +376,19 @@ fn acceptance(pipeline: Pipeline, seeds: std::ops::Range<u64>, start: Start) {
 /// The acceptance run, one test per pipeline so that one failing pipeline hides no other:
 /// `cargo test --release -p msreg --test imu_timing -- --ignored --nocapture ten_seeds`.
 #[test]
-#[ignore = "acceptance run, ~3 min on 2 cores"]
+#[ignore = "acceptance run, ~15 s on 2 cores"]
 fn ten_seeds_pose_imu() {
     acceptance(Pipeline::PoseImu, 1000..1010, Start::AtRest);
 }
 
 #[test]
-#[ignore = "acceptance run, ~5 min on 2 cores"]
+#[ignore = "acceptance run, ~7 min on 2 cores"]
 fn ten_seeds_lidar_imu() {
     acceptance(Pipeline::LidarImu, 1000..1010, Start::AtRest);
 }
 
 #[test]
-#[ignore = "acceptance run, ~3 min on 2 cores"]
+#[ignore = "acceptance run, ~40 s on 2 cores"]
 fn ten_seeds_camera_imu() {
     acceptance(Pipeline::CameraImu, 1000..1010, Start::AtRest);
 }
@@ -397,13 +397,13 @@ fn ten_seeds_camera_imu() {
 /// 60 s cut at peak motion; the same checks. The LiDAR-IMU scans are not cut here (its scan
 /// source is the simulator itself).
 #[test]
-#[ignore = "acceptance run, ~3 min on 2 cores"]
+#[ignore = "acceptance run, ~10 s on 2 cores"]
 fn ten_seeds_moving_start_pose_imu() {
     acceptance(Pipeline::PoseImu, 2000..2010, Start::PeakMotion);
 }
 
 #[test]
-#[ignore = "acceptance run, ~3 min on 2 cores"]
+#[ignore = "acceptance run, ~70 s on 2 cores"]
 fn ten_seeds_moving_start_camera_imu() {
     acceptance(Pipeline::CameraImu, 2000..2010, Start::PeakMotion);
 }
