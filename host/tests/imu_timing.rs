@@ -53,6 +53,8 @@ struct Outcome {
     nees: f64,
     inside_three_sigma: bool,
     converged: bool,
+    /// Health-monitor events (alarms) raised during the run.
+    alarms: usize,
 }
 
 /// The true offset of a seed: uniform in +-20 ms, from its own stream.
@@ -65,7 +67,7 @@ fn judge<R>(
     c: &ImuExtrinsicCalibration<R>,
     truth: &Isometry3<f64>,
     true_offset_s: f64,
-    converged: bool,
+    (converged, alarms): (bool, usize),
 ) -> Outcome {
     let r = (c.t_imu_sensor.rotation.inverse() * truth.rotation).scaled_axis();
     let p = truth.translation.vector - c.t_imu_sensor.translation.vector;
@@ -88,6 +90,7 @@ fn judge<R>(
         inside_three_sigma: (0..6).all(|i| e[i].abs() <= 3.0 * c.covariance[(i, i)].sqrt())
             && offset_error.abs() <= 3.0 * c.time_offset_sigma_s,
         converged,
+        alarms,
     }
 }
 
@@ -126,9 +129,9 @@ fn pose_imu(seed: u64, rate_hz: f64, duration_s: f64, start: Start) -> Outcome {
         data.pose.retain(|p| p.stamp_ns >= cut);
     }
     let c = common::calibrate::<f64>(&data, &PoseImuOptions::default());
-    let converged = c.report.converged;
+    let status = (c.report.converged, c.report.events.len());
     let id = (Pipeline::PoseImu, rate_hz, seed);
-    judge(id, &c, &data.t_imu_pose, data.time_offset_s, converged)
+    judge(id, &c, &data.t_imu_pose, data.time_offset_s, status)
 }
 
 fn lidar_imu(seed: u64, rate_hz: f64, duration_s: f64) -> Outcome {
@@ -152,10 +155,10 @@ fn lidar_imu(seed: u64, rate_hz: f64, duration_s: f64) -> Outcome {
     };
     let c = lidar_imu::calibrate::<f64>(&input, &LidarImuOptions::default(), &mut |_| {})
         .expect("calibration runs");
-    let converged = c.report.filter.converged;
+    let status = (c.report.filter.converged, c.report.filter.events.len());
     let id = (Pipeline::LidarImu, rate_hz, seed);
     let td = sim.config.lidar.time_offset_s;
-    judge(id, &c, &sim.t_imu_lidar, td, converged)
+    judge(id, &c, &sim.t_imu_lidar, td, status)
 }
 
 fn camera_imu(seed: u64, rate_hz: f64, duration_s: f64, start: Start) -> Outcome {
@@ -182,10 +185,10 @@ fn camera_imu(seed: u64, rate_hz: f64, duration_s: f64, start: Start) -> Outcome
     };
     let c = camera_imu::calibrate::<f64>(&input, &CameraImuOptions::default(), &mut |_| {})
         .expect("calibration runs");
-    let converged = c.report.filter.converged;
+    let status = (c.report.filter.converged, c.report.filter.events.len());
     let truth = sim.t_cam_imu.inverse();
     let id = (Pipeline::CameraImu, rate_hz, seed);
-    judge(id, &c, &truth, sim.config.time_offset_s, converged)
+    judge(id, &c, &truth, sim.config.time_offset_s, status)
 }
 
 fn run(pipeline: Pipeline, rate_hz: f64, seeds: &[u64], duration_s: f64) -> Vec<Outcome> {
@@ -209,7 +212,8 @@ fn run_from(
 fn print(o: &Outcome) {
     println!(
         "{:?} {:>3} Hz seed {:3}: t_d {:+7.3} ms, error {:+.4} ms (sigma {:.4} ms), rotation \
-         {:.4} deg, translation {:.2} mm, NEES {:.2}, inside 3 sigma {}, converged {}",
+         {:.4} deg, translation {:.2} mm, NEES {:.2}, inside 3 sigma {}, converged {} (exit \
+         {}), alarms {}",
         o.pipeline,
         o.rate_hz,
         o.seed,
@@ -220,14 +224,16 @@ fn print(o: &Outcome) {
         o.translation_mm,
         o.nees,
         o.inside_three_sigma,
-        o.converged
+        o.converged,
+        u8::from(!o.converged),
+        o.alarms
     );
 }
 
 /// Every outcome converged, and its time-offset error within the bound, or within 3 sigma where the recording's information does not
 /// allow the bound (the pose-IMU odometry's drift gives sigmas of 0.13-0.23 ms on its own;
 /// a bound below the information limit is reported, not asserted, and the bias is then
-/// judged by the z-scores over seeds, `assert_time_offset_consistent`).
+/// judged by the z-scores over seeds, [`check_cell`]).
 fn assert_unbiased(outcomes: &[Outcome]) {
     for o in outcomes {
         print(o);
@@ -241,27 +247,6 @@ fn assert_unbiased(outcomes: &[Outcome]) {
             o.offset_error_ms
         );
     }
-}
-
-/// Sum over seeds of the squared time-offset z-scores inside the two-sided 95 % band of a
-/// chi-square with one DoF per seed, and the mean error (the bias a held-sample propagation
-/// gives, dt / 2, is 6-20 sigma here) below the bound.
-fn assert_time_offset_consistent(outcomes: &[Outcome]) {
-    let z2: f64 = outcomes
-        .iter()
-        .map(|o| (o.offset_error_ms / o.offset_sigma_ms).powi(2))
-        .sum();
-    let mean = outcomes.iter().map(|o| o.offset_error_ms).sum::<f64>() / outcomes.len() as f64;
-    let (lo, hi) = chi_square_band(outcomes.len() as f64);
-    println!("  time offset: mean error {mean:+.4} ms, sum of z^2 {z2:.1} (band {lo:.1}-{hi:.1})");
-    assert!(
-        z2 <= hi,
-        "time-offset errors beyond their sigmas: sum z^2 {z2}"
-    );
-    assert!(
-        mean.abs() < MAX_TIME_OFFSET_ERROR_S * 1e3,
-        "time-offset bias {mean} ms"
-    );
 }
 
 #[test]
@@ -291,87 +276,134 @@ fn camera_imu_time_offset_is_unbiased_at_400_and_200_hz() {
     }
 }
 
-/// The acceptance run: 10 seeds per pipeline and rate, 60 s recordings; NEES summed over
-/// each cell inside its two-sided 95 % chi-square band (6 DoF per seed), the time-offset
-/// z-scores likewise, and the share of seeds inside 3 sigma reported.
-#[test]
-#[ignore = "acceptance run, ~10 min on 2 cores"]
-fn ten_seeds_per_pipeline_and_rate() {
-    let seeds: Vec<u64> = (1000..1010).collect();
-    for pipeline in [Pipeline::PoseImu, Pipeline::LidarImu, Pipeline::CameraImu] {
-        for rate in [400.0, 200.0] {
-            let outcomes = run(pipeline, rate, &seeds, 60.0);
-            assert_unbiased(&outcomes);
-            assert_time_offset_consistent(&outcomes);
-            let nees: f64 = outcomes.iter().map(|o| o.nees).sum();
-            let worst = outcomes
-                .iter()
-                .map(|o| o.offset_error_ms.abs())
-                .fold(0.0, f64::max);
-            let inside = outcomes.iter().filter(|o| o.inside_three_sigma).count();
-            println!(
-                "  inside 3 sigma on every axis: {inside}/{}",
-                outcomes.len()
-            );
-            let within = outcomes
-                .iter()
-                .filter(|o| o.offset_error_ms.abs() < MAX_TIME_OFFSET_ERROR_S * 1e3)
-                .count();
-            println!(
-                "{pipeline:?} {rate} Hz: worst time offset error {worst:.4} ms ({within}/{} under \
-                 0.2 ms), NEES sum {nees:.1} (band for {} DoF: {:?})",
-                outcomes.len(),
-                6 * outcomes.len(),
-                chi_square_band(6.0 * outcomes.len() as f64)
-            );
-            let (lo, hi) = chi_square_band(6.0 * outcomes.len() as f64);
-            assert!(
-                (lo..=hi).contains(&nees),
-                "{pipeline:?} {rate} Hz: NEES sum {nees}"
-            );
-        }
-    }
-}
-
 /// Moving starts (issue 11): the pose-IMU and camera-IMU runs cut to start at peak motion
-/// (no standstill: dynamic initialisation) meet the same bounds. One seed per pipeline and
-/// rate here; `ten_seeds_moving_start` is the acceptance run.
+/// (no standstill: dynamic initialisation) meet the same bounds, with no health alarm. One
+/// seed per pipeline here, plus camera-IMU seed 2000, which diverged (first image NIS 1.4e6,
+/// rotation 12 deg off) while RepErrCal's time-offset prior was floored at 5 ms; the
+/// `ten_seeds_moving_start_*` tests are the acceptance runs.
 #[test]
 fn moving_start_at_peak_motion_is_unbiased() {
-    for pipeline in [Pipeline::PoseImu, Pipeline::CameraImu] {
-        let outcomes = run_from(pipeline, 400.0, &[5], 30.0, Start::PeakMotion);
+    for (pipeline, seeds) in [
+        (Pipeline::PoseImu, &[5][..]),
+        (Pipeline::CameraImu, &[5, 2000][..]),
+    ] {
+        let outcomes = run_from(pipeline, 400.0, seeds, 30.0, Start::PeakMotion);
         assert_unbiased(&outcomes);
         assert!(
-            outcomes.iter().all(|o| o.inside_three_sigma),
+            outcomes
+                .iter()
+                .all(|o| o.inside_three_sigma && o.alarms == 0),
             "{outcomes:?}"
         );
     }
 }
 
-/// The moving-start acceptance run: 10 seeds per pipeline (pose-IMU, camera-IMU) and rate,
-/// 60 s cut at peak motion; the same checks as [`ten_seeds_per_pipeline_and_rate`]. The
-/// LiDAR-IMU scans are not cut here (its scan source is the simulator itself).
-#[test]
-#[ignore = "acceptance run, ~6 min on 2 cores"]
-fn ten_seeds_moving_start() {
-    let seeds: Vec<u64> = (2000..2010).collect();
-    for pipeline in [Pipeline::PoseImu, Pipeline::CameraImu] {
-        for rate in [400.0, 200.0] {
-            let outcomes = run_from(pipeline, rate, &seeds, 60.0, Start::PeakMotion);
-            assert_unbiased(&outcomes);
-            assert_time_offset_consistent(&outcomes);
-            let nees: f64 = outcomes.iter().map(|o| o.nees).sum();
-            let (lo, hi) = chi_square_band(6.0 * outcomes.len() as f64);
-            let inside = outcomes.iter().filter(|o| o.inside_three_sigma).count();
-            println!(
-                "{pipeline:?} {rate} Hz moving start: NEES sum {nees:.1} (band {lo:.1}-{hi:.1}), \
-                 inside 3 sigma {inside}/{}",
-                outcomes.len()
-            );
-            assert!(
-                (lo..=hi).contains(&nees),
-                "{pipeline:?} {rate} Hz: NEES sum {nees}"
-            );
+/// The checks of one acceptance cell (one pipeline, rate and start over 10 seeds), as
+/// messages of what failed (empty: it passed), after printing every seed and the summary:
+/// every seed converged (exit 0) with no health alarm, its time-offset error within the
+/// bound (or 3 sigma, see [`assert_unbiased`]); the sum over seeds of the squared
+/// time-offset z-scores inside the two-sided 95 % band of a chi-square with one DoF per seed,
+/// and their mean error (the bias a held-sample propagation gives, dt / 2, is 6-20 sigma
+/// here) below the bound; NEES summed over the cell inside its two-sided 95 %
+/// chi-square band (6 DoF per seed). The share inside 3 sigma and the worst errors are
+/// reported.
+fn check_cell(label: &str, outcomes: &[Outcome]) -> Vec<String> {
+    for o in outcomes {
+        print(o);
+    }
+    let mut failures = Vec::new();
+    for o in outcomes {
+        let bound_ms = (MAX_TIME_OFFSET_ERROR_S * 1e3).max(3.0 * o.offset_sigma_ms);
+        if !o.converged || o.alarms > 0 || o.offset_error_ms.abs() >= bound_ms {
+            failures.push(format!("{label}: seed {}: {o:?}", o.seed));
         }
     }
+    let n = outcomes.len() as f64;
+    let z2: f64 = outcomes
+        .iter()
+        .map(|o| (o.offset_error_ms / o.offset_sigma_ms).powi(2))
+        .sum();
+    let mean = outcomes.iter().map(|o| o.offset_error_ms).sum::<f64>() / n;
+    let (_, z2_hi) = chi_square_band(n);
+    if z2 > z2_hi || mean.abs() >= MAX_TIME_OFFSET_ERROR_S * 1e3 {
+        failures.push(format!(
+            "{label}: time offset mean {mean:+.4} ms, sum z^2 {z2:.1} (at most {z2_hi:.1})"
+        ));
+    }
+    let nees: f64 = outcomes.iter().map(|o| o.nees).sum();
+    let (lo, hi) = chi_square_band(6.0 * n);
+    if !(lo..=hi).contains(&nees) {
+        failures.push(format!(
+            "{label}: NEES sum {nees:.1} outside {lo:.1}-{hi:.1}"
+        ));
+    }
+    let worst = |f: fn(&Outcome) -> f64| outcomes.iter().map(f).fold(0.0, f64::max);
+    let count = |f: fn(&Outcome) -> bool| outcomes.iter().filter(|o| f(o)).count();
+    println!(
+        "{label}: worst time offset error {:.4} ms ({}/{} under 0.2 ms; mean {mean:+.4} ms, sum \
+         z^2 {z2:.1}, at most {z2_hi:.1}), NEES sum {nees:.1} (band {lo:.1}-{hi:.1}), inside \
+         3 sigma {}/{}, worst rotation {:.4} deg, worst translation {:.2} mm, exit 0 on {}/{}, \
+         alarms {}",
+        worst(|o| o.offset_error_ms.abs()),
+        count(|o| o.offset_error_ms.abs() < MAX_TIME_OFFSET_ERROR_S * 1e3),
+        outcomes.len(),
+        count(|o| o.inside_three_sigma),
+        outcomes.len(),
+        worst(|o| o.rotation_deg),
+        worst(|o| o.translation_mm),
+        count(|o| o.converged),
+        outcomes.len(),
+        outcomes.iter().map(|o| o.alarms).sum::<usize>(),
+    );
+    failures
+}
+
+/// One pipeline's acceptance cells at 400 and 200 Hz, 10 seeds each, 60 s; both rates run
+/// and print before anything is asserted.
+fn acceptance(pipeline: Pipeline, seeds: std::ops::Range<u64>, start: Start) {
+    let seeds: Vec<u64> = seeds.collect();
+    let mut failures = Vec::new();
+    for rate in [400.0, 200.0] {
+        let outcomes = run_from(pipeline, rate, &seeds, 60.0, start);
+        failures.extend(check_cell(
+            &format!("{pipeline:?} {rate} Hz {start:?}"),
+            &outcomes,
+        ));
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// The acceptance run, one test per pipeline so that one failing pipeline hides no other:
+/// `cargo test --release -p msreg --test imu_timing -- --ignored --nocapture ten_seeds`.
+#[test]
+#[ignore = "acceptance run, ~15 s on 2 cores"]
+fn ten_seeds_pose_imu() {
+    acceptance(Pipeline::PoseImu, 1000..1010, Start::AtRest);
+}
+
+#[test]
+#[ignore = "acceptance run, ~7 min on 2 cores"]
+fn ten_seeds_lidar_imu() {
+    acceptance(Pipeline::LidarImu, 1000..1010, Start::AtRest);
+}
+
+#[test]
+#[ignore = "acceptance run, ~40 s on 2 cores"]
+fn ten_seeds_camera_imu() {
+    acceptance(Pipeline::CameraImu, 1000..1010, Start::AtRest);
+}
+
+/// The moving-start acceptance runs: 10 seeds per pipeline (pose-IMU, camera-IMU) and rate,
+/// 60 s cut at peak motion; the same checks. The LiDAR-IMU scans are not cut here (its scan
+/// source is the simulator itself).
+#[test]
+#[ignore = "acceptance run, ~10 s on 2 cores"]
+fn ten_seeds_moving_start_pose_imu() {
+    acceptance(Pipeline::PoseImu, 2000..2010, Start::PeakMotion);
+}
+
+#[test]
+#[ignore = "acceptance run, ~70 s on 2 cores"]
+fn ten_seeds_moving_start_camera_imu() {
+    acceptance(Pipeline::CameraImu, 2000..2010, Start::PeakMotion);
 }

@@ -473,7 +473,13 @@ pub(crate) fn start_filter<T: Scalar>(
         options.rotation_sigma_rad = p.rotation_sigma(options.rotation_sigma_rad);
     }
     let moving = match (standstill, init_problem.is_none()) {
-        (None, true) => moving_start(imu, odometry, &rotation_init.rotation, gyro_bias, imu_noise),
+        (None, true) => moving_start(
+            imu,
+            odometry,
+            &rotation_init.rotation,
+            (gyro_bias, 0.0),
+            imu_noise,
+        ),
         _ => Err(MovingStart::NotNeeded),
     };
     let initial = initial_state::<T>(imu, standstill, &rotation_init.rotation, &options)?;
@@ -576,12 +582,13 @@ const MOVING_START_MIN_SIGMA_TILT_RAD: f64 = 0.6 * std::f64::consts::PI / 180.0;
 
 /// The filter prior at the first IMU sample from a moving start: gravity, velocity, biases
 /// and lever arm by the dynamic initialisation (VINS-Mono-style alignment of the odometry
-/// with the pre-integrated IMU; `dynamic_init`).
+/// with the pre-integrated IMU; `dynamic_init`), given the gyro bias and the time offset
+/// `t_d` of the odometry (0 when unknown, as for pose-IMU; camera-IMU passes MoCal's).
 pub(crate) fn moving_start(
     imu: &[ImuRecord],
     odometry: &[PoseRecord],
     rotation: &nalgebra::UnitQuaternion<f64>,
-    gyro_bias: Option<&GyroBiasEstimate>,
+    (gyro_bias, time_offset_s): (Option<&GyroBiasEstimate>, f64),
     imu_noise: &ImuNoiseYaml,
 ) -> Result<FilterPrior, MovingStart> {
     let input = DynamicInitInput {
@@ -589,7 +596,7 @@ pub(crate) fn moving_start(
         poses: odometry,
         r_i_s: *rotation,
         gyro_bias: gyro_bias.map_or_else(Vector3::zeros, |g| g.bias),
-        time_offset_s: 0.0,
+        time_offset_s,
     };
     let options = DynamicInitOptions {
         accel_noise_density: imu_noise.accelerometer_noise_density,
