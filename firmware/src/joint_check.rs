@@ -7,12 +7,12 @@ use core::mem::MaybeUninit;
 use cortex_m_semihosting::hprintln;
 
 use msreg_firmware::joint::scenario::{self, JointConfig, JointScenario};
-use msreg_firmware::scenario::{Event, Scenario};
 use msreg_firmware::joint::selftest::{self, JointSetup, SensorResult};
 use msreg_firmware::joint::{
     self, JointFilter, JointReport, JOINT_COVARIANCE_BYTES, JOINT_FILTER_BYTES, JOINT_STATES,
     MSREG_JOINT_FILTER_BYTES,
 };
+use msreg_firmware::scenario::{Event, Scenario};
 use msreg_firmware::selftest::rpy_deg;
 use msreg_firmware::stack;
 

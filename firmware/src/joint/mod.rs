@@ -65,7 +65,13 @@ pub fn run(
         let outcome = selftest::feed(filter, setup, event);
         counts.record(event, &outcome);
     });
-    assess(setup, filter, counts, events.dropped() + dropped, left as u32)
+    assess(
+        setup,
+        filter,
+        counts,
+        events.dropped() + dropped,
+        left as u32,
+    )
 }
 
 /// The report at the end of a run. Out of line: the covariance copies it reads (14 KB each)

@@ -157,6 +157,8 @@ pub struct Image {
 }
 
 /// One item of the joint sequence.
+// An image (42 corners) is far larger than the rest; without a heap there is no boxing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Copy, Debug)]
 pub enum JointEvent {
     /// An IMU sample.
@@ -247,7 +249,9 @@ impl JointScenario {
             corner.point_in_target = corner_in_target(k);
             let sigma = self.config.pixel_sigma;
             let noise = Vector2::new(self.noise.gaussian(), self.noise.gaussian()) * sigma;
-            let seen = self.camera.project(&t_c_t.transform_point(&corner.point_in_target.into()).coords);
+            let seen = self
+                .camera
+                .project(&t_c_t.transform_point(&corner.point_in_target.into()).coords);
             let Some(projected) = seen else {
                 image.outside += 1;
                 continue;
@@ -315,7 +319,6 @@ impl JointScenario {
             self.dropped += 1;
         }
     }
-
 }
 
 impl Iterator for JointScenario {

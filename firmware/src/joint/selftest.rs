@@ -37,7 +37,11 @@ pub struct JointSetup {
 
 /// True `T_I_S` of sensor `s` as an estimator pose.
 pub fn truth(config: &JointConfig, s: usize) -> Pose<f32> {
-    let t = if s == CAMERA { config.t_i_c } else { config.base.t_i_s };
+    let t = if s == CAMERA {
+        config.t_i_c
+    } else {
+        config.base.t_i_s
+    };
     Pose::new(t.rotation, t.translation.vector)
 }
 
@@ -74,7 +78,11 @@ pub fn place_filter<'a>(
     let scenario = JointScenario::new(*c).ok_or(Error::InvalidConfig)?;
     let t_c_t = scenario.camera_to_board(c.camera_time_offset);
     let t_c_t = Pose::new(t_c_t.rotation, t_c_t.translation.vector);
-    let board = filter.imu().pose().compose(&prior(c, CAMERA)).compose(&t_c_t);
+    let board = filter
+        .imu()
+        .pose()
+        .compose(&prior(c, CAMERA))
+        .compose(&t_c_t);
     filter.init_frame(BOARD_FRAME, board, BOARD_SIGMA.0, BOARD_SIGMA.1)?;
     Ok(filter)
 }
@@ -257,7 +265,11 @@ pub struct JointCounts {
 
 impl JointCounts {
     /// Counts the outcome of one [`feed`].
-    pub fn record(&mut self, event: &JointEvent, outcome: &Result<Option<UpdateReport<f32>>, Error>) {
+    pub fn record(
+        &mut self,
+        event: &JointEvent,
+        outcome: &Result<Option<UpdateReport<f32>>, Error>,
+    ) {
         if let JointEvent::Image(image) = event {
             self.corners_outside += image.outside;
         }
