@@ -9,11 +9,11 @@
 #                             "firmware self-test: PASS" and exits 0
 #   tools/firmware.sh size    flash (.text+.rodata+.data), static RAM (.data+.bss+.uninit)
 #                             and the stack reservation of both the self-test and `link`,
-#                             against the 1 MiB / 192 KiB budget, with the measured peaks
+#                             against 1 MiB / 192 KiB, the peaks, size_of JointEkf<f32>
 #   tools/firmware.sh bench [OPT_LEVEL...]
 #                             instructions per IMU propagation, relative-pose and 42-corner
-#                             reprojection update (SysTick under -icount shift=0), one row per opt-level
-#                             (default: the release profile's level, then "s"), then
+#                             reprojection update, and of JointEkf<f32> (SysTick, -icount shift=0)
+#                             per opt-level (default: the profile's level, then "s"), then
 #                             the budget on a 168 MHz Cortex-M4F next to PX4's EKF2
 #                             (from the first opt-level's counts; BENCH_CPI_LOW/HIGH)
 #
