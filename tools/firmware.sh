@@ -9,11 +9,11 @@
 #                             "firmware self-test: PASS" and exits 0
 #   tools/firmware.sh size    flash (.text+.rodata+.data), static RAM (.data+.bss+.uninit)
 #                             and the stack reservation of both the self-test and `link`,
-#                             against the 1 MiB / 192 KiB budget, with the measured peaks
+#                             against 1 MiB / 192 KiB, the peaks, size_of JointEkf<f32>
 #   tools/firmware.sh bench [OPT_LEVEL...]
 #                             instructions per IMU propagation, relative-pose and 42-corner
-#                             reprojection update (SysTick under -icount shift=0), one row per opt-level
-#                             (default: the release profile's level, then "s"), then
+#                             reprojection update, and of JointEkf<f32> (SysTick, -icount shift=0)
+#                             per opt-level (default: the profile's level, then "s"), then
 #                             the budget on a 168 MHz Cortex-M4F next to PX4's EKF2
 #                             (from the first opt-level's counts; BENCH_CPI_LOW/HIGH)
 #
@@ -113,6 +113,23 @@ symbol() {
   echo $((16#$hex))
 }
 
+# read_u32 ELF SYMBOL: the little-endian u32 stored at a symbol (from the file offset of
+# the section that holds it).
+read_u32() {
+  local elf=$1 addr name sec_addr sec_off sec_size
+  addr=$(symbol "$elf" "$2")
+  while read -r name sec_addr sec_off sec_size; do
+    sec_addr=$((16#$sec_addr)) sec_off=$((16#$sec_off)) sec_size=$((16#$sec_size))
+    if ((addr >= sec_addr && addr + 4 <= sec_addr + sec_size)); then
+      od -An -t u4 -j $((sec_off + addr - sec_addr)) -N 4 "$elf" | tr -d ' '
+      return
+    fi
+  done < <(readelf -SW "$elf" | sed 's/^ *\[ *[0-9]*\]//' |
+    awk '$1 ~ /^\./ && $2 == "PROGBITS" { print $1, $3, $4, $5 }')
+  echo "firmware.sh: symbol $2 is in no PROGBITS section of $elf" >&2
+  exit 1
+}
+
 cmd_size() {
   build
   local name
@@ -120,6 +137,12 @@ cmd_size() {
     size_of "$name"
     echo
   done
+  local joint_bytes
+  joint_bytes=$(read_u32 "$out_dir/msreg-firmware" MSREG_JOINT_FILTER_BYTES)
+  echo "joint layout: JointEkf<f32> (Ekf<f32, 2, 4, 59, 1>) = $joint_bytes B," \
+    "core::mem::size_of read from the self-test binary (symbol MSREG_JOINT_FILTER_BYTES);" \
+    "the self-test keeps one in .bss"
+  echo
   local log="$fw/target/selftest.log"
   if [[ -f "$log" ]] && grep -q '^stack:' "$log"; then
     echo "msreg-firmware peak stack measured by the last 'run': $(grep '^stack:' "$log")"
@@ -178,6 +201,7 @@ budget_table() {
     $1 == "BENCH" { mean[$2] = $4 }
     $1 == "RATE" { rate = $2 }
     $1 == "STATES" { states = $2 }
+    $1 == "STATES_JOINT" { states_joint = $2 }
     function us(instr, cpi) { return instr * cpi / hz * 1e6 }
     function row(what, instr, per_s, n) {
       if (per_s > 0)
@@ -195,6 +219,17 @@ budget_table() {
       row("msreg `CameraImuEkf<f32>`: reprojection update (42 corners fused one by one, 84-dof)", mean["reprojection"], 20, 28)
       printf "| **msreg: 400 Hz IMU + 10 Hz relative poses, total** | %d | %.1f M / s | | | **%.1f-%.1f %%** |\n",
         states, rate / 1e6, rate * lo / hz * 100, rate * hi / hz * 100
+      js = states_joint
+      row("msreg `JointEkf<f32>` (joint layout): IMU propagation", mean["joint_propagate"], 400, js)
+      row("msreg joint: LiDAR relative-pose update (6-dof)", mean["joint_update"], 10, js)
+      row("msreg joint: camera image, 42 corners (84-dof)", mean["joint_image"], 20, js)
+      row("msreg joint: LiDAR board plane (3-dof)", mean["joint_plane"], 10, js)
+      core = 400 * mean["joint_propagate"] + 10 * mean["joint_update"] + 20 * mean["joint_image"]
+      printf "| **msreg joint: 400 Hz IMU + 10 Hz LiDAR relative pose + 20 Hz camera (42 corners)** | %d | %.1f M / s | | | **%.1f-%.1f %%** (target < 50 %% at CPI 1.5) |\n",
+        js, core / 1e6, core * lo / hz * 100, core * hi / hz * 100
+      all = core + 10 * mean["joint_plane"]
+      printf "| **msreg joint: the same + 10 Hz board planes** | %d | %.1f M / s | | | **%.1f-%.1f %%** |\n",
+        js, all / 1e6, all * lo / hz * 100, all * hi / hz * 100
       printf "| PX4 EKF2: one fusion (quoted, STM32F4 at 168 MHz) | 24 | %d-%d cycles | %d-%d | 10 | %.2f-%.2f %% (fusions only) |\n",
         e_lo * hz / 1e6, e_hi * hz / 1e6, e_lo, e_hi, 10 * e_lo / 1e4, 10 * e_hi / 1e4
     }' "$1"
@@ -204,7 +239,7 @@ budget_table() {
 cmd_bench() {
   local levels=("$@")
   ((${#levels[@]} > 0)) || levels=("$(profile_opt_level)" s)
-  local rows=() opt log flash
+  local rows=() joint_rows=() opt log flash
   for opt in "${levels[@]}"; do
     echo "bench: building with opt-level=$opt" >&2
     build "$opt" >&2
@@ -227,6 +262,17 @@ cmd_bench() {
           mean["propagate"], max["propagate"], mean["update"], max["update"],
           mean["zero_velocity"], rate / 1e6, stack["propagate"], stack["update"]
       }' "$log")")
+    joint_rows+=("$(awk -v opt="$opt" -v hz="$mcu_hz" -v hi="$cpi_high" '
+      $1 == "BENCH" { mean[$2] = $4; max[$2] = $5 }
+      $1 == "STACK" { stack[$2] = $3 }
+      END {
+        core = 400 * mean["joint_propagate"] + 10 * mean["joint_update"] + 20 * mean["joint_image"]
+        printf "| %s | %d | %d (max %d) | %d (max %d) | %d (max %d) | %.1f | %.1f %% | %d / %d / %d |", opt,
+          mean["joint_propagate"], mean["joint_update"], max["joint_update"],
+          mean["joint_image"], max["joint_image"], mean["joint_plane"], max["joint_plane"],
+          core / 1e6, core * hi / hz * 100, stack["joint_update"], stack["joint_image"],
+          stack["joint_plane"]
+      }' "$log")")
     echo "bench: opt-level=$opt done ($log)" >&2
   done
   echo
@@ -236,6 +282,13 @@ cmd_bench() {
   echo "| opt-level | flash (B) | instr / IMU propagation | instr / relative-pose update | instr / zero-velocity update | M instr / s of data (400 Hz IMU + 10 Hz poses) | stack propagate / update (B) |"
   echo "|---|---|---|---|---|---|---|"
   printf '%s\n' "${rows[@]}"
+  echo
+  echo "Joint layout \`JointEkf<f32>\` (59 error states) over the joint self-test sequence (3 s: 400 Hz"
+  echo "IMU, 10 Hz LiDAR relative poses and board planes, 20 Hz images of 42 corners); per call, mean:"
+  echo
+  echo "| opt-level | instr / IMU propagation | instr / LiDAR relative-pose update | instr / 42-corner image | instr / board plane | M instr / s (400 Hz IMU + 10 Hz LiDAR + 20 Hz camera) | of a 168 MHz M4F at CPI $cpi_high | stack relative pose / image / plane (B) |"
+  echo "|---|---|---|---|---|---|---|---|"
+  printf '%s\n' "${joint_rows[@]}"
   echo
   echo "Budget on a 168 MHz Cortex-M4F (instructions x CPI / 168 MHz; opt-level ${levels[0]}),"
   echo "with PX4's EKF2 for comparison:"

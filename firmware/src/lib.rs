@@ -3,8 +3,8 @@
 //!
 //! The library holds what the binaries share: the embedded sensor sequence (an analytic
 //! trajectory sampled in `f32`, [`scenario`]), the self-test that runs the filter over it
-//! ([`selftest`]), the measuring tools (stack painting, SysTick instruction clock), and the
-//! serial link: the CMSDK UART driver ([`uart`], [`ring`]) and the protocol session
+//! ([`selftest`]), the joint layout's sequence and self-test ([`joint`]), the measuring
+//! tools (stack painting, SysTick instruction clock), and the serial link: the CMSDK UART driver ([`uart`], [`ring`]) and the protocol session
 //! ([`session`]) of the `link` binary with the filters it runs ([`filter`]).
 //! Everything is `no_std` and allocation-free.
 #![no_std]
@@ -12,6 +12,7 @@
 
 pub mod filter;
 pub mod generator_check;
+pub mod joint;
 pub mod noise;
 pub mod ring;
 pub mod scenario;

@@ -7,7 +7,10 @@ use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
 use panic_halt as _;
 
+mod joint_check;
+
 use msreg_firmware::generator_check::dead_reckon;
+use msreg_firmware::joint::scenario::JointConfig;
 use msreg_firmware::scenario::{Event, Scenario, ScenarioConfig};
 use msreg_firmware::selftest::{self, rpy_deg, Filter, SelfTestReport};
 use msreg_firmware::stack;
@@ -17,7 +20,10 @@ fn main() -> ! {
     stack::paint();
     hprintln!("msreg firmware self-test (thumbv7em-none-eabihf, f32)");
     let config = ScenarioConfig::default_run();
-    let passed = check_generator(&config) && check_filter(&config) && check_stack();
+    let passed = check_generator(&config)
+        && check_filter(&config)
+        && joint_check::run(&JointConfig::default_run())
+        && check_stack();
     if passed {
         hprintln!("firmware self-test: PASS");
         debug::exit(debug::EXIT_SUCCESS);

@@ -2,14 +2,14 @@
 //! extrinsic prior, with checks that the estimate moves toward the truth and that the filter
 //! stays healthy (finite state, symmetric covariance with a positive diagonal).
 
-use msreg_estimator::na::{UnitQuaternion, Vector3};
+use msreg_estimator::na::{SMatrix, UnitQuaternion, Vector3};
 use msreg_estimator::state::imu;
 use msreg_estimator::{
     Error, FilterConfig, ImuNoise, ImuSample, InitialState, Layout, Pose, PoseImuEkf, RelativePose,
     UpdateReport,
 };
 
-use crate::scenario::{Event, ImuReading, ScenarioConfig, SensorSpec};
+use crate::scenario::{Event, ImuReading, PoseIncrement, ScenarioConfig, SensorSpec};
 
 /// The filter the firmware runs: one pose sensor, f32.
 pub type Filter = PoseImuEkf<f32>;
@@ -52,6 +52,28 @@ pub fn new_filter(config: &ScenarioConfig, first: &ImuReading) -> Result<Filter,
     Filter::new(&filter_config, &init)
 }
 
+/// An IMU reading of the sequence as the estimator's sample.
+pub fn imu_sample(m: &ImuReading) -> ImuSample<f32> {
+    ImuSample {
+        stamp_ns: m.stamp_ns,
+        gyro: m.gyro,
+        accel: m.accel,
+    }
+}
+
+/// An odometry increment of the sequence as the estimator's measurement, with the noise
+/// the sensors are simulated with.
+pub fn relative_pose(inc: &PoseIncrement, spec: &SensorSpec) -> RelativePose<f32> {
+    let delta = Pose::new(inc.delta.rotation, inc.delta.translation.vector);
+    RelativePose::with_sigmas(
+        inc.stamp_from_ns,
+        inc.stamp_to_ns,
+        delta,
+        spec.rotation_sigma,
+        spec.translation_sigma,
+    )
+}
+
 /// Feeds one event to the filter. Returns the update report for increments.
 pub fn feed(
     filter: &mut Filter,
@@ -59,26 +81,11 @@ pub fn feed(
     event: &Event,
 ) -> Result<Option<UpdateReport<f32>>, Error> {
     match event {
-        Event::Imu(m) => {
-            let sample = ImuSample {
-                stamp_ns: m.stamp_ns,
-                gyro: m.gyro,
-                accel: m.accel,
-            };
-            filter.propagate(&sample).map(|()| None)
-        }
+        Event::Imu(m) => filter.propagate(&imu_sample(m)).map(|()| None),
         Event::Anchor { stamp_ns } => filter.anchor(SENSOR, *stamp_ns).map(|()| None),
-        Event::Increment(inc) => {
-            let delta = Pose::new(inc.delta.rotation, inc.delta.translation.vector);
-            let meas = RelativePose::with_sigmas(
-                inc.stamp_from_ns,
-                inc.stamp_to_ns,
-                delta,
-                spec.rotation_sigma,
-                spec.translation_sigma,
-            );
-            filter.update_relative_pose(SENSOR, &meas).map(Some)
-        }
+        Event::Increment(inc) => filter
+            .update_relative_pose(SENSOR, &relative_pose(inc, spec))
+            .map(Some),
     }
 }
 
@@ -155,20 +162,27 @@ impl CovarianceCheck {
     /// fixed (the time offset here) have zero rows, so the diagonal must be positive on the
     /// IMU and extrinsic blocks and non-negative everywhere.
     pub fn of(filter: &Filter) -> Self {
-        let p = filter.covariance();
-        let n = p.nrows();
+        let extrinsic = Layout::<1, 2>::extrinsic(SENSOR);
+        let required = (0..imu::DIM).chain(extrinsic.idx..extrinsic.end());
+        Self::of_matrix(&filter.covariance(), required)
+    }
+
+    /// Inspects a covariance whose diagonal must be positive at the indices `required` and
+    /// non-negative everywhere.
+    pub fn of_matrix<const N: usize>(
+        p: &SMatrix<f32, N, N>,
+        required: impl Iterator<Item = usize>,
+    ) -> Self {
         let mut max_asymmetry = 0.0f32;
         let mut finite = true;
-        for i in 0..n {
-            for j in 0..n {
+        for i in 0..N {
+            for j in 0..N {
                 max_asymmetry = max_asymmetry.max((p[(i, j)] - p[(j, i)]).abs());
                 finite &= p[(i, j)].is_finite();
             }
         }
-        let extrinsic = Layout::<1, 2>::extrinsic(SENSOR);
-        let required = (0..imu::DIM).chain(extrinsic.idx..extrinsic.end());
         let min_required = required.map(|i| p[(i, i)]).fold(f32::INFINITY, f32::min);
-        let min_any = (0..n).map(|i| p[(i, i)]).fold(f32::INFINITY, f32::min);
+        let min_any = (0..N).map(|i| p[(i, i)]).fold(f32::INFINITY, f32::min);
         Self {
             max_asymmetry,
             min_diagonal: if min_any < 0.0 { min_any } else { min_required },

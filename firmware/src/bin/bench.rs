@@ -10,16 +10,20 @@
 #![no_std]
 #![no_main]
 
+use core::mem::MaybeUninit;
+
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
 use panic_halt as _;
 
-use msreg_estimator::camera::{radtan::RadTan, Camera, Distortion, Intrinsics, Projection};
 use msreg_estimator::na::{UnitQuaternion, Vector2, Vector3};
 use msreg_estimator::{
     CameraImuEkf, CornerObservation, CornerSet, FilterConfig, ImuNoise, ImuSample, InitialState,
     Pose,
 };
+use msreg_firmware::joint::scenario::{self, JointConfig, JointEvent, JointScenario};
+use msreg_firmware::joint::selftest::{JointCounts, JointSetup};
+use msreg_firmware::joint::{self, JointFilter, JOINT_STATES};
 use msreg_firmware::scenario::{Event, ImuReading, Scenario, ScenarioConfig};
 use msreg_firmware::selftest::{self, Filter, RunCounts};
 use msreg_firmware::stack;
@@ -105,24 +109,7 @@ fn bench_reprojection(clock: &InstructionClock) -> Option<Tally> {
         accel: gravity,
     })
     .ok()?;
-    let camera = Camera::new(
-        Projection::Pinhole,
-        Intrinsics {
-            fu: 458.7,
-            fv: 457.3,
-            cu: 367.2,
-            cv: 248.4,
-        },
-        Distortion::RadTan(RadTan {
-            k1: -0.283,
-            k2: 0.074,
-            p1: 2.0e-4,
-            p2: 1.8e-5,
-            k3: 0.0,
-        }),
-        (752, 480),
-    )
-    .ok()?;
+    let camera = scenario::euroc_camera()?;
     let t_c_t = Pose::new(UnitQuaternion::identity(), Vector3::new(-0.1, -0.12, 0.8));
     let t_g_c = ekf.imu().pose().compose(&ekf.extrinsic(0));
     ekf.init_frame(0, t_g_c.compose(&t_c_t), 0.05, 0.05).ok()?;
@@ -151,6 +138,105 @@ fn bench_reprojection(clock: &InstructionClock) -> Option<Tally> {
         tally.add(ticks);
     }
     Some(tally)
+}
+
+/// The joint layout over its self-test sequence: every call timed by kind, except one
+/// relative-pose, image and plane update measured for stack depth instead.
+struct JointBench {
+    propagate: Tally,
+    relative_pose: Tally,
+    image: Tally,
+    plane: Tally,
+    stack: [usize; 3],
+    ticks: u64,
+    errors: u32,
+}
+
+fn bench_joint(clock: &InstructionClock) -> Option<JointBench> {
+    let config = JointConfig::default_run();
+    let setup = JointSetup {
+        config,
+        camera: scenario::euroc_camera()?,
+    };
+    let events = JointScenario::new(config)?;
+    let Some(Event::Imu(first)) = Scenario::new(config.base).next() else {
+        return None;
+    };
+    let slot = cortex_m::singleton!(: MaybeUninit<JointFilter> = MaybeUninit::uninit())?;
+    let filter = joint::selftest::place_filter(slot, &setup, &first).ok()?;
+    let mut b = JointBench {
+        propagate: Tally::default(),
+        relative_pose: Tally::default(),
+        image: Tally::default(),
+        plane: Tally::default(),
+        stack: [0; 3],
+        ticks: 0,
+        errors: 0,
+    };
+    let mut counts = JointCounts::default();
+    let (left, dropped) = joint::selftest::drive(filter, events, |filter, event| {
+        let slot = match event {
+            JointEvent::LidarIncrement(_) => Some((0, counts.relative_poses.calls == 5)),
+            JointEvent::Image(_) => Some((1, counts.images.calls == 5)),
+            JointEvent::Plane(_) => Some((2, counts.planes.calls == 5)),
+            JointEvent::Imu(_) | JointEvent::LidarAnchor { .. } | JointEvent::BadPlane { .. } => {
+                None
+            }
+        };
+        let outcome = match slot {
+            Some((k, true)) => {
+                let (outcome, depth) =
+                    stack::depth_of(|| joint::selftest::feed(filter, &setup, event));
+                b.stack[k] = depth;
+                outcome
+            }
+            Some((_, false)) | None => {
+                let (outcome, ticks) =
+                    clock.measure(|| joint::selftest::feed(filter, &setup, event));
+                b.ticks += u64::from(ticks);
+                let tally = match event {
+                    JointEvent::Imu(_) => Some(&mut b.propagate),
+                    JointEvent::LidarIncrement(_) => Some(&mut b.relative_pose),
+                    JointEvent::Image(_) => Some(&mut b.image),
+                    JointEvent::Plane(_) => Some(&mut b.plane),
+                    JointEvent::LidarAnchor { .. } | JointEvent::BadPlane { .. } => None,
+                };
+                if let Some(t) = tally {
+                    t.add(ticks);
+                }
+                outcome
+            }
+        };
+        counts.record(event, &outcome);
+    });
+    let c = &counts;
+    b.errors = c.errors
+        + left as u32
+        + dropped
+        + [c.relative_poses, c.images, c.planes]
+            .iter()
+            .map(|t| t.calls - t.accepted)
+            .sum::<u32>();
+    Some(b)
+}
+
+fn print_joint(b: &JointBench) {
+    b.propagate.print("joint_propagate");
+    b.relative_pose.print("joint_update");
+    b.image.print("joint_image");
+    b.plane.print("joint_plane");
+    hprintln!("STACK joint_update {}", b.stack[0]);
+    hprintln!("STACK joint_image {}", b.stack[1]);
+    hprintln!("STACK joint_plane {}", b.stack[2]);
+    let seconds = JointConfig::default_run().base.duration_ns as f32 * 1e-9;
+    let rate = (b.ticks * INSTRUCTIONS_PER_TICK) as f32 / seconds;
+    hprintln!(
+        "joint total (timed calls): {:.1} M instructions/s; {} errors or rejected updates",
+        rate * 1e-6,
+        b.errors
+    );
+    hprintln!("RATE_JOINT {}", rate as u64);
+    hprintln!("STATES_JOINT {}", JOINT_STATES);
 }
 
 fn bench(clock: InstructionClock) -> bool {
@@ -256,5 +342,10 @@ fn bench(clock: InstructionClock) -> bool {
     );
     hprintln!("RATE {}", rate as u64);
     hprintln!("STATES {}", error_states(filter));
-    counts.errors == 0
+    let Some(joint) = bench_joint(&clock) else {
+        hprintln!("bench: joint layout setup failed");
+        return false;
+    };
+    print_joint(&joint);
+    counts.errors == 0 && joint.errors == 0
 }
