@@ -346,8 +346,71 @@ fn point_w(
     }
 }
 
+/// Points eliminated together: their updates of one block of the reduced system are
+/// summed in registers before the block is written (the update is memory-bound otherwise).
+const GROUP: usize = 16;
+
+/// One keyframe's `W` (keypoints of one point in one keyframe summed, which is exact) and
+/// `Z = W V^-1` for a point of the group.
+#[derive(Clone, Copy)]
+struct Entry {
+    block: usize,
+    member: usize,
+    w: Matrix6x3<f64>,
+    z: Matrix6x3<f64>,
+}
+
+/// The entries of a group of points, sorted by block, and per block `(block, first entry,
+/// mask of the members that see it)`.
+fn gather(
+    lin: &Lin,
+    p: &BaProblem<'_>,
+    s: &BaState,
+    st: &Structure,
+    group: Range<usize>,
+    lambda: f64,
+    rhs: &mut [f64],
+    out: &mut (Vec<Entry>, Vec<(usize, usize, u64)>),
+) {
+    let (entries, kfs) = out;
+    entries.clear();
+    kfs.clear();
+    let mut w = Vec::new();
+    for (member, j) in group.enumerate() {
+        let vi = damped_inverse(&lin.v[j], lambda);
+        point_w(p, s, st, j, &mut w);
+        let first = entries.len();
+        for &(block, wa) in &w {
+            let len = entries.len();
+            match entries.last_mut() {
+                Some(e) if len > first && e.block == block => e.w += wa,
+                _ => entries.push(Entry {
+                    block,
+                    member,
+                    w: wa,
+                    z: Matrix6x3::zeros(),
+                }),
+            }
+        }
+        for e in &mut entries[first..] {
+            e.z = e.w * vi;
+            let za = e.z * lin.gp[j];
+            for k in 0..6 {
+                rhs[6 * e.block + k] += za[k];
+            }
+        }
+    }
+    entries.sort_by_key(|e| (e.block, e.member));
+    for (k, e) in entries.iter().enumerate() {
+        match kfs.last_mut() {
+            Some(last) if last.0 == e.block => last.2 |= 1 << e.member,
+            _ => kfs.push((e.block, k, 1 << e.member)),
+        }
+    }
+}
+
 /// `sum_j W_j V_j^-1 W_j^T` (upper blocks) and `sum_j W_j V_j^-1 g_j` over a range of
-/// points.
+/// points, `GROUP` points at a time.
 fn schur_part(
     lin: &Lin,
     p: &BaProblem<'_>,
@@ -358,87 +421,85 @@ fn schur_part(
 ) -> (Vec<Matrix6<f64>>, Vec<f64>) {
     let mut blocks = vec![Matrix6::zeros(); st.pat.slots()];
     let mut rhs = vec![0.0; 6 * st.lay.blocks()];
-    let mut w = Vec::new();
-    for j in r {
-        let vi = damped_inverse(&lin.v[j], lambda);
-        point_w(p, s, st, j, &mut w);
-        eliminate_point(&st.pat, &w, &vi, &lin.gp[j], &mut blocks, &mut rhs);
+    let mut scratch = (Vec::new(), Vec::new());
+    let mut g0 = r.start;
+    while g0 < r.end {
+        let g1 = (g0 + GROUP).min(r.end);
+        gather(lin, p, s, st, g0..g1, lambda, &mut rhs, &mut scratch);
+        eliminate_group(&st.pat, &scratch.0, &scratch.1, &mut blocks);
+        g0 = g1;
     }
     (blocks, rhs)
 }
 
-/// Adds one point's `Z_a W_b^T` (`Z_a = W_a V^-1`, blocks `b >= a`) into `blocks` and
-/// `Z_a g_p` into `rhs`: the inner loop of the Schur complement, run with AVX2 + FMA when
-/// the CPU has them.
-fn eliminate_point(
+/// Adds a group's `sum_p Z_pa W_pb^T` into the blocks `(a, b >= a)`: the inner loop of
+/// the Schur complement, run with AVX2 + FMA when the CPU has them.
+fn eliminate_group(
     pat: &BlockPattern,
-    w: &[(usize, Matrix6x3<f64>)],
-    vi: &Matrix3<f64>,
-    gp: &Vector3<f64>,
+    entries: &[Entry],
+    kfs: &[(usize, usize, u64)],
     blocks: &mut [Matrix6<f64>],
-    rhs: &mut [f64],
 ) {
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
         // SAFETY: the CPU supports AVX2 and FMA (checked just above).
-        unsafe { eliminate_point_fma(pat, w, vi, gp, blocks, rhs) };
+        unsafe { eliminate_group_fma(pat, entries, kfs, blocks) };
         return;
     }
-    eliminate_body::<false>(pat, w, vi, gp, blocks, rhs);
+    eliminate_body::<false>(pat, entries, kfs, blocks);
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn eliminate_point_fma(
+unsafe fn eliminate_group_fma(
     pat: &BlockPattern,
-    w: &[(usize, Matrix6x3<f64>)],
-    vi: &Matrix3<f64>,
-    gp: &Vector3<f64>,
+    entries: &[Entry],
+    kfs: &[(usize, usize, u64)],
     blocks: &mut [Matrix6<f64>],
-    rhs: &mut [f64],
 ) {
-    eliminate_body::<true>(pat, w, vi, gp, blocks, rhs);
+    eliminate_body::<true>(pat, entries, kfs, blocks);
 }
 
 #[inline(always)]
 fn eliminate_body<const FMA: bool>(
     pat: &BlockPattern,
-    w: &[(usize, Matrix6x3<f64>)],
-    vi: &Matrix3<f64>,
-    gp: &Vector3<f64>,
+    entries: &[Entry],
+    kfs: &[(usize, usize, u64)],
     blocks: &mut [Matrix6<f64>],
-    rhs: &mut [f64],
 ) {
-    for (ia, &(a, wa)) in w.iter().enumerate() {
-        let z = wa * vi;
-        let za = z * gp;
-        for k in 0..6 {
-            rhs[6 * a + k] += za[k];
-        }
+    for (ia, &(a, ea, ma)) in kfs.iter().enumerate() {
         let (start, cols) = pat.row(a);
-        let zs = z.as_slice();
         let mut pos = 0;
-        for (ib, (b, wb)) in w.iter().enumerate().skip(ia) {
-            while cols[pos] as usize != *b {
-                pos += 1;
-            }
-            if *b == a && ib != ia {
-                // Two keypoints of one point in one keyframe: both cross terms.
-                let m = z * wb.transpose();
-                blocks[start + pos] += m + m.transpose();
+        for &(b, eb, mb) in &kfs[ia..] {
+            let mut both = ma & mb;
+            if both == 0 {
                 continue;
             }
-            let out = blocks[start + pos].as_mut_slice();
-            let ws = wb.as_slice();
-            for jc in 0..6 {
-                let (w0, w1, w2) = (ws[jc], ws[jc + 6], ws[jc + 12]);
-                for i in 0..6 {
-                    out[6 * jc + i] += if FMA {
-                        zs[i].mul_add(w0, zs[6 + i].mul_add(w1, zs[12 + i] * w2))
-                    } else {
-                        zs[i] * w0 + zs[6 + i] * w1 + zs[12 + i] * w2
-                    };
+            while cols[pos] as usize != b {
+                pos += 1;
+            }
+            let mut acc = [0.0f64; 36];
+            while both != 0 {
+                let bit = both & both.wrapping_neg();
+                both &= both - 1;
+                let za = entries[ea + (ma & (bit - 1)).count_ones() as usize].z;
+                let wb = entries[eb + (mb & (bit - 1)).count_ones() as usize].w;
+                let (zs, ws) = (za.as_slice(), wb.as_slice());
+                for jc in 0..6 {
+                    let (w0, w1, w2) = (ws[jc], ws[jc + 6], ws[jc + 12]);
+                    for i in 0..6 {
+                        let o = &mut acc[6 * jc + i];
+                        *o = if FMA {
+                            zs[i].mul_add(w0, zs[6 + i].mul_add(w1, zs[12 + i].mul_add(w2, *o)))
+                        } else {
+                            *o + zs[i] * w0 + zs[6 + i] * w1 + zs[12 + i] * w2
+                        };
+                    }
                 }
+            }
+            let out = blocks[start + pos].as_mut_slice();
+            for (o, v) in out.iter_mut().zip(acc) {
+                *o += v;
             }
         }
     }
