@@ -211,7 +211,7 @@ fn generate(g: &GenArgs) -> Bench {
     );
     let corners = [(-0.25, 0.25), (0.25, 0.25), (0.25, -0.25), (-0.25, -0.25)]
         .map(|(x, y)| Vector3::new(x, y, 0.0));
-    let cams: Vec<Camera<f64>> = cams_truth.iter().map(|c| c.camera.clone()).collect();
+    let cams: Vec<Camera<f64>> = cams_truth.iter().map(|c| c.camera).collect();
     let poses: Vec<Isometry3<f64>> = cams_truth.iter().map(|c| c.t_world_cam).collect();
     let markers = marker_obs(&cams, &poses, &motion, &stamps, &t_f_m, &corners, &mut rng);
     let blobs = blob_obs(&f, &truth, &poses, &mut rng);

@@ -217,12 +217,13 @@ pub(super) fn robust(r2: f64) -> (f64, f64) {
     (l.rho(r2), l.weight(r2))
 }
 
+/// Whitened, weighted residual, Jacobians w.r.t. keyframe and point, and `rho`.
+pub(super) type VoTerm = (Vector2<f64>, Matrix2x6<f64>, Matrix2x3<f64>, f64);
+/// Whitened, weighted residual, Jacobians w.r.t. keyframe and camera, and `rho`.
+pub(super) type BlobTerm = (Vector2<f64>, Matrix2x6<f64>, Matrix2x6<f64>, f64);
+
 /// Whitened, robust-weighted terms of one VO keypoint: `(r, J_kf, J_point, rho)`.
-pub(super) fn vo_term(
-    p: &BaProblem<'_>,
-    s: &BaState,
-    o: &VoObs,
-) -> Option<(Vector2<f64>, Matrix2x6<f64>, Matrix2x3<f64>, f64)> {
+pub(super) fn vo_term(p: &BaProblem<'_>, s: &BaState, o: &VoObs) -> Option<VoTerm> {
     let (px, jp, jx) = project_in(p.f, &s.kf[o.kf], &s.points[o.point])?;
     let r = (px - o.uv) / SIGMA_VO;
     let (rho, w) = robust(r.norm_squared());
@@ -231,11 +232,7 @@ pub(super) fn vo_term(
 }
 
 /// Whitened, robust-weighted terms of one blob: `(r, J_kf, J_cam, rho)`.
-pub(super) fn blob_term(
-    p: &BaProblem<'_>,
-    s: &BaState,
-    b: &BlobObs,
-) -> Option<(Vector2<f64>, Matrix2x6<f64>, Matrix2x6<f64>, f64)> {
+pub(super) fn blob_term(p: &BaProblem<'_>, s: &BaState, b: &BlobObs) -> Option<BlobTerm> {
     let (px, jp, jx) = project_in(p.f, &s.kf[b.kf], &s.cams[b.cam].translation.vector)?;
     let r = (px - b.uv) / SIGMA_BLOB;
     let (rho, w) = robust(r.norm_squared());

@@ -362,6 +362,7 @@ struct Entry {
 
 /// The entries of a group of points, sorted by block, and per block `(block, first entry,
 /// mask of the members that see it)`.
+#[allow(clippy::too_many_arguments)]
 fn gather(
     lin: &Lin,
     p: &BaProblem<'_>,
