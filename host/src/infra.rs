@@ -7,6 +7,8 @@
 
 pub mod align;
 pub mod ba;
+pub mod ba_solver;
+pub mod blocksym;
 pub mod cli;
 pub mod colmap;
 pub mod dataset;

@@ -14,16 +14,14 @@
 //!   cameras within 10 ms (eq. 6.13-6.14), whitened by 0.3 px / focal length, Jacobian by
 //!   central differences.
 //!
-//! Solver: Levenberg-Marquardt; the points are eliminated by the Schur complement and the
-//! reduced system (6 per keyframe, camera and `T_F_M`) is solved by faer's dense Cholesky.
-//! Perturbations: right on rotations, additive on positions; points additive.
+//! The solver is [`super::ba_solver`]. Perturbations: right on rotations, additive on
+//! positions; points additive.
 
-use faer::linalg::solvers::Solve;
 use msreg_estimator::camera::Camera;
 use msreg_estimator::lie::skew;
 use nalgebra::{
-    DMatrix, DVector, Isometry3, Matrix2x3, Matrix2x6, Matrix3, Matrix6, Matrix6x3, Point3,
-    SMatrix, Translation3, UnitQuaternion, Vector2, Vector3,
+    Isometry3, Matrix2x3, Matrix2x6, Matrix3, Point3, SMatrix, Translation3, UnitQuaternion,
+    Vector2, Vector3,
 };
 
 use super::io::MarkerDetection;
@@ -122,12 +120,12 @@ pub struct BaState {
 }
 
 /// Nominal sigmas (px) and the Cauchy scale (whitened units).
-const SIGMA_VO: f64 = 0.5;
-const SIGMA_BLOB: f64 = 1.0;
-const SIGMA_CORNER: f64 = 0.3;
-const CAUCHY: f64 = 3.0;
+pub(super) const SIGMA_VO: f64 = 0.5;
+pub(super) const SIGMA_BLOB: f64 = 1.0;
+pub(super) const SIGMA_CORNER: f64 = 0.3;
+pub(super) const CAUCHY: f64 = 3.0;
 
-fn plus(t: &Isometry3<f64>, d: &[f64]) -> Isometry3<f64> {
+pub(super) fn plus(t: &Isometry3<f64>, d: &[f64]) -> Isometry3<f64> {
     let q = t.rotation * UnitQuaternion::from_scaled_axis(Vector3::new(d[0], d[1], d[2]));
     Isometry3::from_parts(
         Translation3::from(t.translation.vector + Vector3::new(d[3], d[4], d[5])),
@@ -214,381 +212,117 @@ pub fn marker_linearised(
     Some((pred - meas, jac))
 }
 
-/// Normal equations of one linearisation: reduced-side blocks in `u`/`g`, points apart.
-struct Normal {
-    u: DMatrix<f64>,
-    g: DVector<f64>,
-    v: Vec<Matrix3<f64>>,
-    gp: Vec<Vector3<f64>>,
-    /// Per VO observation: `W = J_pose^T w J_point` (6 x 3).
-    w: Vec<Matrix6x3<f64>>,
-    cost: f64,
-    count: usize,
-}
-
-struct Layout {
-    kfs: usize,
-    cams: usize,
-}
-
-impl Layout {
-    fn kf(&self, k: usize) -> Option<usize> {
-        (k >= 1).then(|| 6 * (k - 1))
-    }
-    fn cam(&self, c: usize) -> usize {
-        6 * (self.kfs - 1) + 6 * c
-    }
-    fn tfm(&self) -> usize {
-        6 * (self.kfs - 1) + 6 * self.cams
-    }
-    fn size(&self) -> usize {
-        self.tfm() + 6
-    }
-}
-
-/// Adds `w J_a^T J_b` and `w J_a^T r` for pose blocks at offsets `a`, `b`.
-fn add_block<const R: usize>(
-    n: &mut Normal,
-    ja: &SMatrix<f64, R, 6>,
-    a: usize,
-    jb: &SMatrix<f64, R, 6>,
-    b: usize,
-) {
-    let blk = ja.transpose() * jb;
-    let mut view = n.u.view_mut((a, b), (6, 6));
-    view += blk;
-}
-
-fn robust(r2: f64) -> (f64, f64) {
+pub(super) fn robust(r2: f64) -> (f64, f64) {
     let l = Loss::Cauchy(CAUCHY);
     (l.rho(r2), l.weight(r2))
 }
 
-fn linearise_vo(p: &BaProblem<'_>, s: &BaState, lay: &Layout, n: &mut Normal) -> bool {
-    for (o, obs) in p.vo.iter().enumerate() {
-        let Some((px, jp, jx)) = project_in(p.f, &s.kf[obs.kf], &s.points[obs.point]) else {
-            return false;
-        };
-        let r = (px - obs.uv) / SIGMA_VO;
-        let (rho, w) = robust(r.norm_squared());
-        n.cost += rho;
-        n.count += 2;
-        let (jp, jx) = (jp * (w.sqrt() / SIGMA_VO), jx * (w.sqrt() / SIGMA_VO));
-        let r = r * w.sqrt();
-        n.v[obs.point] += jx.transpose() * jx;
-        n.gp[obs.point] += jx.transpose() * r;
-        if let Some(a) = lay.kf(obs.kf) {
-            add_block(n, &jp, a, &jp, a);
-            let mut g = n.g.rows_mut(a, 6);
-            g += jp.transpose() * r;
-            n.w[o] = jp.transpose() * jx;
-        }
-    }
-    true
+/// Whitened, weighted residual, Jacobians w.r.t. keyframe and point, and `rho`.
+pub(super) type VoTerm = (Vector2<f64>, Matrix2x6<f64>, Matrix2x3<f64>, f64);
+/// Whitened, weighted residual, Jacobians w.r.t. keyframe and camera, and `rho`.
+pub(super) type BlobTerm = (Vector2<f64>, Matrix2x6<f64>, Matrix2x6<f64>, f64);
+
+/// Whitened, robust-weighted terms of one VO keypoint: `(r, J_kf, J_point, rho)`.
+pub(super) fn vo_term(p: &BaProblem<'_>, s: &BaState, o: &VoObs) -> Option<VoTerm> {
+    let (px, jp, jx) = project_in(p.f, &s.kf[o.kf], &s.points[o.point])?;
+    let r = (px - o.uv) / SIGMA_VO;
+    let (rho, w) = robust(r.norm_squared());
+    let k = w.sqrt() / SIGMA_VO;
+    Some((r * w.sqrt(), jp * k, jx * k, rho))
 }
 
-fn linearise_blobs(p: &BaProblem<'_>, s: &BaState, lay: &Layout, n: &mut Normal) {
-    for b in &p.blobs {
-        let Some((px, jp, jx)) = project_in(p.f, &s.kf[b.kf], &s.cams[b.cam].translation.vector)
-        else {
-            continue;
-        };
-        let r = (px - b.uv) / SIGMA_BLOB;
-        let (rho, w) = robust(r.norm_squared());
-        n.cost += rho;
-        n.count += 2;
-        let k = w.sqrt() / SIGMA_BLOB;
-        let jk = jp * k;
-        let mut jc = Matrix2x6::zeros();
-        jc.fixed_view_mut::<2, 3>(0, 3).copy_from(&(jx * k));
-        let r = r * w.sqrt();
-        let blocks: Vec<(Matrix2x6<f64>, usize)> = lay
-            .kf(b.kf)
-            .map(|a| (jk, a))
-            .into_iter()
-            .chain([(jc, lay.cam(b.cam))])
-            .collect();
-        accumulate(n, &blocks, &r);
-    }
+/// Whitened, robust-weighted terms of one blob: `(r, J_kf, J_cam, rho)`.
+pub(super) fn blob_term(p: &BaProblem<'_>, s: &BaState, b: &BlobObs) -> Option<BlobTerm> {
+    let (px, jp, jx) = project_in(p.f, &s.kf[b.kf], &s.cams[b.cam].translation.vector)?;
+    let r = (px - b.uv) / SIGMA_BLOB;
+    let (rho, w) = robust(r.norm_squared());
+    let k = w.sqrt() / SIGMA_BLOB;
+    let mut jc = Matrix2x6::zeros();
+    jc.fixed_view_mut::<2, 3>(0, 3).copy_from(&(jx * k));
+    Some((r * w.sqrt(), jp * k, jc, rho))
 }
 
-fn linearise_epipolar(p: &BaProblem<'_>, s: &BaState, lay: &Layout, n: &mut Normal) {
-    let h = 1e-7;
-    for o in &p.epipolar {
-        let (ta, tb) = (s.cams[o.a], s.cams[o.b]);
-        let r = epipolar(&ta, &tb, o) / o.sigma;
-        let (rho, w) = robust(r * r);
-        n.cost += rho;
-        n.count += 1;
-        let sw = w.sqrt() / o.sigma;
-        let (mut ja, mut jb) = (SMatrix::<f64, 1, 6>::zeros(), SMatrix::<f64, 1, 6>::zeros());
-        for k in 0..6 {
-            let mut d = [0.0; 6];
-            d[k] = h;
-            let up = (
-                epipolar(&plus(&ta, &d), &tb, o),
-                epipolar(&ta, &plus(&tb, &d), o),
-            );
-            d[k] = -h;
-            let dn = (
-                epipolar(&plus(&ta, &d), &tb, o),
-                epipolar(&ta, &plus(&tb, &d), o),
-            );
-            ja[k] = (up.0 - dn.0) / (2.0 * h) * sw;
-            jb[k] = (up.1 - dn.1) / (2.0 * h) * sw;
-        }
-        let blocks = [(ja, lay.cam(o.a)), (jb, lay.cam(o.b))];
-        accumulate(n, &blocks, &SMatrix::<f64, 1, 1>::new(r * w.sqrt()));
-    }
-}
-
-fn accumulate<const R: usize>(
-    n: &mut Normal,
-    blocks: &[(SMatrix<f64, R, 6>, usize)],
-    r: &SMatrix<f64, R, 1>,
-) {
-    for (ja, a) in blocks {
-        for (jb, b) in blocks {
-            add_block(n, ja, *a, jb, *b);
-        }
-        let mut g = n.g.rows_mut(*a, 6);
-        g += ja.transpose() * r;
-    }
-}
-
-fn linearise_markers(p: &BaProblem<'_>, s: &BaState, lay: &Layout, n: &mut Normal) -> bool {
-    for m in &p.markers {
-        let Some((r, j)) = marker_linearised(p, s, m) else {
-            return false;
-        };
-        let r = r / SIGMA_CORNER;
-        for k in 0..4 {
-            let rk = Vector2::new(r[2 * k], r[2 * k + 1]);
-            let (rho, w) = robust(rk.norm_squared());
-            n.cost += rho;
-            n.count += 2;
-            let sw = w.sqrt() / SIGMA_CORNER;
-            let jk: SMatrix<f64, 2, 24> = j.fixed_rows::<2>(2 * k) * sw;
-            let mut blocks: Vec<(Matrix2x6<f64>, usize)> = Vec::with_capacity(4);
-            let slots = [
-                lay.kf(m.i),
-                if m.i == m.j { None } else { lay.kf(m.j) },
-                Some(lay.tfm()),
-                Some(lay.cam(m.cam)),
-            ];
-            for (b, off) in slots.iter().enumerate() {
-                if let Some(off) = off {
-                    blocks.push((jk.fixed_columns::<6>(6 * b).into_owned(), *off));
-                }
-            }
-            accumulate(n, &blocks, &(rk * w.sqrt()));
-        }
-    }
-    true
-}
-
-fn linearise(p: &BaProblem<'_>, s: &BaState, lay: &Layout) -> Option<Normal> {
-    let dim = lay.size();
-    let mut n = Normal {
-        u: DMatrix::zeros(dim, dim),
-        g: DVector::zeros(dim),
-        v: vec![Matrix3::zeros(); s.points.len()],
-        gp: vec![Vector3::zeros(); s.points.len()],
-        w: vec![Matrix6x3::zeros(); p.vo.len()],
-        cost: 0.0,
-        count: 0,
-    };
-    if !linearise_vo(p, s, lay, &mut n) || !linearise_markers(p, s, lay, &mut n) {
-        return None;
-    }
-    linearise_blobs(p, s, lay, &mut n);
-    linearise_epipolar(p, s, lay, &mut n);
-    Some(n)
-}
-
-/// Solution of the bundle adjustment.
-#[derive(Clone, Debug)]
-pub struct BaSolution {
-    /// The state at the minimum.
-    pub state: BaState,
-    /// Covariance of each camera's `[theta, p]` (right perturbation of `T_vo_C`).
-    pub camera_covariances: Vec<Matrix6<f64>>,
-    /// Robust cost at the start and the end (whitened units).
-    pub initial_cost: f64,
-    /// See `initial_cost`.
-    pub final_cost: f64,
-    /// Accepted + rejected iterations.
-    pub iterations: usize,
-    /// Variance factor (robust cost, i.e. whitened chi-square, per degree of freedom)
-    /// applied to the covariances.
-    pub variance_factor: f64,
-}
-
-fn to_faer(m: &DMatrix<f64>) -> faer::Mat<f64> {
-    faer::Mat::from_fn(m.nrows(), m.ncols(), |i, j| m[(i, j)])
-}
-
-/// Reduced system `S`, right-hand side, and the damped point blocks' inverses.
-fn schur(
-    n: &Normal,
-    p: &BaProblem<'_>,
-    lay: &Layout,
-    by_point: &[Vec<usize>],
-    lambda: f64,
-) -> (DMatrix<f64>, DVector<f64>, Vec<Matrix3<f64>>) {
-    let mut s = n.u.clone();
-    for k in 0..s.nrows() {
-        s[(k, k)] += lambda * n.u[(k, k)].max(1e-9);
-    }
-    let mut rhs = n.g.clone();
-    let mut vinv = Vec::with_capacity(n.v.len());
-    for (j, obs) in by_point.iter().enumerate() {
-        let mut v = n.v[j];
-        for k in 0..3 {
-            v[(k, k)] += lambda * v[(k, k)].max(1e-9) + 1e-12;
-        }
-        let vi = v.try_inverse().unwrap_or_else(Matrix3::zeros);
-        vinv.push(vi);
-        for &a in obs {
-            let Some(ka) = lay.kf(p.vo[a].kf) else {
-                continue;
-            };
-            let wa = n.w[a] * vi;
-            let mut r = rhs.rows_mut(ka, 6);
-            r -= wa * n.gp[j];
-            for &b in obs {
-                let Some(kb) = lay.kf(p.vo[b].kf) else {
-                    continue;
-                };
-                let mut view = s.view_mut((ka, kb), (6, 6));
-                view -= wa * n.w[b].transpose();
-            }
-        }
-    }
-    (s, rhs, vinv)
-}
-
-fn apply(s: &BaState, lay: &Layout, d: &DVector<f64>, dx: &[Vector3<f64>]) -> BaState {
-    let mut out = s.clone();
-    for k in 1..s.kf.len() {
-        let o = 6 * (k - 1);
-        out.kf[k] = plus(&s.kf[k], d.rows(o, 6).as_slice());
-    }
-    for c in 0..s.cams.len() {
-        out.cams[c] = plus(&s.cams[c], d.rows(lay.cam(c), 6).as_slice());
-    }
-    out.t_f_m = plus(&s.t_f_m, d.rows(lay.tfm(), 6).as_slice());
-    for (x, d) in out.points.iter_mut().zip(dx) {
-        *x += d;
-    }
-    out
-}
-
-/// One damped step: `None` when the reduced system is not positive definite.
-fn step(
-    n: &Normal,
+/// Whitened, robust-weighted terms of one marker detection (Cauchy per corner):
+/// `(r, J w.r.t. [kf_i, kf_j, T_F_M, cam], rho)`.
+pub(super) fn marker_term(
     p: &BaProblem<'_>,
     s: &BaState,
-    lay: &Layout,
-    by_point: &[Vec<usize>],
-    lambda: f64,
-) -> Option<BaState> {
-    let (sm, rhs, vinv) = schur(n, p, lay, by_point, lambda);
-    let llt = to_faer(&sm).llt(faer::Side::Lower).ok()?;
-    let b = faer::Mat::from_fn(rhs.len(), 1, |i, _| -rhs[i]);
-    let x = llt.solve(&b);
-    let d = DVector::from_fn(rhs.len(), |i, _| x[(i, 0)]);
-    if d.iter().any(|v| !v.is_finite()) {
-        return None;
-    }
-    let dx: Vec<Vector3<f64>> = by_point
-        .iter()
-        .enumerate()
-        .map(|(j, obs)| {
-            let mut acc = n.gp[j];
-            for &a in obs {
-                if let Some(ka) = lay.kf(p.vo[a].kf) {
-                    acc += n.w[a].transpose() * d.rows(ka, 6);
-                }
-            }
-            -(vinv[j] * acc)
-        })
-        .collect();
-    Some(apply(s, lay, &d, &dx))
-}
-
-/// Runs Levenberg-Marquardt from `start`.
-pub fn solve(p: &BaProblem<'_>, start: BaState, max_iterations: usize) -> Option<BaSolution> {
-    let lay = Layout {
-        kfs: start.kf.len(),
-        cams: start.cams.len(),
-    };
-    let mut by_point = vec![Vec::new(); start.points.len()];
-    for (o, obs) in p.vo.iter().enumerate() {
-        by_point[obs.point].push(o);
-    }
-    let mut s = start;
-    let mut n = linearise(p, &s, &lay)?;
-    let initial_cost = n.cost;
-    let mut lambda = 1e-4;
-    let mut iterations = 0;
-    while iterations < max_iterations {
-        iterations += 1;
-        let candidate = step(&n, p, &s, &lay, &by_point, lambda)
-            .and_then(|c| linearise(p, &c, &lay).map(|m| (c, m)));
-        match candidate {
-            Some((c, m)) if m.cost < n.cost => {
-                let done = n.cost - m.cost < 1e-7 * n.cost;
-                (s, n) = (c, m);
-                lambda = (lambda * 0.2).max(1e-10);
-                if done {
-                    break;
-                }
-            }
-            _ => {
-                lambda *= 10.0;
-                if lambda > 1e6 {
-                    break;
-                }
-            }
+    m: &MarkerObs,
+) -> Option<(SMatrix<f64, 8, 1>, SMatrix<f64, 8, 24>, f64)> {
+    let (r, mut j) = marker_linearised(p, s, m)?;
+    let mut r = r / SIGMA_CORNER;
+    let mut cost = 0.0;
+    for k in 0..4 {
+        let rk = Vector2::new(r[2 * k], r[2 * k + 1]);
+        let (rho, w) = robust(rk.norm_squared());
+        cost += rho;
+        for row in [2 * k, 2 * k + 1] {
+            r[row] *= w.sqrt();
+            let mut jr = j.row_mut(row);
+            jr *= w.sqrt() / SIGMA_CORNER;
         }
     }
-    let unknowns = lay.size() + 3 * s.points.len();
-    let variance_factor = (n.cost / n.count.saturating_sub(unknowns).max(1) as f64).max(1e-12);
-    let camera_covariances = covariances(&n, p, &lay, &by_point, variance_factor)?;
-    Some(BaSolution {
-        state: s,
-        camera_covariances,
-        initial_cost,
-        final_cost: n.cost,
-        iterations,
-        variance_factor,
-    })
+    Some((r, j, cost))
 }
 
-/// Camera blocks of the inverse reduced (undamped) system.
-fn covariances(
-    n: &Normal,
-    p: &BaProblem<'_>,
-    lay: &Layout,
-    by_point: &[Vec<usize>],
-    factor: f64,
-) -> Option<Vec<Matrix6<f64>>> {
-    let (sm, _, _) = schur(n, p, lay, by_point, 0.0);
-    let llt = to_faer(&sm).llt(faer::Side::Lower).ok()?;
-    let dim = lay.size();
-    let cols = 6 * lay.cams;
-    let e = faer::Mat::from_fn(
-        dim,
-        cols,
-        |i, j| if i == lay.cam(0) + j { 1.0 } else { 0.0 },
-    );
-    let x = llt.solve(&e);
-    Some(
-        (0..lay.cams)
-            .map(|c| Matrix6::from_fn(|i, j| x[(lay.cam(c) + i, 6 * c + j)] * factor))
-            .collect(),
-    )
+/// Whitened, robust-weighted epipolar term (eq. 6.13-6.14): `(r, J w.r.t. [cam a, cam b],
+/// rho)`, Jacobian by central differences.
+pub(super) fn epipolar_term(s: &BaState, o: &EpiObs) -> (f64, SMatrix<f64, 1, 12>, f64) {
+    let h = 1e-7;
+    let (ta, tb) = (s.cams[o.a], s.cams[o.b]);
+    let r = epipolar(&ta, &tb, o) / o.sigma;
+    let (rho, w) = robust(r * r);
+    let sw = w.sqrt() / o.sigma;
+    let mut j = SMatrix::<f64, 1, 12>::zeros();
+    for k in 0..6 {
+        let mut d = [0.0; 6];
+        d[k] = h;
+        let up = (
+            epipolar(&plus(&ta, &d), &tb, o),
+            epipolar(&ta, &plus(&tb, &d), o),
+        );
+        d[k] = -h;
+        let dn = (
+            epipolar(&plus(&ta, &d), &tb, o),
+            epipolar(&ta, &plus(&tb, &d), o),
+        );
+        j[k] = (up.0 - dn.0) / (2.0 * h) * sw;
+        j[6 + k] = (up.1 - dn.1) / (2.0 * h) * sw;
+    }
+    (r * w.sqrt(), j, rho)
+}
+
+/// The robust cost (whitened units) of `state`: the sum [`super::ba_solver::solve`]
+/// minimises; `None` when a keypoint or marker corner does not project.
+pub fn robust_cost(p: &BaProblem<'_>, s: &BaState) -> Option<f64> {
+    use rayon::prelude::*;
+    let vo: Option<f64> = p.vo.par_iter().map(|o| vo_term(p, s, o).map(|t| t.3)).sum();
+    let markers: Option<f64> = p
+        .markers
+        .par_iter()
+        .map(|m| {
+            let pred = marker_pixels(p, &s.kf[m.i], &s.kf[m.j], &s.t_f_m, &s.cams[m.cam], m)?;
+            Some(
+                (0..4)
+                    .map(|k| {
+                        let e = Vector2::new(pred[2 * k], pred[2 * k + 1]) - m.detection.corners[k];
+                        robust((e / SIGMA_CORNER).norm_squared()).0
+                    })
+                    .sum::<f64>(),
+            )
+        })
+        .sum();
+    let blobs: f64 = p
+        .blobs
+        .par_iter()
+        .filter_map(|b| blob_term(p, s, b).map(|t| t.3))
+        .sum();
+    let epi: f64 = p
+        .epipolar
+        .iter()
+        .map(|o| robust((epipolar(&s.cams[o.a], &s.cams[o.b], o) / o.sigma).powi(2)).0)
+        .sum();
+    Some(vo? + markers? + blobs + epi)
 }
 
 /// The VO-scale estimate: similarity scale from the input VO keyframe positions (VO units)

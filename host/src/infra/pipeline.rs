@@ -444,7 +444,7 @@ fn global_ba(
     poses: &[Vec<MarkerPose>],
     solved: &[Option<Isometry3<f64>>],
     blobs: &[super::io::Blob],
-) -> Option<(super::ba::BaSolution, Vec<usize>, Vec<f64>)> {
+) -> Option<(super::ba_solver::BaSolution, Vec<usize>, Vec<f64>)> {
     use super::ba::{BaProblem, BaState, BlobObs, MarkerObs, VoObs};
     let ids: Vec<usize> = (0..solved.len()).filter(|&i| solved[i].is_some()).collect();
     let s = keyframes.get(1).map_or(1.0, |k| {
@@ -512,7 +512,7 @@ fn global_ba(
         t_f_m: *t_f_m,
         points,
     };
-    let b = super::ba::solve(&problem, start, 30)?;
+    let b = super::ba_solver::solve(&problem, start, 30)?;
     let rmse = super::ba::marker_rmse(&problem, &b.state);
     Some((b, ids, rmse))
 }

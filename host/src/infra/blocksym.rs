@@ -1,0 +1,211 @@
+//! A symmetric matrix of 6 x 6 blocks with a fixed sparsity pattern (upper triangle stored)
+//! and its sparse Cholesky factorisation (faer's supernodal `LL^T`, symbolic analysis done
+//! once per pattern). The reduced camera / keyframe system of the bundle adjustment
+//! ([`super::ba`]) lives here.
+
+use faer::linalg::solvers::Solve;
+use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+use nalgebra::Matrix6;
+
+/// Collects the block pairs of a pattern (a bit per block pair).
+pub struct PatternBuilder {
+    nb: usize,
+    words: usize,
+    bits: Vec<u64>,
+}
+
+impl PatternBuilder {
+    /// An empty pattern of `nb` x `nb` blocks (the diagonal is always present).
+    pub fn new(nb: usize) -> Self {
+        let words = nb.div_ceil(64);
+        let mut b = Self {
+            nb,
+            words,
+            bits: vec![0; nb * words],
+        };
+        for k in 0..nb {
+            b.mark(k, k);
+        }
+        b
+    }
+
+    /// Marks the block pair `(a, b)` (either order).
+    pub fn mark(&mut self, a: usize, b: usize) {
+        let (r, c) = if a <= b { (a, b) } else { (b, a) };
+        self.bits[r * self.words + c / 64] |= 1 << (c % 64);
+    }
+
+    /// Marks every pair of `blocks`.
+    pub fn mark_all(&mut self, blocks: &[usize]) {
+        for (i, &a) in blocks.iter().enumerate() {
+            for &b in &blocks[i..] {
+                self.mark(a, b);
+            }
+        }
+    }
+
+    /// The pattern, with its symbolic Cholesky factorisation; `None` if faer refuses it.
+    pub fn finish(self) -> Option<BlockPattern> {
+        let mut row_ptr = vec![0usize];
+        let mut cols = Vec::new();
+        for r in 0..self.nb {
+            for w in 0..self.words {
+                let mut word = self.bits[r * self.words + w];
+                while word != 0 {
+                    let bit = word.trailing_zeros() as usize;
+                    cols.push((64 * w + bit) as u32);
+                    word &= word - 1;
+                }
+            }
+            row_ptr.push(cols.len());
+        }
+        BlockPattern::new(self.nb, row_ptr, cols)
+    }
+}
+
+/// The fixed pattern: per block row the sorted block columns `>= row`, slot numbers in
+/// row-major order, and the scalar upper-triangular CSC layout handed to faer.
+pub struct BlockPattern {
+    nb: usize,
+    row_ptr: Vec<usize>,
+    cols: Vec<u32>,
+    col_ptr: Vec<usize>,
+    row_idx: Vec<usize>,
+    /// Per CSC entry: `36 * slot + i + 6 * j` into the column-major blocks.
+    src: Vec<usize>,
+    symbolic: SymbolicLlt<usize>,
+}
+
+impl BlockPattern {
+    fn new(nb: usize, row_ptr: Vec<usize>, cols: Vec<u32>) -> Option<Self> {
+        // Transpose: per block column, the block rows above (and at) the diagonal.
+        let mut by_col: Vec<Vec<(usize, usize)>> = vec![Vec::new(); nb];
+        for r in 0..nb {
+            for s in row_ptr[r]..row_ptr[r + 1] {
+                by_col[cols[s] as usize].push((r, s));
+            }
+        }
+        let (mut col_ptr, mut row_idx, mut src) = (vec![0usize], Vec::new(), Vec::new());
+        for (c, rows) in by_col.iter().enumerate() {
+            for j in 0..6 {
+                for &(r, s) in rows {
+                    let top = if r == c { j + 1 } else { 6 };
+                    for i in 0..top {
+                        row_idx.push(6 * r + i);
+                        src.push(36 * s + i + 6 * j);
+                    }
+                }
+                col_ptr.push(row_idx.len());
+            }
+        }
+        let n = 6 * nb;
+        let sym = SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &row_idx);
+        let symbolic = SymbolicLlt::try_new(sym, faer::Side::Upper).ok()?;
+        Some(Self {
+            nb,
+            row_ptr,
+            cols,
+            col_ptr,
+            row_idx,
+            src,
+            symbolic,
+        })
+    }
+
+    /// Number of block rows.
+    pub fn blocks(&self) -> usize {
+        self.nb
+    }
+
+    /// Number of stored blocks (slots).
+    pub fn slots(&self) -> usize {
+        self.cols.len()
+    }
+
+    /// First slot of block row `r` and its sorted block columns.
+    pub fn row(&self, r: usize) -> (usize, &[u32]) {
+        (
+            self.row_ptr[r],
+            &self.cols[self.row_ptr[r]..self.row_ptr[r + 1]],
+        )
+    }
+
+    /// Slot of the block `(r, c)`, `r <= c`; `None` outside the pattern.
+    pub fn slot(&self, r: usize, c: usize) -> Option<usize> {
+        let (start, cols) = self.row(r);
+        cols.binary_search(&(c as u32)).ok().map(|k| start + k)
+    }
+
+    /// Cholesky factor of the matrix whose upper blocks are `blocks` (one per slot);
+    /// `None` when it is not positive definite.
+    pub fn factor(&self, blocks: &[Matrix6<f64>]) -> Option<Llt<usize, f64>> {
+        let vals: Vec<f64> = self
+            .src
+            .iter()
+            .map(|&k| blocks[k / 36].as_slice()[k % 36])
+            .collect();
+        let n = 6 * self.nb;
+        let sym = SymbolicSparseColMatRef::new_checked(n, n, &self.col_ptr, None, &self.row_idx);
+        let mat = SparseColMatRef::new(sym, &vals);
+        Llt::try_new_with_symbolic(self.symbolic.clone(), mat, faer::Side::Upper).ok()
+    }
+}
+
+/// Solves `L L^T x = b` for the columns of `b` (row-major `n x k` given as a faer matrix).
+pub fn solve(llt: &Llt<usize, f64>, b: &faer::Mat<f64>) -> faer::Mat<f64> {
+    llt.solve(b)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::DMatrix;
+
+    /// A random symmetric positive definite block matrix with a sparse pattern: the
+    /// factor's solution matches a dense solve.
+    #[test]
+    fn sparse_factor_solves_like_dense() {
+        let nb = 7;
+        let pairs = [(0, 3), (1, 2), (2, 6), (4, 5), (3, 6)];
+        let mut b = PatternBuilder::new(nb);
+        for &(r, c) in &pairs {
+            b.mark(c, r);
+        }
+        let pat = b.finish().expect("pattern");
+        let mut blocks = vec![Matrix6::zeros(); pat.slots()];
+        let mut dense = DMatrix::<f64>::zeros(6 * nb, 6 * nb);
+        let mut seed = 1u64;
+        let mut rnd = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64 / (1u64 << 53) as f64) - 0.5
+        };
+        for &(r, c) in &pairs {
+            let m = Matrix6::from_fn(|_, _| rnd());
+            blocks[pat.slot(r, c).expect("slot")] = m;
+            dense.view_mut((6 * r, 6 * c), (6, 6)).copy_from(&m);
+            dense
+                .view_mut((6 * c, 6 * r), (6, 6))
+                .copy_from(&m.transpose());
+        }
+        for k in 0..nb {
+            let a = Matrix6::from_fn(|_, _| rnd());
+            let d = a * a.transpose() + Matrix6::identity() * 8.0;
+            blocks[pat.slot(k, k).expect("diag")] = d;
+            dense.view_mut((6 * k, 6 * k), (6, 6)).copy_from(&d);
+        }
+        let rhs = faer::Mat::from_fn(6 * nb, 2, |i, j| (i + 3 * j) as f64 * 0.1 - 1.0);
+        let x = solve(&pat.factor(&blocks).expect("pd"), &rhs);
+        let rd = DMatrix::from_fn(6 * nb, 2, |i, j| rhs[(i, j)]);
+        let xd = dense.cholesky().expect("dense pd").solve(&rd);
+        for i in 0..6 * nb {
+            for j in 0..2 {
+                assert!((x[(i, j)] - xd[(i, j)]).abs() < 1e-9, "{i},{j}");
+            }
+        }
+        assert_eq!(pat.slot(1, 0), None);
+        assert!(pat.slot(0, 1).is_none() && pat.slot(0, 3).is_some());
+    }
+}
