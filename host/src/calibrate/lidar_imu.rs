@@ -25,8 +25,12 @@
 //!    translation) and a tight `R` lets the first updates jump along a wrong linearisation,
 //!    after which the gate rejects everything. The floor therefore starts at
 //!    `initial_*_floor` (0.2 deg / 10 mm, the pose-IMU odometry's level) and decays
-//!    exponentially to the final floor over `anneal_updates` updates: a larger `R` only
-//!    makes the filter more conservative, never inconsistent.
+//!    exponentially to the final floor over `anneal_updates` updates, and at least as fast
+//!    as the filter's largest extrinsic sigma relative to its prior (`anneal_by_sigma`):
+//!    a larger `R` only makes the filter more conservative, never inconsistent.
+//!    NDT's increments also carry a small systematic error along the time-offset direction
+//!    that no amount of data separates from `t_d`; it enters the reported time-offset sigma
+//!    as a consider parameter (`time_shift_sigma_s`).
 //! 4. Degenerate, non-converged or low-fitness matches are skipped (reported) and the
 //!    odometry chain restarts at that scan; a scan with zero points is skipped; a malformed
 //!    scan file stops the run with an error naming it.
