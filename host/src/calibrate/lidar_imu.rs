@@ -500,11 +500,20 @@ fn load(scans: &dyn ScanSource, k: usize) -> Result<Option<PointCloud>, PoseImuE
     }
 }
 
-/// The filter's largest extrinsic sigma relative to its prior, over the six axes (1 at the
-/// start, -> 0 as the extrinsic is learned; 1 when the prior is unknown).
-fn extrinsic_sigma_ratio<T: Scalar>(ekf: &PoseImuEkf<T>) -> f64 {
-    let (rotation, translation) = ekf.extrinsic_sigma(0);
-    let prior = ekf.prior_sigma(0);
+/// The filter's largest extrinsic sigma of sensor `s` relative to its prior, over the six
+/// axes (1 at the start, -> 0 as the extrinsic is learned; 1 when the prior is unknown).
+fn extrinsic_sigma_ratio<
+    T: Scalar,
+    const S: usize,
+    const C: usize,
+    const N: usize,
+    const F: usize,
+>(
+    ekf: &Ekf<T, S, C, N, F>,
+    s: usize,
+) -> f64 {
+    let (rotation, translation) = ekf.extrinsic_sigma(s);
+    let prior = ekf.prior_sigma(s);
     (0..6)
         .map(|i| {
             let sigma = if i < 3 {
@@ -981,7 +990,7 @@ impl<'a> LidarFeed<'a> {
         };
         record.fitness = Some(result.fitness);
         record.iterations = Some(result.iterations);
-        let sigma_ratio = extrinsic_sigma_ratio(ekf);
+        let sigma_ratio = extrinsic_sigma_ratio(ekf, self.sensor);
         let (covariance, ndt_share) = self.measurement_covariance(
             match self.options.ndt_covariance {
                 NdtCovariance::Hessian => &result.covariance,
