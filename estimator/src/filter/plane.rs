@@ -5,7 +5,6 @@
 use super::undo::PropagationUndo;
 use super::Ekf;
 use crate::scalar::Scalar;
-use crate::state::{imu, Layout};
 use crate::update::board_plane::{self, BoardPlane, BoardPlaneJacobians};
 use crate::update::{Measurement, SparseJacobian, UpdateKind, UpdateReport};
 use crate::Error;
@@ -75,7 +74,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     }
 
     /// The 19 non-zero columns of the plane's 3 x N Jacobian (IMU pose, extrinsic, time
-    /// offset, target pose); the time offset enters as `H_theta w + H_p v`, as for a corner.
+    /// offset, target pose), as for a corner.
     pub(super) fn board_plane_jacobian(
         &self,
         s: usize,
@@ -83,31 +82,18 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         lin: &BoardPlaneJacobians<T>,
         held_gyro: &Vector3<T>,
     ) -> SparseJacobian<T, 3, 19> {
-        let w = held_gyro - self.imu.gyro_bias;
-        let v = self.imu.velocity;
-        let mut h = SparseJacobian::zeros();
-        let blocks = [
-            (imu::ORIENTATION.idx, &lin.imu_rotation),
-            (imu::POSITION.idx, &lin.imu_position),
-            (
-                Layout::<S, C>::extrinsic_rotation(s).idx,
+        self.target_model_jacobian(
+            s,
+            f,
+            [
+                &lin.imu_rotation,
+                &lin.imu_position,
                 &lin.extrinsic_rotation,
-            ),
-            (
-                Layout::<S, C>::extrinsic_translation(s).idx,
                 &lin.extrinsic_translation,
-            ),
-            (
-                Layout::<S, C>::frame_orientation(f).idx,
                 &lin.target_rotation,
-            ),
-            (Layout::<S, C>::frame_position(f).idx, &lin.target_position),
-        ];
-        for (k, (idx, block)) in blocks.into_iter().enumerate() {
-            h.set(3 * k, idx, block);
-        }
-        let td = lin.imu_rotation * w + lin.imu_position * v;
-        h.set(18, Layout::<S, C>::time_offset(s).idx, &td);
-        h
+                &lin.target_position,
+            ],
+            held_gyro,
+        )
     }
 }

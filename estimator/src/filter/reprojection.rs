@@ -18,7 +18,7 @@ use crate::state::{imu, Layout};
 use crate::update::reprojection::{self, CornerSet};
 use crate::update::{Gain, Measurement, SparseJacobian, UpdateKind, UpdateReport};
 use crate::Error;
-use nalgebra::{Matrix2, Matrix3, Vector3};
+use nalgebra::{Matrix2, Matrix3, SMatrix, Vector3};
 
 impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> Ekf<T, S, C, N, F> {
     /// Fuses the corners of target frame `f` seen by camera sensor `s` (whose extrinsic is
@@ -145,8 +145,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     }
 
     /// The Jacobian of one corner: its 19 non-zero columns (IMU pose, extrinsic, time offset,
-    /// target pose) of the 2 x N. The time offset enters through the IMU pose at the image's
-    /// true IMU time: `d/dt_d = H_theta w + H_p v` (as the clones carry it).
+    /// target pose) of the 2 x N.
     pub(super) fn reprojection_jacobian(
         &self,
         s: usize,
@@ -154,30 +153,48 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         lin: &reprojection::ReprojectionJacobians<T>,
         held_gyro: &Vector3<T>,
     ) -> SparseJacobian<T, 2, 19> {
+        self.target_model_jacobian(
+            s,
+            f,
+            [
+                &lin.imu_rotation,
+                &lin.imu_position,
+                &lin.extrinsic_rotation,
+                &lin.extrinsic_translation,
+                &lin.target_rotation,
+                &lin.target_position,
+            ],
+            held_gyro,
+        )
+    }
+
+    /// The 19 non-zero columns of a model that sees static frame `f` through sensor `s` at
+    /// the current IMU pose (a corner, a board plane), from its blocks w.r.t. the IMU
+    /// orientation and position, the extrinsic rotation and translation, and the frame's
+    /// orientation and position. The time offset enters through the IMU pose at the
+    /// measurement's true IMU time: `d/dt_d = H_theta w + H_p v` (as the clones carry it).
+    pub(super) fn target_model_jacobian<const M: usize>(
+        &self,
+        s: usize,
+        f: usize,
+        blocks: [&SMatrix<T, M, 3>; 6],
+        held_gyro: &Vector3<T>,
+    ) -> SparseJacobian<T, M, 19> {
         let w = held_gyro - self.imu.gyro_bias;
         let v = self.imu.velocity;
-        let mut h = SparseJacobian::zeros();
-        let blocks = [
-            (imu::ORIENTATION.idx, &lin.imu_rotation),
-            (imu::POSITION.idx, &lin.imu_position),
-            (
-                Layout::<S, C>::extrinsic_rotation(s).idx,
-                &lin.extrinsic_rotation,
-            ),
-            (
-                Layout::<S, C>::extrinsic_translation(s).idx,
-                &lin.extrinsic_translation,
-            ),
-            (
-                Layout::<S, C>::frame_orientation(f).idx,
-                &lin.target_rotation,
-            ),
-            (Layout::<S, C>::frame_position(f).idx, &lin.target_position),
+        let at = [
+            imu::ORIENTATION.idx,
+            imu::POSITION.idx,
+            Layout::<S, C>::extrinsic_rotation(s).idx,
+            Layout::<S, C>::extrinsic_translation(s).idx,
+            Layout::<S, C>::frame_orientation(f).idx,
+            Layout::<S, C>::frame_position(f).idx,
         ];
-        for (k, (idx, block)) in blocks.into_iter().enumerate() {
+        let mut h = SparseJacobian::zeros();
+        for (k, (idx, block)) in at.into_iter().zip(blocks).enumerate() {
             h.set(3 * k, idx, block);
         }
-        let td = lin.imu_rotation * w + lin.imu_position * v;
+        let td = blocks[0] * w + blocks[1] * v;
         h.set(18, Layout::<S, C>::time_offset(s).idx, &td);
         h
     }
