@@ -2,7 +2,6 @@
 //! of the dataset layout or the simulator, read one at a time) and motion compensation
 //! ([`deskew`], eq. 3.18) from a buffer of the filter's IMU poses ([`PoseBuffer`]).
 
-pub mod cli;
 pub mod deskew;
 mod source;
 

@@ -89,7 +89,7 @@ enum Scenario {
     /// IMU + generic pose sensor (odometry) with drifting increments.
     PoseImu(SimulatePoseImu),
     /// IMU + spinning LiDAR (Ouster OS1-like, motion-distorted scans) in a box-world room.
-    LidarImu(msreg_host::lidar::cli::SimulateLidarImu),
+    LidarImu(msreg_host::calibrate::lidar_imu::cli::SimulateLidarImu),
     /// IMU + camera waved in front of a checkerboard (rendered images, true corners).
     CameraImu(msreg_host::sim::camera_cli::SimulateCameraImu),
     /// Static LiDAR + camera suite and a plain board at many still poses.
@@ -137,7 +137,7 @@ enum Task {
     /// Motion-based IMU to pose-sensor calibration (EKF over IMU + odometry).
     PoseImu(CalibratePoseImu),
     /// LiDAR-IMU calibration: predict, deskew, NDT, relative-pose update (EKF).
-    LidarImu(msreg_host::lidar::cli::CalibrateLidarImu),
+    LidarImu(msreg_host::calibrate::lidar_imu::cli::CalibrateLidarImu),
     /// LiDAR-camera calibration with a plain board (PBPC-Cal or PPC-Cal), judged by MLRE.
     LidarCamera(msreg_host::lidar_camera::cli::CalibrateLidarCamera),
     /// Camera-IMU calibration from checkerboard images: corner reprojection (RepErrCal) or
@@ -206,7 +206,7 @@ fn run(command: Command) -> Result<(), Failure> {
         } => calibrate_pose_imu(&args),
         Command::Simulate {
             scenario: Scenario::LidarImu(args),
-        } => Ok(msreg_host::lidar::cli::simulate(&args)?),
+        } => Ok(msreg_host::calibrate::lidar_imu::cli::simulate(&args)?),
         Command::Simulate {
             scenario: Scenario::CameraImu(args),
         } => Ok(msreg_host::sim::camera_cli::simulate(&args)?),
@@ -215,7 +215,7 @@ fn run(command: Command) -> Result<(), Failure> {
         } => Ok(msreg_host::sim::joint_cli::simulate(&args)?),
         Command::Calibrate {
             task: Task::LidarImu(args),
-        } => exit_code_of(msreg_host::lidar::cli::calibrate(&args)?),
+        } => exit_code_of(msreg_host::calibrate::lidar_imu::cli::calibrate(&args)?),
         Command::Simulate {
             scenario: Scenario::LidarCamera(args),
         } => Ok(msreg_host::lidar_camera::cli::simulate(&args)?),
@@ -334,7 +334,8 @@ fn calibrate_pose_imu(args: &CalibratePoseImu) -> Result<(), Failure> {
     eprintln!("msreg: wrote {}", args.output.display());
     warn_unobservable(&calibration.report.observability);
     if let Some(path) = &args.plot {
-        let series = msreg_host::plot::extrinsic_series(&calibration.report.history, None);
+        let series =
+            msreg_host::calibrate::convergence::extrinsic_series(&calibration.report.history, None);
         let title = format!("T_imu_pose convergence: {}", args.dataset.display());
         match msreg_host::plot::write_convergence_png(path, &title, &series, (1500, 1100)) {
             Ok(()) => eprintln!("msreg: wrote {}", path.display()),

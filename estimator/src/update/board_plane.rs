@@ -112,16 +112,24 @@ impl<T: Scalar> BoardPlane<T> {
         Ok(plane)
     }
 
-    /// The points' RMS distance from their own best-fit plane, m (an estimate of the normal
-    /// noise when the board is flat): `sqrt(lambda_3 / (K - 3))`, from the same scatter.
-    pub fn fit_rms(points: &[Vector3<T>]) -> Option<T> {
+    /// The unit normal of the fitted plane, `u_1 x u_2`.
+    pub fn normal(&self) -> Vector3<T> {
+        self.in_plane[0].cross(&self.in_plane[1])
+    }
+
+    /// The RMS distance of `points` from this plane, over `K - 3` degrees of freedom (for the
+    /// points it was fitted to: an estimate of their noise along the normal); `None` under
+    /// 4 points.
+    pub fn distance_rms(&self, points: &[Vector3<T>]) -> Option<T> {
         if points.len() < 4 {
             return None;
         }
-        let k = T::lit(points.len() as f64);
-        let (_, scatter) = centroid_and_scatter(points);
-        let smallest = scatter.symmetric_eigenvalues().min().max(T::zero());
-        Some((smallest / (k - T::lit(3.0))).sqrt())
+        let n = self.normal();
+        let sum = points.iter().fold(T::zero(), |a, p| {
+            let d = (p - self.centroid).dot(&n);
+            a + d * d
+        });
+        Some((sum / T::lit(points.len() as f64 - 3.0)).sqrt())
     }
 
     /// The whitening weights `[sqrt(K), sqrt(lambda_1), sqrt(lambda_2)]` of the three rows.
@@ -335,6 +343,10 @@ mod tests {
         let u3 = eig.eigenvectors.column(smallest).into_owned();
         let rest = eig.eigenvalues[smallest] * u3.dot(&n).powi(2);
         assert!((moments.centroid - c).norm() < 1e-12);
+        // The RMS distance is the normal's scatter over K - 3.
+        let rms = moments.distance_rms(&points).unwrap();
+        let expected = (eig.eigenvalues[smallest] / (points.len() as f64 - 3.0)).sqrt();
+        assert!((rms - expected).abs() < 1e-12, "{rms} vs {expected}");
         assert!((h.norm_squared() + rest - direct).abs() < 1e-9 * direct.max(1.0));
         // At the truth the in-plane rows vanish; the centroid row is the wobble's mean.
         let h = predict(&t_g_i, &t_i_l, &t_g_t, &moments);

@@ -409,16 +409,13 @@ fn reprojection_calibration<T: Scalar>(
     let started = Instant::now();
     let mut feed = CornerFeed::new(input, options, start, prior, 0);
     drive_imu(&mut ekf, imu, standstill.as_ref(), progress, &mut feed)?;
+    feed.skip_remaining();
     let CornerFeed {
-        mut run,
-        next,
+        run,
         reprojection,
         sample,
         ..
     } = feed;
-    for frame in &input.frames[next..] {
-        run.skip_measurement("cam0", frame.stamp_ns, "after the last IMU sample");
-    }
     progress(1.0);
     let filter_s = started.elapsed().as_secs_f64();
     let mut calibration = finish(
@@ -748,13 +745,19 @@ impl<'a, T: Scalar> CornerFeed<'a, T> {
             .then_some(frame.stamp_ns)
     }
 
-    /// The run's bookkeeping, every image not reached booked as after the last IMU sample.
-    pub(crate) fn into_run(self) -> Run {
-        let mut run = self.run;
+    /// Books every image not reached as after the last IMU sample.
+    pub(crate) fn skip_remaining(&mut self) {
         for frame in &self.frames[self.next..] {
-            run.skip_measurement("cam0", frame.stamp_ns, "after the last IMU sample");
+            self.run
+                .skip_measurement("cam0", frame.stamp_ns, "after the last IMU sample");
         }
-        run
+        self.next = self.frames.len();
+    }
+
+    /// The run's bookkeeping, every image not reached booked as after the last IMU sample.
+    pub(crate) fn into_run(mut self) -> Run {
+        self.skip_remaining();
+        self.run
     }
 
     /// Fuses the image [`CornerFeed::next_due`] found due (`index`: the IMU sample fed

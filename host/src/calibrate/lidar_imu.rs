@@ -35,6 +35,8 @@
 //!    odometry chain restarts at that scan; a scan with zero points is skipped; a malformed
 //!    scan file stops the run with an error naming it.
 
+pub mod cli;
+
 use std::time::Instant;
 
 use msreg_estimator::{Ekf, Error as FilterError, RelativePose, Scalar};
@@ -422,12 +424,7 @@ pub fn calibrate<T: Scalar>(
     let started = Instant::now();
     let mut feed = LidarFeed::new(input.scans, options, first_imu.stamp_ns, (0, false));
     drive_imu(&mut ekf, imu, standstill.as_ref(), progress, &mut feed)?;
-    if let Some(p) = feed.pending.take() {
-        feed.skip(p.index, p.stamp_ns, "after the last IMU sample");
-    }
-    for k in feed.next..input.scans.len() {
-        feed.skip(k, input.scans.stamp_ns(k), "after the last IMU sample");
-    }
+    feed.skip_remaining();
     progress(1.0);
     let filter_s = started.elapsed().as_secs_f64();
     let mut timing = feed.timing;
@@ -832,14 +829,20 @@ impl<'a> LidarFeed<'a> {
         self.buffer.push(time_ns, *after);
     }
 
-    /// The run's bookkeeping, every scan not reached booked as after the last IMU sample.
-    pub(crate) fn into_run(mut self) -> Run {
+    /// Books every scan not reached (pending or unread) as after the last IMU sample.
+    pub(crate) fn skip_remaining(&mut self) {
         if let Some(p) = self.pending.take() {
             self.skip(p.index, p.stamp_ns, "after the last IMU sample");
         }
         for k in self.next..self.scans.len() {
             self.skip(k, self.scans.stamp_ns(k), "after the last IMU sample");
         }
+        self.next = self.scans.len();
+    }
+
+    /// The run's bookkeeping, every scan not reached booked as after the last IMU sample.
+    pub(crate) fn into_run(mut self) -> Run {
+        self.skip_remaining();
         self.run
     }
 

@@ -363,7 +363,8 @@ fn write_plot(path: &Path, dataset: &Dataset, calibration: &CameraImuCalibration
                 cam0.timeshift_s,
             )
         });
-    let series = crate::plot::extrinsic_series(&calibration.report.filter.history, truth);
+    let series =
+        crate::calibrate::convergence::extrinsic_series(&calibration.report.filter.history, truth);
     let name = std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf());
     let title = format!("T_imu_cam convergence: {}", name.display());
     match crate::plot::write_convergence_png(path, &title, &series, (1500, 1100)) {

@@ -243,25 +243,24 @@ impl PlaneFeed {
     /// A plane through `points` with the points beyond 3 sigma of a first fit cut, its
     /// noise the refit's RMS (floored).
     fn fit(&self, points: &[Vector3<f64>]) -> Result<BoardPlane<f64>, String> {
-        let too_few = |_: usize| format!("fewer than {} board points", self.options.min_points);
+        let too_few = || format!("fewer than {} board points", self.options.min_points);
+        let floor = self.options.min_sigma_m;
         if points.len() < self.options.min_points {
-            return Err(too_few(points.len()));
+            return Err(too_few());
         }
-        let first = BoardPlane::from_points(0, points, 1.0).map_err(|e| e.to_string())?;
-        let normal = first.in_plane[0].cross(&first.in_plane[1]);
-        let rms = BoardPlane::fit_rms(points).unwrap_or(0.0);
-        let cut = 3.0 * rms.max(self.options.min_sigma_m);
+        let first = BoardPlane::from_points(0, points, floor).map_err(|e| e.to_string())?;
+        let (normal, rms) = (first.normal(), first.distance_rms(points).unwrap_or(0.0));
+        let cut = 3.0 * rms.max(floor);
         let kept: Vec<Vector3<f64>> = points
             .iter()
             .filter(|p| (*p - first.centroid).dot(&normal).abs() < cut)
             .copied()
             .collect();
         if kept.len() < self.options.min_points {
-            return Err(too_few(kept.len()));
+            return Err(too_few());
         }
-        let sigma = BoardPlane::fit_rms(&kept)
-            .unwrap_or(0.0)
-            .max(self.options.min_sigma_m);
-        BoardPlane::from_points(0, &kept, sigma).map_err(|e| e.to_string())
+        let mut plane = BoardPlane::from_points(0, &kept, floor).map_err(|e| e.to_string())?;
+        plane.sigma = plane.distance_rms(&kept).unwrap_or(0.0).max(floor);
+        Ok(plane)
     }
 }

@@ -140,7 +140,10 @@ pub fn calibrate(args: &CalibrateLidarImu) -> anyhow::Result<Outcome> {
         crate::report::write_report(path, &calibration.report)?;
     }
     if let Some(path) = &args.plot {
-        let series = crate::plot::extrinsic_series(&calibration.report.filter.history, None);
+        let series = crate::calibrate::convergence::extrinsic_series(
+            &calibration.report.filter.history,
+            None,
+        );
         let title = format!("T_imu_lidar convergence: {}", args.dataset.display());
         match crate::plot::write_convergence_png(path, &title, &series, (1500, 1100)) {
             Ok(()) => eprintln!("msreg: wrote {}", path.display()),
