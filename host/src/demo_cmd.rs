@@ -38,14 +38,17 @@ pub enum Pipeline {
     LidarImu,
     /// LiDAR + camera at a plain board, PBPC-Cal.
     LidarCamera,
+    /// IMU + LiDAR + camera at a checkerboard both see, one EKF with the board plane.
+    Joint,
 }
 
 impl Pipeline {
-    const ALL: [Pipeline; 4] = [
+    const ALL: [Pipeline; 5] = [
         Pipeline::PoseImu,
         Pipeline::CameraImu,
         Pipeline::LidarImu,
         Pipeline::LidarCamera,
+        Pipeline::Joint,
     ];
 
     fn name(self) -> &'static str {
@@ -54,6 +57,7 @@ impl Pipeline {
             Pipeline::CameraImu => "camera-imu",
             Pipeline::LidarImu => "lidar-imu",
             Pipeline::LidarCamera => "lidar-camera",
+            Pipeline::Joint => "joint",
         }
     }
 
@@ -74,6 +78,10 @@ impl Pipeline {
             }
             Pipeline::LidarCamera => {
                 "30 still poses of a plain 1.0 x 0.8 m board, Ouster-like LiDAR, 1280x960 camera"
+            }
+            Pipeline::Joint => {
+                "15 s hand-held at a 7x9 checkerboard on a board both sensors see, camera 20 Hz \
+                 (rendered), 32 x 512 LiDAR 10 Hz, IMU 400 Hz, time offsets 5 / -8 ms"
             }
         }
     }
@@ -101,6 +109,18 @@ impl Pipeline {
                 "3",
             ],
             Pipeline::LidarCamera => &["--lidar", "ouster"],
+            Pipeline::Joint => &[
+                "--duration",
+                "15",
+                "--rings",
+                "32",
+                "--columns",
+                "512",
+                "--camera-time-offset-ms",
+                "5",
+                "--lidar-time-offset-ms",
+                "-8",
+            ],
         }
     }
 
@@ -113,6 +133,7 @@ impl Pipeline {
                 ("--overlay", "reprojection.png"),
             ],
             Pipeline::LidarCamera => &[("--overlay", "edges.png")],
+            Pipeline::Joint => &[],
         }
     }
 }
@@ -201,7 +222,7 @@ pub fn run_demo(args: &DemoArgs) -> Result<(), Failure> {
     for p in &pipelines {
         eprintln!("msreg demo: {} ...", p.name());
         let (r, note) = demo_one(*p, args.seed, &root.join(p.name()))?;
-        rows.push_str(&r);
+        rows.push_str(&format!("{}:\n{r}", p.name()));
         notes.push(note);
     }
     println!("\n{}{rows}", eval::TABLE_HEADER);

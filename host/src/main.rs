@@ -146,6 +146,9 @@ enum Task {
     /// Static infrastructure cameras registered from a robot's VO (COLMAP model), marker
     /// detections and blobs (chapter 6).
     Infra(msreg_host::infra::cli::CalibrateInfra),
+    /// Joint LiDAR-IMU-camera calibration in one EKF (chapter 5): LiDAR relative poses,
+    /// checkerboard corners and the board plane both sensors see.
+    Joint(msreg_host::calibrate::joint::cli::CalibrateJoint),
 }
 
 #[derive(Args)]
@@ -228,6 +231,9 @@ fn run(command: Command) -> Result<(), Failure> {
         Command::Calibrate {
             task: Task::CameraImu(args),
         } => exit_code_of(msreg_host::calibrate::camera_imu::cli::run(&args)?),
+        Command::Calibrate {
+            task: Task::Joint(args),
+        } => exit_code_of(msreg_host::calibrate::joint::cli::run(&args)?),
         Command::Calibrate {
             task: Task::Infra(args),
         } => match msreg_host::infra::cli::calibrate(&args)? {

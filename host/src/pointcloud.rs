@@ -17,6 +17,7 @@
 mod error;
 mod header;
 mod lzf;
+pub mod ray_plane;
 mod read;
 mod voxel;
 mod write;

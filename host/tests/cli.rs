@@ -213,23 +213,57 @@ fn demo_prints_the_table() {
     assert!(o.status.success(), "{}", stderr(&o));
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(out.contains("inside 3 sigma"), "{out}");
-    for (section, pipeline) in [
-        ("pose0", "pose-imu"),
-        ("cam0", "camera-imu"),
-        ("lidar0", "lidar-imu"),
-        ("cam0_lidar0", "lidar-camera"),
+    // One row per section of each pipeline's result, in the demo's order.
+    let sections: Vec<&str> = out
+        .lines()
+        .filter(|l| {
+            l.split_whitespace()
+                .next()
+                .is_some_and(|s| ["pose0", "cam0", "lidar0", "cam0_lidar0"].contains(&s))
+        })
+        .inspect(|row| assert!(row.ends_with("yes"), "{row}"))
+        .filter_map(|l| l.split_whitespace().next())
+        .collect();
+    assert_eq!(
+        sections,
+        [
+            "pose0",
+            "cam0",
+            "lidar0",
+            "cam0_lidar0",
+            "cam0",
+            "lidar0",
+            "cam0_lidar0"
+        ],
+        "{out}"
+    );
+    for pipeline in [
+        "pose-imu",
+        "camera-imu",
+        "lidar-imu",
+        "lidar-camera",
+        "joint",
     ] {
-        let row = out
-            .lines()
-            .find(|l| l.split_whitespace().next() == Some(section))
-            .unwrap_or_else(|| panic!("no {section} row: {out}"));
-        assert!(row.ends_with("yes"), "{row}");
         assert!(
             out.contains(&format!("{pipeline:<13} converged")),
             "{pipeline}: {out}"
         );
         assert!(keep.join(pipeline).join("result.yaml").is_file());
     }
+    // The joint calibration needs the board's size to find it in the scans.
+    let data = keep.join("joint").join("dataset");
+    let target = data.join("target.yaml");
+    let text = std::fs::read_to_string(&target).expect("target.yaml");
+    let without_size: String = text
+        .lines()
+        .filter(|l| !l.trim_start().starts_with("width_m"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    std::fs::write(&target, without_size).expect("write target.yaml");
+    let o = msreg(&["calibrate", "joint", &data.to_string_lossy()], dir.path());
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("target.yaml"), "{}", stderr(&o));
+    assert!(stderr(&o).contains("width_m"), "{}", stderr(&o));
 }
 
 #[test]

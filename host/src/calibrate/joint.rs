@@ -14,6 +14,8 @@
 //! they come from. `T_cam_lidar` is derived with its covariance from the joint covariance,
 //! cross terms included.
 
+pub mod cli;
+mod consistency;
 mod plane;
 
 use std::time::Instant;
@@ -34,6 +36,7 @@ use crate::dataset::{ImuNoiseYaml, ImuRecord};
 use crate::lidar::ScanSource;
 use msreg_estimator::camera::Camera;
 
+pub use consistency::{chained_pairwise, LoopConsistency, PairwiseRuns};
 pub use plane::{BoardExtent, PlaneOptions, PlaneStats};
 
 /// The filter's index of the LiDAR.
@@ -271,9 +274,6 @@ fn joint_filter<T: Scalar>(
 pub fn cam_lidar<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize>(
     ekf: &Ekf<T, S, C, N, F>,
 ) -> (Isometry3<f64>, Matrix6<f64>) {
-    let t_i_c = convert::isometry(&ekf.extrinsic(CAMERA));
-    let t_i_l = convert::isometry(&ekf.extrinsic(LIDAR));
-    let t_c_l = t_i_c.inverse() * t_i_l;
     let p = ekf.covariance();
     let block = |a: usize, b: usize| {
         let (a, b) = (
@@ -282,13 +282,29 @@ pub fn cam_lidar<T: Scalar, const S: usize, const C: usize, const N: usize, cons
         );
         Matrix6::from_fn(|r, c| p[(a + r, b + c)].to_f64())
     };
-    // Joint covariance of [camera extrinsic; LiDAR extrinsic], 12 x 12, as 6 x 6 blocks.
-    let (cc, cl, ll) = (
-        block(CAMERA, CAMERA),
-        block(CAMERA, LIDAR),
-        block(LIDAR, LIDAR),
-    );
-    let (j_c, j_l) = cam_lidar_jacobians(&t_i_c, &t_c_l);
+    compose_cam_lidar(
+        (
+            &convert::isometry(&ekf.extrinsic(CAMERA)),
+            &block(CAMERA, CAMERA),
+        ),
+        (
+            &convert::isometry(&ekf.extrinsic(LIDAR)),
+            &block(LIDAR, LIDAR),
+        ),
+        &block(CAMERA, LIDAR),
+    )
+}
+
+/// `T_cam_lidar = T_imu_cam^-1 T_imu_lidar` from `(T_imu_cam, covariance)` and
+/// `(T_imu_lidar, covariance)` with their cross-covariance `cl` (zero for two independent
+/// runs), covariances `[dtheta (right); dp]`.
+pub fn compose_cam_lidar(
+    (t_i_c, cc): (&Isometry3<f64>, &Matrix6<f64>),
+    (t_i_l, ll): (&Isometry3<f64>, &Matrix6<f64>),
+    cl: &Matrix6<f64>,
+) -> (Isometry3<f64>, Matrix6<f64>) {
+    let t_c_l = t_i_c.inverse() * t_i_l;
+    let (j_c, j_l) = cam_lidar_jacobians(t_i_c, &t_c_l);
     let cov = j_c * cc * j_c.transpose()
         + j_c * cl * j_l.transpose()
         + j_l * cl.transpose() * j_c.transpose()

@@ -52,7 +52,7 @@ use super::pose_imu::{
     PoseImuOptions, PoseImuReport, Run, Timing, HAND_EYE_MIN_PAIRS,
 };
 use crate::dataset::{ImuNoiseYaml, ImuRecord};
-use crate::lidar::deskew::imu_time;
+use crate::lidar::deskew::{imu_time, DeskewedScan};
 use crate::lidar::{deskew_scan, PoseBuffer, ScanLoadError, ScanSource};
 use crate::ndt::{align, LocalMap, NdtParams, NdtResult, NdtTarget};
 use crate::pointcloud::{voxel_downsample, PointCloud};
@@ -648,7 +648,7 @@ pub(crate) struct LidarFeed<'a> {
     /// Keep every deskewed scan for [`LidarFeed::take_deskewed`] (the joint calibration's
     /// board planes).
     keep_deskewed: bool,
-    deskewed: Option<(u64, PointCloud)>,
+    deskewed: Option<(u64, DeskewedScan)>,
     run: Run,
     scans: &'a dyn ScanSource,
     options: &'a LidarImuOptions,
@@ -848,7 +848,7 @@ impl<'a> LidarFeed<'a> {
 
     /// The last processed scan, deskewed to its reference stamp (LiDAR clock), when the feed
     /// keeps them.
-    pub(crate) fn take_deskewed(&mut self) -> Option<(u64, PointCloud)> {
+    pub(crate) fn take_deskewed(&mut self) -> Option<(u64, DeskewedScan)> {
         self.deskewed.take()
     }
 
@@ -901,7 +901,7 @@ impl<'a> LidarFeed<'a> {
                 &self.buffer,
             )
         } else {
-            Some(p.cloud)
+            Some(DeskewedScan::undistorted(p.cloud))
         };
         self.timing.deskew += started.elapsed().as_secs_f64();
         let Some(deskewed) = deskewed else {
@@ -909,7 +909,7 @@ impl<'a> LidarFeed<'a> {
             return;
         };
         let started = Instant::now();
-        let filtered = voxel_downsample(&deskewed, self.options.voxel_m);
+        let filtered = voxel_downsample(&deskewed.cloud, self.options.voxel_m);
         if self.keep_deskewed {
             self.deskewed = Some((ref_stamp, deskewed));
         }

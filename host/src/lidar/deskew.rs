@@ -14,7 +14,7 @@
 
 use std::collections::VecDeque;
 
-use nalgebra::{Isometry3, Point3};
+use nalgebra::{Isometry3, Point3, Vector3};
 
 use crate::pointcloud::{Point, PointCloud};
 
@@ -91,6 +91,36 @@ pub fn imu_time(stamp_ns: u64, offset_ns: u64, td_ns: i64) -> u64 {
     t.clamp(0, i128::from(u64::MAX)) as u64
 }
 
+/// A scan moved into the LiDAR frame at its reference time, with where each firing's rays
+/// start in that frame: the LiDAR's origin at the firing time. A point is its ray's origin
+/// plus its range along the ray, so a selection made on the ray (e.g. "the ray crosses the
+/// board") is blind to the range noise, which a selection on the point's position is not.
+#[derive(Debug, Clone, Default)]
+pub struct DeskewedScan {
+    /// The points in the reference frame.
+    pub cloud: PointCloud,
+    /// `(firing offset ns, ray origin)`, sorted by offset; empty when not deskewed.
+    firing_origins: Vec<(u32, Vector3<f64>)>,
+}
+
+impl DeskewedScan {
+    /// A scan left as it is (no motion compensation): every ray starts at the origin.
+    pub fn undistorted(cloud: PointCloud) -> Self {
+        Self {
+            cloud,
+            firing_origins: Vec::new(),
+        }
+    }
+
+    /// The origin, in the reference frame, of the rays fired at offset `t_ns` (the frame's
+    /// origin for a scan left as it is or an offset the scan does not have).
+    pub fn ray_origin(&self, t_ns: u32) -> Vector3<f64> {
+        self.firing_origins
+            .binary_search_by_key(&t_ns, |(t, _)| *t)
+            .map_or_else(|_| Vector3::zeros(), |i| self.firing_origins[i].1)
+    }
+}
+
 /// Moves every point of `scan` (stamped `stamp_ns`, LiDAR clock) into the LiDAR frame at
 /// LiDAR time `stamp_ns + ref_offset_ns` (eq. 3.18), with time offset `td_ns` and extrinsic
 /// `t_i_l`. Consecutive points with the same firing offset share one transform.
@@ -101,11 +131,12 @@ pub fn deskew_scan(
     td_ns: i64,
     t_i_l: &Isometry3<f64>,
     buffer: &PoseBuffer,
-) -> Option<PointCloud> {
+) -> Option<DeskewedScan> {
     let t_g_iref = buffer.at(imu_time(stamp_ns, ref_offset_ns, td_ns))?;
     let head = t_i_l.inverse() * t_g_iref.inverse();
     let mut cached: Option<(u32, Isometry3<f64>)> = None;
     let mut points = Vec::with_capacity(scan.len());
+    let mut firing_origins = Vec::new();
     for p in &scan.points {
         let transform = match cached {
             Some((t, m)) if t == p.t_ns => m,
@@ -113,6 +144,7 @@ pub fn deskew_scan(
                 let t_g_i = buffer.at(imu_time(stamp_ns, u64::from(p.t_ns), td_ns))?;
                 let m = head * t_g_i * t_i_l;
                 cached = Some((p.t_ns, m));
+                firing_origins.push((p.t_ns, m.translation.vector));
                 m
             }
         };
@@ -121,13 +153,18 @@ pub fn deskew_scan(
             ..*p
         });
     }
-    Some(PointCloud::new(points))
+    firing_origins.sort_by_key(|(t, _)| *t);
+    firing_origins.dedup_by_key(|(t, _)| *t);
+    Some(DeskewedScan {
+        cloud: PointCloud::new(points),
+        firing_origins,
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::{Translation3, UnitQuaternion, Vector3};
+    use nalgebra::{Translation3, UnitQuaternion};
 
     fn motion(t: f64) -> Isometry3<f64> {
         Isometry3::from_parts(
@@ -159,11 +196,26 @@ mod tests {
                 }
             })
             .collect();
-        let out = deskew_scan(&PointCloud::new(points), 0, 90_000_000, 0, &t_i_l, &buffer);
+        let raw = PointCloud::new(points);
+        let out = deskew_scan(&raw, 0, 90_000_000, 0, &t_i_l, &buffer).unwrap_or_default();
         let expected = ((motion(0.09) * t_i_l).inverse() * world).coords;
-        let out = out.map(|c| c.points).unwrap_or_default();
-        assert_eq!(out.len(), 10);
-        for p in out {
+        assert_eq!(out.cloud.len(), 10);
+        for (p, r) in out.cloud.points.iter().zip(&raw.points) {
+            // The point lies its raw range away from its ray's origin, which is the LiDAR at
+            // the firing time seen from the reference frame.
+            let origin = out.ray_origin(p.t_ns);
+            let truth = ((motion(0.09) * t_i_l).inverse()
+                * (motion(f64::from(p.t_ns) * 1e-9) * t_i_l))
+                .translation
+                .vector;
+            assert!(
+                (origin - truth).norm() < 1e-5,
+                "{}",
+                (origin - truth).norm()
+            );
+            assert!(((p.xyz - origin).norm() - r.xyz.norm()).abs() < 1e-9);
+        }
+        for p in out.cloud.points {
             // Linear interpolation of a 1 ms spaced buffer: sub-micrometre.
             assert!(
                 (p.xyz - expected).norm() < 1e-5,

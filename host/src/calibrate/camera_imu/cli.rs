@@ -106,7 +106,7 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
         frames,
         detection,
         camera_data,
-    } = load_frames(args)?;
+    } = load_corner_frames(&args.dataset, args.opencv_window)?;
     let mut options = CameraImuOptions {
         update: args.update,
         pixel_sigma: args.pixel_sigma,
@@ -175,22 +175,26 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
 }
 
 /// The camera and its corner frames, with how they were found.
-struct LoadedFrames {
-    camera: Camera<f64>,
-    frames: Vec<CornerFrame>,
-    detection: DetectionSummary,
+pub struct LoadedFrames {
+    /// The camera model of `cam0/camera.yaml`.
+    pub camera: Camera<f64>,
+    /// The corners of each image with the board.
+    pub frames: Vec<CornerFrame>,
+    /// What the detector found.
+    pub detection: DetectionSummary,
     /// The image dataset when the corners were detected here (for the overlay).
-    camera_data: Option<CameraDataset>,
+    pub camera_data: Option<CameraDataset>,
 }
 
 /// The camera, its corner frames and how they were found: `cam0/corners.csv` when the
 /// dataset has it (pre-detected corners, any target), else detection in the images of
-/// `cam0/data.csv` (then the images are returned too, for the overlay).
-fn load_frames(args: &CalibrateCameraImu) -> anyhow::Result<LoadedFrames> {
-    let observed = args.dataset.join(OBSERVED_CORNERS_CSV);
+/// `cam0/data.csv` (then the images are returned too, for the overlay); `opencv_window`
+/// refines corners with OpenCV's fixed window.
+pub fn load_corner_frames(dataset: &Path, opencv_window: bool) -> anyhow::Result<LoadedFrames> {
+    let observed = dataset.join(OBSERVED_CORNERS_CSV);
     if !observed.is_file() {
-        let camera_data = CameraDataset::open(&args.dataset)?;
-        let (frames, detection) = detect_for_calibration(args, &camera_data)?;
+        let camera_data = CameraDataset::open(dataset)?;
+        let (frames, detection) = detect_for_calibration(dataset, opencv_window, &camera_data)?;
         return Ok(LoadedFrames {
             camera: camera_data.camera,
             frames,
@@ -198,9 +202,9 @@ fn load_frames(args: &CalibrateCameraImu) -> anyhow::Result<LoadedFrames> {
             camera_data: Some(camera_data),
         });
     }
-    let camera = read_camera_yaml(&args.dataset.join(CAMERA_YAML))?;
+    let camera = read_camera_yaml(&dataset.join(CAMERA_YAML))?;
     let images = read_observed_corners(&observed)?;
-    let target_path = args.dataset.join(TARGET_YAML);
+    let target_path = dataset.join(TARGET_YAML);
     let target = target_path
         .is_file()
         .then(|| read_target_yaml(&target_path))
@@ -271,14 +275,15 @@ fn corner_frame(
 /// [`detect_corner_frames`] with a progress bar; fewer than [`MIN_IMAGES`] boards found is
 /// bad input, with the rejection reasons.
 fn detect_for_calibration(
-    args: &CalibrateCameraImu,
+    dataset: &Path,
+    opencv_window: bool,
     camera_data: &CameraDataset,
 ) -> anyhow::Result<(Vec<CornerFrame>, DetectionSummary)> {
     let detecting = progress_bar(
         1000,
         "{spinner} detecting corners [{bar:40}] {percent}% {elapsed}",
     );
-    let params = if args.opencv_window {
+    let params = if opencv_window {
         DetectorParams::opencv_compatible()
     } else {
         DetectorParams::default()
@@ -300,7 +305,7 @@ fn detect_for_calibration(
         return Err(anyhow!(
             "{}: the {}x{} checkerboard of target.yaml is found in {} of {} images, at least \
              {MIN_IMAGES} are needed (rejected: {})",
-            args.dataset.display(),
+            dataset.display(),
             camera_data.target.rows,
             camera_data.target.cols,
             frames.len(),
