@@ -11,6 +11,7 @@ pub mod components;
 pub mod frames;
 pub mod gray;
 pub mod grid;
+pub mod overlay;
 pub mod pnp;
 pub mod render;
 pub mod saddle;

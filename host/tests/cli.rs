@@ -250,8 +250,22 @@ fn demo_prints_the_table() {
         );
         assert!(keep.join(pipeline).join("result.yaml").is_file());
     }
-    // The joint calibration needs the board's size to find it in the scans.
+    // The joint calibration draws the board's LiDAR returns over an image.
     let data = keep.join("joint").join("dataset");
+    let overlay = dir.path().join("overlay.png");
+    let o = msreg(
+        &[
+            "calibrate",
+            "joint",
+            &data.to_string_lossy(),
+            "--overlay",
+            &overlay.to_string_lossy(),
+        ],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(overlay.is_file(), "{}", stderr(&o));
+    // It needs the board's size to find it in the scans.
     let target = data.join("target.yaml");
     let text = std::fs::read_to_string(&target).expect("target.yaml");
     let without_size: String = text

@@ -21,7 +21,7 @@ mod plane;
 use std::time::Instant;
 
 use msreg_estimator::{Ekf, InitialState, JointEkf, Scalar, SensorPrior, SensorState};
-use nalgebra::{Isometry3, Matrix3, Matrix6};
+use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, Vector3};
 
 use super::camera_imu::{
     frame_poses, motion_calibration, prior_from_motion, CameraImuInput, CameraImuOptions,
@@ -87,6 +87,8 @@ pub struct JointCalibration {
     pub planes: PlaneStats,
     /// Every board plane fused or gated (the LiDAR's board-point moments at each scan).
     pub plane_measurements: Vec<msreg_estimator::update::board_plane::BoardPlane<f64>>,
+    /// One scan's board returns at an image's instant, halfway through the run.
+    pub overlay: Option<OverlaySample>,
     /// Wall time of the start (MoCal, hand-eye) and of the filter pass, s.
     pub timing_s: Timing,
 }
@@ -148,6 +150,7 @@ pub fn calibrate<T: Scalar>(
         ),
         corners: CornerFeed::new(&camera_input, &options.camera, &start, camera_prior, CAMERA),
         planes: plane::PlaneFeed::new(board, options.plane),
+        overlay: OverlayCapture::halfway(imu),
     };
     drive_imu(
         &mut ekf,
@@ -165,7 +168,9 @@ pub fn calibrate<T: Scalar>(
         lidar,
         corners,
         planes,
+        overlay,
     } = feed;
+    let overlay = overlay.sample(&convert::isometry(&ekf.extrinsic(LIDAR)));
     Ok(JointCalibration {
         lidar: finish(
             &ekf,
@@ -185,6 +190,7 @@ pub fn calibrate<T: Scalar>(
         cam_lidar_covariance,
         planes: planes.stats(),
         plane_measurements: planes.measurements,
+        overlay,
         timing_s: timing,
     })
 }
@@ -336,12 +342,34 @@ fn cam_lidar_jacobians(
 }
 
 impl<T: Scalar> JointFeed<'_, T> {
-    /// Fuses the next image, due at IMU time `t`, and moves the LiDAR's pose history with
-    /// the update's correction.
-    fn fuse_image(&mut self, ekf: &mut JointEkf<T>, index: usize, t: u64) {
+    /// Fuses the next image (stamp `stamp`), due at IMU time `t`, and moves the LiDAR's
+    /// pose history with the update's correction.
+    fn fuse_image(&mut self, ekf: &mut JointEkf<T>, index: usize, (t, stamp): (u64, u64)) {
         let before = predicted_pose(ekf, t);
+        if let (Some(_), None, Some((_, pose))) = (&self.overlay.scan, &self.overlay.image, before)
+        {
+            self.overlay.image = Some((stamp, pose));
+        }
         self.corners.fuse_next(ekf, index);
         self.pose_moved(ekf, &before);
+    }
+
+    /// Fuses the next scan, due at IMU time `t`, and its board plane.
+    fn fuse_scan(&mut self, ekf: &mut JointEkf<T>, index: usize, t: u64) {
+        self.lidar.fuse_next(ekf, index);
+        let Some((stamp, cloud)) = self.lidar.take_deskewed() else {
+            return;
+        };
+        let before = predicted_pose(ekf, t);
+        let planes = self.planes.measurements.len();
+        self.planes.fuse(ekf, stamp, &cloud);
+        self.pose_moved(ekf, &before);
+        let new_plane = self.planes.measurements.len() > planes;
+        if let (None, true, Some((t, pose))) = (&self.overlay.scan, new_plane, before) {
+            if t >= self.overlay.after_ns {
+                self.overlay.scan = Some((std::mem::take(&mut self.planes.last_returns), pose));
+            }
+        }
     }
 
     /// An update at IMU time `t` changed the pose there from `before` (a failed update
@@ -368,6 +396,52 @@ struct JointFeed<'a, T: Scalar> {
     lidar: LidarFeed<'a>,
     corners: CornerFeed<'a, T>,
     planes: plane::PlaneFeed,
+    overlay: OverlayCapture,
+}
+
+/// One scan's board returns moved to the instant of an image, to draw them over it with a
+/// `T_cam_lidar` (`msreg calibrate joint --overlay`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct OverlaySample {
+    /// Stamp of the image, ns (camera clock).
+    pub image_stamp_ns: u64,
+    /// The board returns in L at the image's instant (moved with the filter's motion and
+    /// `T_imu_lidar`), m.
+    pub returns_in_lidar: Vec<Vector3<f64>>,
+}
+
+/// Halfway through the run, the first board plane's returns and the IMU pose at its scan,
+/// then the next image's stamp and the IMU pose there.
+struct OverlayCapture {
+    after_ns: u64,
+    scan: Option<(Vec<Vector3<f64>>, Isometry3<f64>)>,
+    image: Option<(u64, Isometry3<f64>)>,
+}
+
+impl OverlayCapture {
+    fn halfway(imu: &[ImuRecord]) -> Self {
+        let (first, last) = (
+            imu.first().map_or(0, |r| r.stamp_ns),
+            imu.last().map_or(0, |r| r.stamp_ns),
+        );
+        Self {
+            after_ns: first + (last.saturating_sub(first)) / 2,
+            scan: None,
+            image: None,
+        }
+    }
+
+    fn sample(self, t_i_l: &Isometry3<f64>) -> Option<OverlaySample> {
+        let ((returns, at_scan), (image_stamp_ns, at_image)) = (self.scan?, self.image?);
+        let motion = t_i_l.inverse() * at_image.inverse() * at_scan * t_i_l;
+        Some(OverlaySample {
+            image_stamp_ns,
+            returns_in_lidar: returns
+                .iter()
+                .map(|p| (motion * Point3::from(*p)).coords)
+                .collect(),
+        })
+    }
 }
 
 impl<T: Scalar> ImuHooks<T, JointEkf<T>> for JointFeed<'_, T> {
@@ -381,18 +455,12 @@ impl<T: Scalar> ImuHooks<T, JointEkf<T>> for JointFeed<'_, T> {
             let imu_time =
                 |s: usize, stamp: Option<u64>| stamp.and_then(|t| ekf.imu_time(s, t).ok());
             let scan = imu_time(LIDAR, self.lidar.next_due(ekf)?);
-            let image = imu_time(CAMERA, self.corners.next_due(ekf));
+            let image_stamp = self.corners.next_due(ekf);
+            let image = imu_time(CAMERA, image_stamp).zip(image_stamp);
             match (scan, image) {
                 (None, None) => return Ok(()),
-                (Some(l), Some(c)) if c < l => self.fuse_image(ekf, index, c),
-                (Some(l), _) => {
-                    self.lidar.fuse_next(ekf, index);
-                    if let Some((stamp, cloud)) = self.lidar.take_deskewed() {
-                        let before = predicted_pose(ekf, l);
-                        self.planes.fuse(ekf, stamp, &cloud);
-                        self.pose_moved(ekf, &before);
-                    }
-                }
+                (Some(l), Some(c)) if c.0 < l => self.fuse_image(ekf, index, c),
+                (Some(l), _) => self.fuse_scan(ekf, index, l),
                 (None, Some(c)) => self.fuse_image(ekf, index, c),
             }
         }

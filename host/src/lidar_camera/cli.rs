@@ -19,6 +19,7 @@ use super::pipeline::{
 use super::sim::{simulate_lidar_camera, LidarCameraSimConfig, LidarModel};
 use crate::command::{progress_bar, Outcome};
 use crate::dataset::{CalibrationResult, ExtrinsicEstimate};
+use crate::vision::overlay::Canvas;
 use crate::vision::GrayImage;
 
 /// LiDAR variant on the command line.
@@ -284,25 +285,12 @@ pub fn write_overlay(
     let Some((_, image_path)) = data.images.iter().find(|(s, _)| *s == frame.image_stamp_ns) else {
         return Ok(());
     };
-    let grey = GrayImage::load(image_path)
-        .with_context(|| format!("{}: cannot read image", image_path.display()))?
-        .to_luma8();
-    let mut rgb = image::RgbImage::from_fn(grey.width(), grey.height(), |x, y| {
-        let v = grey.get_pixel(x, y).0[0];
-        image::Rgb([v, v, v])
-    });
+    let image = GrayImage::load(image_path)
+        .with_context(|| format!("{}: cannot read image", image_path.display()))?;
+    let mut canvas = Canvas::from_gray(&image);
     let mut dot = |p: &nalgebra::Vector3<f64>, colour: [u8; 3], radius: i64| {
-        let Some(px) = camera.project(&t_cam_lidar.transform_point(p)) else {
-            return;
-        };
-        let (u, v) = (px.pixel.x.round() as i64, px.pixel.y.round() as i64);
-        for dy in -radius..=radius {
-            for dx in -radius..=radius {
-                let (x, y) = (u + dx, v + dy);
-                if x >= 0 && y >= 0 && (x as u32) < rgb.width() && (y as u32) < rgb.height() {
-                    rgb.put_pixel(x as u32, y as u32, image::Rgb(colour));
-                }
-            }
+        if let Some(px) = camera.project(&t_cam_lidar.transform_point(p)) {
+            canvas.dot(&px.pixel, colour, radius);
         }
     };
     for p in frame.lidar.plane_points.iter().step_by(3) {
@@ -313,7 +301,8 @@ pub fn write_overlay(
             dot(p, [255, 0, 0], 2);
         }
     }
-    rgb.save(path)
+    canvas
+        .save(path)
         .with_context(|| format!("{}: cannot write overlay", path.display()))?;
     Ok(())
 }

@@ -4,15 +4,17 @@
 //! `lidar0` and the derived `cam0_lidar0` (with sigmas from the joint covariance), and with
 //! `--compare-pairwise` the loop-consistency comparison with the two pairwise pipelines.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use anyhow::anyhow;
+use anyhow::{anyhow, Context};
 use clap::Args;
 use serde::Serialize;
 
+use nalgebra::{Isometry3, Point3};
+
 use super::{
     calibrate, chained_pairwise, JointCalibration, JointInput, JointOptions, LoopConsistency,
-    PlaneStats,
+    OverlaySample, PlaneStats,
 };
 use crate::calibrate::camera_imu::cli::{load_corner_frames, DetectionSummary, LoadedFrames};
 use crate::calibrate::camera_imu::invert_with_covariance;
@@ -21,6 +23,9 @@ use crate::camera_yaml::{read_target_yaml, Target};
 use crate::command::{progress_bar, Outcome};
 use crate::dataset::{CalibrationResult, Dataset, ExtrinsicEstimate, TARGET_YAML};
 use crate::lidar::FileScans;
+use crate::vision::frames::CameraDataset;
+use crate::vision::overlay::Canvas;
+use crate::vision::GrayImage;
 
 /// `msreg calibrate joint`.
 #[derive(Args, Debug)]
@@ -42,6 +47,11 @@ pub struct CalibrateJoint {
     /// Run the filter in f32, as the firmware does.
     #[arg(long)]
     pub f32: bool,
+    /// PNG of one image halfway through with the board returns of the nearest scan
+    /// projected by the joint `T_cam_lidar` (green) and, with `--compare-pairwise`, by the
+    /// chained pairwise one (red). Needs the images (not `corners.csv`).
+    #[arg(long)]
+    pub overlay: Option<PathBuf>,
 }
 
 /// The JSON report of the command.
@@ -73,7 +83,7 @@ pub fn run(args: &CalibrateJoint) -> anyhow::Result<Outcome> {
         camera,
         frames,
         detection,
-        ..
+        camera_data,
     } = load_corner_frames(&args.dataset, false)?;
     let scans = FileScans {
         files: dataset.lidar0_scans()?,
@@ -102,7 +112,7 @@ pub fn run(args: &CalibrateJoint) -> anyhow::Result<Outcome> {
     let joint = outcome.map_err(bad_input)?;
     result(&joint).write(&args.output)?;
     print_summary(args, &joint);
-    let loop_consistency = if args.compare_pairwise {
+    let (loop_consistency, chained) = if args.compare_pairwise {
         let bar = progress_bar(
             1000,
             "{spinner} pairwise runs [{bar:40}] {percent}% {elapsed}",
@@ -111,12 +121,23 @@ pub fn run(args: &CalibrateJoint) -> anyhow::Result<Outcome> {
             bar.set_position((f * 1000.0) as u64)
         });
         bar.finish_and_clear();
-        let consistency = LoopConsistency::of(&joint, &runs.map_err(bad_input)?);
+        let runs = runs.map_err(bad_input)?;
+        let consistency = LoopConsistency::of(&joint, &runs);
         print_consistency(&consistency);
-        Some(consistency)
+        (Some(consistency), Some(runs.t_cam_lidar().0))
     } else {
-        None
+        (None, None)
     };
+    if let Some(path) = &args.overlay {
+        match (&camera_data, &joint.overlay) {
+            (Some(images), Some(sample)) => {
+                write_overlay(path, images, sample, &joint.t_cam_lidar, chained.as_ref())?;
+                eprintln!("msreg: wrote {}", path.display());
+            }
+            (None, _) => eprintln!("msreg: warning: no overlay: the corners come without images"),
+            (_, None) => eprintln!("msreg: warning: no overlay: no board plane after halfway"),
+        }
+    }
     if let Some(path) = &args.report {
         let report = JointCliReport {
             detection,
@@ -192,6 +213,45 @@ fn print_consistency(c: &LoopConsistency) {
             " (a pairwise run did not pass its checks)"
         }
     );
+}
+
+/// The image of `sample` with its board returns projected by the joint `T_cam_lidar`
+/// (green) and the chained one (red).
+fn write_overlay(
+    path: &Path,
+    images: &CameraDataset,
+    sample: &OverlaySample,
+    joint: &Isometry3<f64>,
+    chained: Option<&Isometry3<f64>>,
+) -> anyhow::Result<()> {
+    let frame = images
+        .frames
+        .iter()
+        .find(|f| f.stamp_ns == sample.image_stamp_ns)
+        .ok_or_else(|| {
+            anyhow!(
+                "no image stamped {} in cam0/data.csv",
+                sample.image_stamp_ns
+            )
+        })?;
+    let image = GrayImage::load(&frame.path)
+        .with_context(|| format!("{}: cannot read image", frame.path.display()))?;
+    let mut canvas = Canvas::from_gray(&image);
+    let camera = &images.camera;
+    for (t_cam_lidar, colour) in chained
+        .map(|c| (c, [255, 0, 0]))
+        .into_iter()
+        .chain([(joint, [0, 220, 0])])
+    {
+        for p in &sample.returns_in_lidar {
+            if let Some(px) = camera.project(&(t_cam_lidar * Point3::from(*p)).coords) {
+                canvas.dot(&px.pixel, colour, 1);
+            }
+        }
+    }
+    canvas
+        .save(path)
+        .with_context(|| format!("{}: cannot write overlay", path.display()))
 }
 
 fn max3(x: &[f64; 3]) -> f64 {

@@ -104,6 +104,8 @@ pub struct PlaneStats {
 pub(super) struct PlaneFeed {
     /// Every plane handed to the filter (LiDAR frame at its stamp), for the report.
     pub(super) measurements: Vec<BoardPlane<f64>>,
+    /// The board returns (in L at the scan stamp) of the last plane handed to the filter.
+    pub(super) last_returns: Vec<Vector3<f64>>,
     board: BoardExtent,
     options: PlaneOptions,
     stats: PlaneStats,
@@ -116,6 +118,7 @@ impl PlaneFeed {
     pub(super) fn new(board: BoardExtent, options: PlaneOptions) -> Self {
         Self {
             measurements: Vec::new(),
+            last_returns: Vec::new(),
             board,
             options,
             stats: PlaneStats::default(),
@@ -150,12 +153,13 @@ impl PlaneFeed {
         stamp_ns: u64,
         scan: &DeskewedScan,
     ) {
-        let plane = match self.plane(ekf, stamp_ns, scan) {
+        let (plane, returns) = match self.plane(ekf, stamp_ns, scan) {
             Ok(p) => p,
             Err(why) => return self.skip(why),
         };
         match ekf.update_board_plane(LIDAR, TARGET, &plane) {
             Ok(report) => {
+                self.last_returns = returns;
                 self.measurements.push(BoardPlane {
                     stamp_ns,
                     count: plane.count,
@@ -181,13 +185,13 @@ impl PlaneFeed {
         *self.stats.skipped.entry(why.into()).or_default() += 1;
     }
 
-    /// The board plane of one scan at the current estimate.
+    /// The board plane of one scan at the current estimate, and the returns it came from.
     fn plane<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize>(
         &self,
         ekf: &Ekf<T, S, C, N, F>,
         stamp_ns: u64,
         scan: &DeskewedScan,
-    ) -> Result<BoardPlane<T>, String> {
+    ) -> Result<(BoardPlane<T>, Vec<Vector3<f64>>), String> {
         let target = ekf.frame(TARGET).ok_or("no target yet")?;
         let (sr, st) = ekf.extrinsic_sigma(LIDAR);
         let (sr, st) = (sr.amax().to_f64(), st.amax().to_f64());
@@ -208,14 +212,16 @@ impl PlaneFeed {
         let gate = self.options.gate_m + 3.0 * (st + sr * range);
         let candidates = self.on_board(scan, &t_t_l, gate);
         let plane = self.fit(&candidates)?;
-        Ok(BoardPlane {
+        let returns = candidates.into_iter().map(|(_, x)| x).collect();
+        let moments = BoardPlane {
             stamp_ns,
             count: plane.count,
             centroid: convert::vec3(&plane.centroid),
             in_plane: plane.in_plane.map(|u| convert::vec3(&u)),
             spread: plane.spread.map(T::lit),
             sigma: T::lit(plane.sigma),
-        })
+        };
+        Ok((moments, returns))
     }
 
     /// The returns of `scan` (`(ray origin, point)`) within `gate` of the predicted board
