@@ -64,6 +64,22 @@ impl<T: Scalar, const M: usize, const L: usize> SparseJacobian<T, M, L> {
         h
     }
 
+    /// The covariance of the stored columns, `P[columns, columns]` (`L x L`; a column
+    /// listed twice appears twice, so `H P_sub H^T` is still `H P H^T`). Errors on a
+    /// column outside `N`.
+    pub fn sub_covariance<const N: usize>(
+        &self,
+        cov: &SMatrix<T, N, N>,
+    ) -> Result<SMatrix<T, L, L>, Error> {
+        if self.columns.iter().any(|&c| c >= N) {
+            return Err(Error::InvalidConfig);
+        }
+        let p = cov.as_slice();
+        Ok(SMatrix::from_fn(|r, c| {
+            p[self.columns[c] * N + self.columns[r]]
+        }))
+    }
+
     /// `P H^T` from the stored columns of `P` only (plain slices: nalgebra's strided
     /// iterators cost several times more on the M4F).
     fn cov_times_transpose<const N: usize>(&self, cov: &SMatrix<T, N, N>) -> SMatrix<T, N, M> {
@@ -134,10 +150,10 @@ pub struct Gain<T: Scalar, const M: usize, const N: usize> {
     pub weighted_residual: SVector<T, M>,
     /// `S^-1`.
     pub innovation_inverse: SMatrix<T, M, M>,
-    /// `K` (zero when rejected).
-    gain: SMatrix<T, N, M>,
-    /// `C = K S / 2 - P H^T` (zero when rejected).
-    cross: SMatrix<T, N, M>,
+    /// `K^T` (zero when rejected): stored transposed, so a row of `K` is contiguous.
+    gain_t: SMatrix<T, M, N>,
+    /// `C^T`, `C = K S / 2 - P H^T` (zero when rejected), transposed as `K^T`.
+    cross_t: SMatrix<T, M, N>,
 }
 
 impl<T: Scalar, const M: usize, const N: usize> Gain<T, M, N> {
@@ -145,6 +161,7 @@ impl<T: Scalar, const M: usize, const N: usize> Gain<T, M, N> {
     /// infinite threshold never rejects), gain with every hold projected out, correction.
     /// Errors: a non-finite input, a state index outside `N`, `S` not positive definite, or
     /// a result that is not finite or could overflow the covariance.
+    #[inline(never)]
     pub fn compute<const L: usize>(
         cov: &SMatrix<T, N, N>,
         meas: &Measurement<T, M, L>,
@@ -174,19 +191,29 @@ impl<T: Scalar, const M: usize, const N: usize> Gain<T, M, N> {
             correction: SVector::zeros(),
             weighted_residual,
             innovation_inverse: s_inv,
-            gain: SMatrix::zeros(),
-            cross: SMatrix::zeros(),
+            gain_t: SMatrix::zeros(),
+            cross_t: SMatrix::zeros(),
         };
         if nis > threshold {
             return Ok(out);
         }
-        let mut gain = ph_t * s_inv;
-        for hold in holds {
-            hold.project(&mut gain);
+        // K^T = S^-1 (P H^T)^T (S^-1 symmetric), every hold projected out.
+        for (i, column) in out.gain_t.as_mut_slice().chunks_exact_mut(M).enumerate() {
+            for (r, k) in column.iter_mut().enumerate() {
+                *k = (0..M).fold(T::zero(), |a, q| a + s_inv[(r, q)] * ph_t[(i, q)]);
+            }
         }
-        out.correction = gain * meas.residual;
-        out.cross = gain * s * T::lit(0.5) - ph_t;
-        out.gain = gain;
+        for hold in holds {
+            hold.project(&mut out.gain_t);
+        }
+        out.correction = out.gain_t.tr_mul(&meas.residual);
+        // C^T = S K^T / 2 - (P H^T)^T.
+        out.cross_t = s * out.gain_t * T::lit(0.5);
+        for (i, row) in out.cross_t.as_mut_slice().chunks_exact_mut(M).enumerate() {
+            for (r, c) in row.iter_mut().enumerate() {
+                *c -= ph_t[(i, r)];
+            }
+        }
         out.accepted = true;
         if !out.fits(cov) {
             return Err(Error::DivergentUpdate);
@@ -203,23 +230,24 @@ impl<T: Scalar, const M: usize, const N: usize> Gain<T, M, N> {
         let sum = |m: &[T]| m.iter().fold(T::zero(), |a, x| a + x.abs());
         let diag = (0..N).fold(T::zero(), |a, i| a + cov[(i, i)].abs());
         let bound = T::lit(2.0) * diag
-            + T::lit(2.0 * M as f64) * sum(self.gain.as_slice()) * sum(self.cross.as_slice());
+            + T::lit(2.0 * M as f64) * sum(self.gain_t.as_slice()) * sum(self.cross_t.as_slice());
         bound.is_finite() && sum(self.correction.as_slice()).is_finite()
     }
 
     /// `P <- P + K C^T + C K^T` (the Joseph form, see the module doc), upper triangle then
     /// mirrored; nothing when the gate rejected.
+    #[inline(never)]
     pub fn apply_to(&self, cov: &mut SMatrix<T, N, N>) {
         if !self.accepted {
             return;
         }
-        // Rows of K and C as arrays: the inner loop runs over slices, without index checks.
-        let (gain, cross) = (self.gain.as_slice(), self.cross.as_slice());
-        let k: [[T; M]; N] = core::array::from_fn(|i| core::array::from_fn(|r| gain[r * N + i]));
-        let c: [[T; M]; N] = core::array::from_fn(|i| core::array::from_fn(|r| cross[r * N + i]));
+        // Rows of K and C are the contiguous columns of K^T and C^T: no copies.
+        let k = self.gain_t.as_slice();
+        let c = self.cross_t.as_slice();
         for (j, column) in cov.as_mut_slice().chunks_exact_mut(N).enumerate() {
-            let (kj, cj) = (&k[j], &c[j]);
-            for ((p, ki), ci) in column[..=j].iter_mut().zip(&k).zip(&c) {
+            let (kj, cj) = (&k[j * M..(j + 1) * M], &c[j * M..(j + 1) * M]);
+            let rows = k.chunks_exact(M).zip(c.chunks_exact(M));
+            for (p, (ki, ci)) in column[..=j].iter_mut().zip(rows) {
                 let mut d = T::zero();
                 for r in 0..M {
                     d += ki[r] * cj[r] + ci[r] * kj[r];
