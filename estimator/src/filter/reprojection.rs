@@ -22,7 +22,7 @@ use crate::scalar::Scalar;
 use crate::state::{imu, Layout};
 use crate::update::compress::{pair_nis, Compressor};
 use crate::update::reprojection::{self, CornerSet};
-use crate::update::{Gain, Hold, Measurement, SparseJacobian, UpdateKind, UpdateReport};
+use crate::update::{Gain, Measurement, SparseJacobian, UpdateKind, UpdateReport};
 use crate::Error;
 use nalgebra::{Matrix3, SMatrix, Vector3};
 
@@ -49,10 +49,6 @@ struct Outcome<T: Scalar> {
     accepted: bool,
     innovation: ExtrinsicInnovation<T>,
 }
-
-/// The gate's verdict on an image: `(nis, dof, threshold)` and the gain when one was
-/// computed (none when every corner was an outlier).
-type Verdict<T, const N: usize> = ((T, usize, T), Option<Gain<T, ACTIVE, N>>);
 
 impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> Ekf<T, S, C, N, F> {
     /// Fuses the corners of target frame `f` seen by camera sensor `s` (whose extrinsic is
@@ -136,34 +132,70 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         let last = self.imu_now.ok_or(Error::NotInitialized)?;
         self.flush_transition();
         let target = self.frames[f].ok_or(Error::FrameNotInitialized)?;
-        let (holds, count) = self.holds();
         let mut scale = T::one();
         let mut first = None;
         loop {
-            let image = self.compress_image(s, f, &target, camera, meas, &last.gyro, scale)?;
-            let (stats, gain) = self.gate_image(&image, &holds[..count])?;
-            let raw = *first.get_or_insert(stats);
-            let innovation = image.innovation(gain.as_ref());
-            let outcome = |accepted| Outcome {
-                stats: raw,
-                accepted,
-                innovation,
-            };
-            if let Some(gain) = gain.filter(|g| g.accepted) {
-                self.correct(&gain)?;
-                return Ok(outcome(true));
+            let pass = self.image_pass(s, f, &target, camera, meas, &last.gyro, scale)?;
+            let stats = *first.get_or_insert(pass.stats);
+            if pass.accepted {
+                return Ok(Outcome { stats, ..pass });
             }
-            let (nis, dof, _) = stats;
+            let (nis, dof, _) = pass.stats;
             let wanted = (nis / T::lit(dof as f64)).sqrt();
             if scale > T::one() || wanted <= T::one() || wanted > self.config.max_noise_scale {
-                return Ok(outcome(false));
+                return Ok(Outcome { stats, ..pass });
             }
             scale = wanted;
         }
     }
 
+    /// One pass over the image at pixel sigma `meas.pixel_sigma * scale`: compress, gate,
+    /// and apply when accepted. Out of line, so that its gain (`N x 19` twice) is one
+    /// frame's, popped before another pass.
+    #[inline(never)]
+    #[allow(clippy::too_many_arguments)]
+    fn image_pass(
+        &mut self,
+        s: usize,
+        f: usize,
+        target: &Pose<T>,
+        camera: &Camera<T>,
+        meas: &CornerSet<'_, T>,
+        held_gyro: &Vector3<T>,
+        scale: T,
+    ) -> Result<Outcome<T>, Error> {
+        let image = self.compress_image(s, f, target, camera, meas, held_gyro, scale)?;
+        let rows = image.rows.rows();
+        if rows == 0 {
+            // Every corner an outlier: the image is rejected on their NIS.
+            let dof = 2 * image.outliers;
+            let threshold = chi2::quantile::<T>(dof, self.config.gate);
+            return Ok(Outcome {
+                stats: (image.outlier_nis, dof, threshold),
+                accepted: false,
+                innovation: no_innovation(),
+            });
+        }
+        let threshold = chi2::quantile::<T>(rows, self.config.gate);
+        let leftover = image.rows.leftover() / image.sigma2;
+        let (holds, count) = self.holds();
+        let gain = Gain::compute(
+            &self.cov,
+            &image.measurement(),
+            threshold - leftover,
+            &holds[..count],
+        )?;
+        self.correct(&gain)?;
+        Ok(Outcome {
+            stats: (gain.nis + leftover, rows, threshold),
+            accepted: gain.accepted,
+            innovation: image.innovation(&gain),
+        })
+    }
+
     /// Linearises every corner at the current state with pixel sigma `meas.pixel_sigma *
     /// scale`, drops those whose own NIS fails the 2-dof gate, and compresses the rest.
+    #[inline(never)]
     #[allow(clippy::too_many_arguments)]
     fn compress_image(
         &self,
@@ -216,30 +248,6 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
             image.rows.add_rows(&h.values, &lin.residual);
         }
         Ok(image)
-    }
-
-    /// The image's NIS over all inlier rows (compressed part plus the residual the columns
-    /// cannot explain), its gate, and the gain of the compressed update (none when every
-    /// corner was an outlier: then the NIS and dof are those of the outliers).
-    fn gate_image(&self, image: &Image<T>, holds: &[Hold<T>]) -> Result<Verdict<T, N>, Error> {
-        let rows = image.rows.rows();
-        if rows == 0 {
-            let dof = 2 * image.outliers;
-            let threshold = chi2::quantile::<T>(dof, self.config.gate);
-            return Ok(((image.outlier_nis, dof, threshold), None));
-        }
-        let threshold = chi2::quantile::<T>(rows, self.config.gate);
-        let leftover = image.rows.leftover() / image.sigma2;
-        let measurement = Measurement {
-            residual: *image.rows.residual(),
-            jacobian: SparseJacobian {
-                columns: image.columns,
-                values: *image.rows.upper(),
-            },
-            noise: SMatrix::<T, ACTIVE, ACTIVE>::identity() * image.sigma2,
-        };
-        let gain = Gain::compute(&self.cov, &measurement, threshold - leftover, holds)?;
-        Ok(((gain.nis + leftover, rows, threshold), Some(gain)))
     }
 
     /// The Jacobian of one corner: its 19 non-zero columns (IMU pose, extrinsic, time offset,
@@ -303,29 +311,38 @@ const EXTRINSIC_ROTATION_AT: usize = 6;
 const EXTRINSIC_TRANSLATION_AT: usize = 9;
 
 impl<T: Scalar> Image<T> {
+    /// The compressed rows as a measurement over their 19 columns.
+    fn measurement(&self) -> Measurement<T, ACTIVE, ACTIVE> {
+        Measurement {
+            residual: *self.rows.residual(),
+            jacobian: SparseJacobian {
+                columns: self.columns,
+                values: *self.rows.upper(),
+            },
+            noise: SMatrix::<T, ACTIVE, ACTIVE>::identity() * self.sigma2,
+        }
+    }
+
     /// The innovation projected on the camera extrinsic for the health monitor, from the
     /// compressed rows: the rows the compression dropped have no extrinsic component
-    /// (`Q2^T H = 0`), so this equals the stacked image's. Zero without a gain.
-    fn innovation<const N: usize>(
-        &self,
-        gain: Option<&Gain<T, ACTIVE, N>>,
-    ) -> ExtrinsicInnovation<T> {
-        match gain {
-            Some(gain) => {
-                let u = self.rows.upper();
-                extrinsic_innovation(
-                    &u.fixed_columns::<3>(EXTRINSIC_ROTATION_AT).clone_owned(),
-                    &u.fixed_columns::<3>(EXTRINSIC_TRANSLATION_AT).clone_owned(),
-                    &gain.innovation_inverse,
-                    &gain.weighted_residual,
-                )
-            }
-            None => ExtrinsicInnovation {
-                rotation_info: Matrix3::zeros(),
-                rotation_score: Vector3::zeros(),
-                translation_info: Matrix3::zeros(),
-                translation_score: Vector3::zeros(),
-            },
-        }
+    /// (`Q2^T H = 0`), so this equals the stacked image's.
+    fn innovation<const N: usize>(&self, gain: &Gain<T, ACTIVE, N>) -> ExtrinsicInnovation<T> {
+        let u = self.rows.upper();
+        extrinsic_innovation(
+            &u.fixed_columns::<3>(EXTRINSIC_ROTATION_AT).clone_owned(),
+            &u.fixed_columns::<3>(EXTRINSIC_TRANSLATION_AT).clone_owned(),
+            &gain.innovation_inverse,
+            &gain.weighted_residual,
+        )
+    }
+}
+
+/// No information (an image without a gain).
+fn no_innovation<T: Scalar>() -> ExtrinsicInnovation<T> {
+    ExtrinsicInnovation {
+        rotation_info: Matrix3::zeros(),
+        rotation_score: Vector3::zeros(),
+        translation_info: Matrix3::zeros(),
+        translation_score: Vector3::zeros(),
     }
 }

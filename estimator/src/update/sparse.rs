@@ -208,10 +208,10 @@ impl<T: Scalar, const M: usize, const N: usize> Gain<T, M, N> {
         }
         out.correction = out.gain_t.tr_mul(&meas.residual);
         // C^T = S K^T / 2 - (P H^T)^T.
-        out.cross_t = s * out.gain_t * T::lit(0.5);
+        s.mul_to(&out.gain_t, &mut out.cross_t);
         for (i, row) in out.cross_t.as_mut_slice().chunks_exact_mut(M).enumerate() {
             for (r, c) in row.iter_mut().enumerate() {
-                *c -= ph_t[(i, r)];
+                *c = *c * T::lit(0.5) - ph_t[(i, r)];
             }
         }
         out.accepted = true;
