@@ -173,7 +173,8 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         self.flush_transition();
         let (holds, count) = self.holds();
         let threshold = chi2::quantile::<T>(M, self.config.gate);
-        let gain = Gain::compute(&self.cov, meas, threshold, &holds[..count])?;
+        let mut gain = Gain::empty();
+        gain.compute_into(&self.cov, meas, threshold, &holds[..count])?;
         self.correct(&gain)?;
         let innovation = extrinsic_jacobian.map(|h_e| {
             extrinsic_innovation(

@@ -179,7 +179,8 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         let threshold = chi2::quantile::<T>(rows, self.config.gate);
         let leftover = image.rows.leftover() / image.sigma2;
         let (holds, count) = self.holds();
-        let gain = Gain::compute(
+        let mut gain = Gain::empty();
+        gain.compute_into(
             &self.cov,
             &image.measurement(),
             threshold - leftover,
