@@ -55,6 +55,13 @@ pub struct HealthConfig<T: Scalar> {
     pub min_rotation_step: T,
     /// Smallest translation step worth an alarm, m (see `min_rotation_step`).
     pub min_translation_step: T,
+    /// A step detector tests only the directions in which its step estimate's 1-sigma is
+    /// at most this many times the smallest step worth an alarm (`min_rotation_step`,
+    /// `min_translation_step`). Elsewhere a near-singular information turns noise into a
+    /// large "step" (the lever arm along the axis of planar driving carries 1e-5 of the
+    /// information across it). Infinite (the default) tests every direction; the vehicle
+    /// monitor (`msreg monitor`) uses 1: a detector claims only steps it can resolve.
+    pub resolvable_step_factor: T,
 }
 
 impl<T: Scalar> Default for HealthConfig<T> {
@@ -74,6 +81,7 @@ impl<T: Scalar> Default for HealthConfig<T> {
             // biased low by what the filter absorbed before the detection), and 5 mm.
             min_rotation_step: T::lit(0.25f64.to_radians()),
             min_translation_step: T::lit(0.005),
+            resolvable_step_factor: T::lit(f64::INFINITY),
         }
     }
 }
@@ -153,7 +161,7 @@ impl<T: Scalar> StepDetector<T> {
     /// chi-square threshold at `confidence` and the estimated step is at least `min_step`
     /// long. Both are taken only over the directions in which a step of `min_step` can be
     /// resolved: the eigen-directions of the information `A1` where the step's 1-sigma
-    /// (at most `A1^-1/2`) is at most `min_step`. Elsewhere (the lever arm along the axis of
+    /// (at most `A1^-1/2`) is at most `factor` times `min_step`. Elsewhere (the lever arm along the axis of
     /// planar driving, a camera's roll about its direction of travel) the estimate `A1^-1 b`
     /// is noise amplified by a near-singular `A1` and says nothing about a knock; the
     /// threshold is chi-square with as many dof as directions kept.
@@ -161,14 +169,16 @@ impl<T: Scalar> StepDetector<T> {
         &self,
         min_updates: u32,
         confidence: Confidence,
-        min_step: T,
+        (min_step, factor): (T, T),
     ) -> Option<(T, Vector3<T>, Matrix3<T>)> {
         if self.updates < min_updates {
             return None;
         }
         let eig = self.info.symmetric_eigen();
         let v = eig.eigenvectors;
-        let floor = T::one() / (min_step * min_step);
+        let resolvable = min_step * factor;
+        // Infinite factor: every direction (floor 0).
+        let floor = T::one() / (resolvable * resolvable);
         let keep: [bool; 3] = core::array::from_fn(|i| eig.eigenvalues[i] >= floor);
         let kept = keep.iter().filter(|k| **k).count();
         if kept == 0 {
@@ -353,11 +363,11 @@ impl<T: Scalar, const S: usize> HealthMonitor<T, S> {
             .add(&inn.translation_info, &inn.translation_score, l);
         let confidence = config.step_confidence;
         let min = config.step_min_updates;
-        let event = if let Some((statistic, step, step_covariance)) =
-            health
-                .rotation
-                .fire(min, confidence, config.min_rotation_step)
-        {
+        let event = if let Some((statistic, step, step_covariance)) = health.rotation.fire(
+            min,
+            confidence,
+            (config.min_rotation_step, config.resolvable_step_factor),
+        ) {
             Some(HealthEvent::RotationStep {
                 sensor: s,
                 stamp_ns,
@@ -368,7 +378,11 @@ impl<T: Scalar, const S: usize> HealthMonitor<T, S> {
         } else {
             health
                 .translation
-                .fire(min, confidence, config.min_translation_step)
+                .fire(
+                    min,
+                    confidence,
+                    (config.min_translation_step, config.resolvable_step_factor),
+                )
                 .map(
                     |(statistic, step, step_covariance)| HealthEvent::TranslationStep {
                         sensor: s,
@@ -460,7 +474,11 @@ mod tests {
         // Two axes well informed and unbiased; the third carries 1e-3 of their information
         // (a step's sigma there is far above 0.25 deg) and a 3-sigma bias: the estimate
         // along it is large, but it cannot be resolved, so no alarm.
-        let mut m = HealthMonitor::<f64, 1>::new(HealthConfig::default());
+        let config = HealthConfig {
+            resolvable_step_factor: 1.0,
+            ..HealthConfig::default()
+        };
+        let mut m = HealthMonitor::<f64, 1>::new(config);
         let info = Matrix3::from_diagonal(&Vector3::new(INFO, INFO, INFO * 1e-3));
         for k in 0..300u64 {
             let inn = ExtrinsicInnovation {

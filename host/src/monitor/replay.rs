@@ -280,6 +280,9 @@ pub fn monitor(
     let start = start::start(input)?;
     let mut config = FilterConfig::new(convert::imu_noise::<f64>(input.imu_noise));
     config.health.step_forgetting = options.step_forgetting;
+    // Claim only steps the drive can resolve (the lever arm along the planar axis and a
+    // camera's roll about its direction of travel cannot be, docs/monitor.md).
+    config.health.resolvable_step_factor = 1.0;
     let sigmas = input.prior.map(|p| ExtrinsicSigmas {
         rotation: p
             .sigma_rot_deg
