@@ -91,6 +91,7 @@ fn bad_input_exits_2_naming_the_file_and_line() {
     let d = tmp.path().join("drive");
     simulate(&d, &["--knock-sensor", "none", "--duration", "5"]);
     let csv = d.join("pose1/data.csv");
+    let original = std::fs::read_to_string(&csv).expect("csv");
     let mut lines: Vec<String> = std::fs::read_to_string(&csv)
         .expect("csv")
         .lines()
@@ -103,6 +104,7 @@ fn bad_input_exits_2_naming_the_file_and_line() {
     assert_eq!(o.status.code(), Some(2), "{err}");
     assert!(err.contains("pose1/data.csv:6"), "{err}");
     // A missing calibration of record names the file too.
+    std::fs::write(&csv, original).expect("restore");
     std::fs::remove_file(d.join("calibration.yaml")).expect("rm");
     let o = msreg(&["monitor", d.to_str().unwrap()]);
     let (_, err) = text(&o);
