@@ -24,6 +24,8 @@ pub type PoseImuEkf<T> = Ekf<T, 1, 2, 34>;
 /// camera's visual odometry on the vehicle) and one static target frame (the board of a
 /// joint calibration): `15 + 2 * 7 + 4 * 6 + 6 = 59` error states.
 pub type JointEkf<T> = Ekf<T, 2, 4, 59, 1>;
+/// The joint layout without the target frame: on-vehicle monitoring (two pose sensors).
+pub type MonitorEkf<T> = Ekf<T, 2, 4, 53>;
 /// Filter for a camera and an IMU observing one static target (RepErrCal): the target pose
 /// is a state, no clones are needed.
 pub type CameraImuEkf<T> = Ekf<T, 1, 0, 28, 1>;

@@ -55,6 +55,13 @@ pub struct HealthConfig<T: Scalar> {
     pub min_rotation_step: T,
     /// Smallest translation step worth an alarm, m (see `min_rotation_step`).
     pub min_translation_step: T,
+    /// A step detector tests only the directions in which its step estimate's 1-sigma is
+    /// at most this many times the smallest step worth an alarm (`min_rotation_step`,
+    /// `min_translation_step`). Elsewhere a near-singular information turns noise into a
+    /// large "step" (the lever arm along the axis of planar driving carries 1e-5 of the
+    /// information across it). Infinite (the default) tests every direction; the vehicle
+    /// monitor (`msreg monitor`) uses 1: a detector claims only steps it can resolve.
+    pub resolvable_step_factor: T,
 }
 
 impl<T: Scalar> Default for HealthConfig<T> {
@@ -74,6 +81,7 @@ impl<T: Scalar> Default for HealthConfig<T> {
             // biased low by what the filter absorbed before the detection), and 5 mm.
             min_rotation_step: T::lit(0.25f64.to_radians()),
             min_translation_step: T::lit(0.005),
+            resolvable_step_factor: T::lit(f64::INFINITY),
         }
     }
 }
@@ -149,35 +157,70 @@ impl<T: Scalar> StepDetector<T> {
         self.updates = self.updates.saturating_add(1);
     }
 
-    /// The GLR statistic, or `None` while the information is singular.
-    fn statistic(&self) -> Option<T> {
-        let reg = Matrix3::identity() * (self.info_squared_weights.trace() * T::lit(1e-9));
-        let cov = Cholesky::new(self.info_squared_weights + reg)?;
-        Some(self.score.dot(&cov.solve(&self.score)))
-    }
-
-    /// The maximum-likelihood step `A1^-1 b` and its covariance `A1^-1 A2 A1^-1`.
-    fn step(&self) -> Option<(Vector3<T>, Matrix3<T>)> {
-        let reg = Matrix3::identity() * (self.info.trace() * T::lit(1e-9));
-        let info_inv = Cholesky::new(self.info + reg)?.inverse();
-        let cov = info_inv * self.info_squared_weights * info_inv;
-        Some((info_inv * self.score, (cov + cov.transpose()) * T::lit(0.5)))
-    }
-
-    /// Statistic and step when the detector is ready, the statistic exceeds `threshold`
-    /// and the estimated step is at least `min_step` long.
+    /// Statistic and step when the detector is ready, the statistic exceeds its
+    /// chi-square threshold at `confidence` and the estimated step is at least `min_step`
+    /// long. Both are taken only over the directions in which a step of `min_step` can be
+    /// resolved: the eigen-directions of the information `A1` where the step's 1-sigma
+    /// (at most `A1^-1/2`) is at most `factor` times `min_step`. Elsewhere (the lever arm along the axis of
+    /// planar driving, a camera's roll about its direction of travel) the estimate `A1^-1 b`
+    /// is noise amplified by a near-singular `A1` and says nothing about a knock; the
+    /// threshold is chi-square with as many dof as directions kept.
     fn fire(
         &self,
         min_updates: u32,
-        threshold: T,
-        min_step: T,
+        confidence: Confidence,
+        (min_step, factor): (T, T),
     ) -> Option<(T, Vector3<T>, Matrix3<T>)> {
         if self.updates < min_updates {
             return None;
         }
-        let statistic = self.statistic().filter(|s| *s > threshold)?;
-        let (step, cov) = self.step()?;
-        (step.norm() >= min_step).then_some((statistic, step, cov))
+        let eig = self.info.symmetric_eigen();
+        let v = eig.eigenvectors;
+        let resolvable = min_step * factor;
+        // Infinite factor: every direction (floor 0).
+        let floor = T::one() / (resolvable * resolvable);
+        let keep: [bool; 3] = core::array::from_fn(|i| eig.eigenvalues[i] >= floor);
+        let kept = keep.iter().filter(|k| **k).count();
+        if kept == 0 {
+            return None;
+        }
+        // In eigen-coordinates, with the dropped directions made inert (zero score, unit
+        // information), the 3-dof formulas give the kept subspace's.
+        let mut score = v.transpose() * self.score;
+        let mut a1 = v.transpose() * self.info * v;
+        let mut a2 = v.transpose() * self.info_squared_weights * v;
+        for i in (0..3).filter(|i| !keep[*i]) {
+            score[i] = T::zero();
+            for j in 0..3 {
+                for m in [&mut a1, &mut a2] {
+                    m[(i, j)] = T::zero();
+                    m[(j, i)] = T::zero();
+                }
+            }
+            a1[(i, i)] = T::one();
+            a2[(i, i)] = T::one();
+        }
+        let threshold = chi2::quantile::<T>(kept, confidence);
+        let reg = |m: &Matrix3<T>| Matrix3::identity() * (m.trace() * T::lit(1e-9));
+        let statistic = score.dot(&Cholesky::new(a2 + reg(&a2))?.solve(&score));
+        if statistic <= threshold {
+            return None;
+        }
+        let a1_inv = Cholesky::new(a1 + reg(&a1))?.inverse();
+        let mut cov = a1_inv * a2 * a1_inv;
+        for i in (0..3).filter(|i| !keep[*i]) {
+            for j in 0..3 {
+                cov[(i, j)] = T::zero();
+                cov[(j, i)] = T::zero();
+            }
+        }
+        let step = v * (a1_inv * score);
+        let cov = v * cov * v.transpose();
+        (step.norm() >= min_step).then_some((
+            statistic,
+            step,
+            (cov + cov.transpose()) * T::lit(0.5),
+        ))
     }
 }
 
@@ -318,13 +361,13 @@ impl<T: Scalar, const S: usize> HealthMonitor<T, S> {
         health
             .translation
             .add(&inn.translation_info, &inn.translation_score, l);
-        let threshold = chi2::quantile::<T>(3, config.step_confidence);
+        let confidence = config.step_confidence;
         let min = config.step_min_updates;
-        let event = if let Some((statistic, step, step_covariance)) =
-            health
-                .rotation
-                .fire(min, threshold, config.min_rotation_step)
-        {
+        let event = if let Some((statistic, step, step_covariance)) = health.rotation.fire(
+            min,
+            confidence,
+            (config.min_rotation_step, config.resolvable_step_factor),
+        ) {
             Some(HealthEvent::RotationStep {
                 sensor: s,
                 stamp_ns,
@@ -335,7 +378,11 @@ impl<T: Scalar, const S: usize> HealthMonitor<T, S> {
         } else {
             health
                 .translation
-                .fire(min, threshold, config.min_translation_step)
+                .fire(
+                    min,
+                    confidence,
+                    (config.min_translation_step, config.resolvable_step_factor),
+                )
                 .map(
                     |(statistic, step, step_covariance)| HealthEvent::TranslationStep {
                         sensor: s,
@@ -347,10 +394,14 @@ impl<T: Scalar, const S: usize> HealthMonitor<T, S> {
                 )
         };
         if event.is_some() {
-            health.rotation = StepDetector::new();
-            health.translation = StepDetector::new();
             health.steps_detected = health.steps_detected.saturating_add(1);
             health.last_event = event;
+            // The filter's reaction to a step also settles what the other sensors saw of
+            // it through the shared IMU state: every detector starts again.
+            for h in self.sensors.iter_mut() {
+                h.rotation = StepDetector::new();
+                h.translation = StepDetector::new();
+            }
         }
         event
     }
@@ -360,12 +411,15 @@ impl<T: Scalar, const S: usize> HealthMonitor<T, S> {
 mod tests {
     use super::*;
 
+    /// Information per update and axis: a 1-sigma of 0.18 deg per update.
+    const INFO: f64 = 1e5;
+
     fn innovation(r: Vector3<f64>) -> ExtrinsicInnovation<f64> {
-        // H = I, S = I: info = I, score = r.
+        // H = I, S = 1 / INFO: info = INFO I, score = INFO r (r the rotation error, rad).
         ExtrinsicInnovation {
-            rotation_info: Matrix3::identity(),
-            rotation_score: r,
-            translation_info: Matrix3::identity(),
+            rotation_info: Matrix3::identity() * INFO,
+            rotation_score: r * INFO,
+            translation_info: Matrix3::identity() * INFO,
             translation_score: Vector3::zeros(),
         }
     }
@@ -373,6 +427,8 @@ mod tests {
     #[test]
     fn persistent_bias_fires_the_rotation_detector() {
         let mut m = HealthMonitor::<f64, 1>::new(HealthConfig::default());
+        // 1.5 sigma per update: 0.27 deg, above the 0.25 deg worth an alarm.
+        let bias = 1.5 / INFO.sqrt();
         let mut fired = None;
         for k in 0..100 {
             if let Some(e) = m.record(
@@ -381,7 +437,7 @@ mod tests {
                 3.0,
                 6,
                 true,
-                Some(&innovation(Vector3::new(1.5, 0.0, 0.0))),
+                Some(&innovation(Vector3::new(bias, 0.0, 0.0))),
             ) {
                 fired = Some((k, e));
                 break;
@@ -414,11 +470,37 @@ mod tests {
     }
 
     #[test]
+    fn an_unresolvable_direction_does_not_fire() {
+        // Two axes well informed and unbiased; the third carries 1e-3 of their information
+        // (a step's sigma there is far above 0.25 deg) and a 3-sigma bias: the estimate
+        // along it is large, but it cannot be resolved, so no alarm.
+        let config = HealthConfig {
+            resolvable_step_factor: 1.0,
+            ..HealthConfig::default()
+        };
+        let mut m = HealthMonitor::<f64, 1>::new(config);
+        let info = Matrix3::from_diagonal(&Vector3::new(INFO, INFO, INFO * 1e-3));
+        for k in 0..300u64 {
+            let inn = ExtrinsicInnovation {
+                rotation_info: info,
+                rotation_score: Vector3::new(0.0, 0.0, 3.0 * (INFO * 1e-3).sqrt()),
+                translation_info: info,
+                translation_score: Vector3::zeros(),
+            };
+            assert!(
+                m.record(0, k, 3.0, 6, true, Some(&inn)).is_none(),
+                "alarm at {k}"
+            );
+        }
+    }
+
+    #[test]
     fn zero_mean_residuals_do_not_fire() {
         let mut m = HealthMonitor::<f64, 1>::new(HealthConfig::default());
-        // Alternating signs: zero-mean, unit variance.
+        // Alternating signs: zero-mean, unit variance (in sigmas).
+        let sd = 1.0 / INFO.sqrt();
         for k in 0..1000u64 {
-            let s = if k % 2 == 0 { 1.0 } else { -1.0 };
+            let s = if k % 2 == 0 { sd } else { -sd };
             let e = m.record(
                 0,
                 k,

@@ -18,6 +18,7 @@ mod lidar;
 mod meta;
 mod observed_corners;
 mod pose;
+mod pose_pair;
 mod result;
 mod yaml;
 
@@ -42,4 +43,5 @@ pub use observed_corners::{
     read_observed_corners, ObservedCorner, ObservedImage, OBSERVED_CORNERS_CSV,
 };
 pub use pose::{read_pose_csv, write_pose_csv, PoseRecord, PoseSensorYaml};
+pub use pose_pair::{PosePairCalibration, CALIBRATION_OF_RECORD_YAML};
 pub use result::{isometry_from_matrix, CalibrationResult, ExtrinsicEstimate};

@@ -13,6 +13,7 @@ pub mod lidar;
 pub mod lidar_camera;
 pub mod link;
 pub mod mi;
+pub mod monitor;
 pub mod ndt;
 pub mod plot;
 pub mod pointcloud;

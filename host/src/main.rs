@@ -70,6 +70,8 @@ enum Command {
         #[command(subcommand)]
         target: DetectTarget,
     },
+    /// Replay the calibration health monitor over IMU + pose0 + pose1 (alarms, timeline).
+    Monitor(msreg_host::monitor::cli::MonitorArgs),
 }
 
 #[derive(Subcommand)]
@@ -100,6 +102,9 @@ enum Scenario {
     /// Robot with an upward fisheye and a marker driving a loop under ~40 static
     /// infrastructure cameras (marker corners, blobs, COLMAP VO model).
     Infra(msreg_host::infra::cli::SimulateInfra),
+    /// On-vehicle monitoring: a car-like drive with IMU, LiDAR odometry (pose0) and camera
+    /// visual odometry (pose1), a camera knock partway through.
+    Drive(msreg_host::sim::drive_cli::SimulateDrive),
 }
 
 #[derive(Args)]
@@ -267,6 +272,16 @@ fn run(command: Command) -> Result<(), Failure> {
         } => aruco_cmd::run_blobs(&args)
             .map(|_| ())
             .map_err(Failure::BadInput),
+        Command::Simulate {
+            scenario: Scenario::Drive(args),
+        } => Ok(msreg_host::sim::drive_cli::simulate(&args)?),
+        Command::Monitor(args) => match msreg_host::monitor::cli::run(&args)? {
+            msreg_host::monitor::cli::MonitorOutcome::Ran => Ok(()),
+            msreg_host::monitor::cli::MonitorOutcome::Failed(why) => {
+                eprintln!("msreg: monitor: {why}");
+                std::process::exit(1)
+            }
+        },
         Command::Match(args) => match match_cmd::run(&args)? {
             match_cmd::MatchOutcome { ok: true } => Ok(()),
             _ => Err(Failure::NotConverged(

@@ -24,6 +24,8 @@ pub mod camera_cli;
 mod clock;
 mod config;
 pub mod drive;
+pub mod drive_cli;
+pub mod drive_sim;
 #[cfg(test)]
 mod drive_tests;
 mod extrinsic;
@@ -47,6 +49,7 @@ pub use camera::{simulate_camera_imu, CameraImuSim, CameraImuSimConfig, CameraMo
 pub use clock::Clock;
 pub use config::{ImuSimConfig, Knock, PoseSimConfig, SimConfig, SimError, DEFAULT_START_STAMP_NS};
 pub use drive::DriveConfig;
+pub use drive_sim::{simulate_drive, DriveSim, DriveSimConfig, KnockTarget};
 pub use extrinsic::{random_mounting, random_pose};
 pub use imu::{imu_noise_yaml, synthesize_imu, ImuSynthesis};
 pub use joint::{simulate_joint, JointSim, JointSimConfig};
@@ -72,6 +75,9 @@ enum Stream {
     CameraScene = 8,
     CameraNoise = 9,
     JointLidarMounting = 10,
+    DriveMounting = 11,
+    DriveOdometry0 = 12,
+    DriveOdometry1 = 13,
 }
 
 fn rng_for(seed: u64, stream: Stream) -> ChaCha8Rng {

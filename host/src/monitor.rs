@@ -1,0 +1,176 @@
+//! `msreg monitor`: the on-vehicle calibration health monitor (estimator/src/health.rs)
+//! replayed on the host over an IMU and two pose sensors (`pose0`, e.g. LiDAR odometry;
+//! `pose1`, e.g. a camera's visual odometry), all in one filter (the joint layout without a
+//! target frame, `MonitorEkf`), started from the vehicle's calibration of record.
+//!
+//! Two runs over the same data:
+//! - the **monitor**: extrinsics and time offsets start at the calibration of record with its
+//!   sigmas; the health monitor's step detectors and windowed NIS test flag what changes
+//!   (alarms: time, sensor, kind);
+//! - the **observability** run: the same filter with wide extrinsic priors and no alarms, so
+//!   how far each sigma shrinks says what this drive itself can observe, per DoF, in words
+//!   (`calibrate::observability`), independent of how tight the calibration of record is.
+//!
+//! With planar motion (detected from `pose0`'s rotation increments against the gyro,
+//! `calibrate::planar`) the lever arm of both sensors along the rotation axis is held at the
+//! calibration of record (not observable; a Schmidt direction).
+
+pub mod cli;
+mod replay;
+pub mod start;
+pub mod timeline;
+
+use serde::Serialize;
+
+use crate::calibrate::observability::DofObservability;
+use crate::dataset::{ExtrinsicEstimate, ImuNoiseYaml, ImuRecord, PoseRecord, PoseSensorYaml};
+
+pub use replay::{monitor, MonitorOptions};
+
+/// Sensor names, by filter index.
+pub const SENSOR_NAMES: [&str; 2] = ["pose0", "pose1"];
+
+/// What the monitor replays.
+#[derive(Debug, Clone, Copy)]
+pub struct MonitorInput<'a> {
+    /// `imu0/data.csv`.
+    pub imu: &'a [ImuRecord],
+    /// `imu0/imu.yaml`.
+    pub imu_noise: &'a ImuNoiseYaml,
+    /// `pose0/data.csv`, `pose1/data.csv`.
+    pub poses: [&'a [PoseRecord]; 2],
+    /// `pose0/sensor.yaml`, `pose1/sensor.yaml`.
+    pub pose_noise: [&'a PoseSensorYaml; 2],
+    /// The calibration of record, `pose0` and `pose1`.
+    pub prior: [ExtrinsicEstimate; 2],
+}
+
+/// Why the monitor could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum MonitorError {
+    /// The input is unusable (the message names the file).
+    #[error("{0}")]
+    BadInput(String),
+    /// The filter could not be started on this recording.
+    #[error("the monitor could not start: {0}")]
+    NoStart(String),
+}
+
+/// One alarm.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Alarm {
+    /// IMU time, s after the first IMU sample.
+    pub t_s: f64,
+    /// `pose0` or `pose1`.
+    pub sensor: &'static str,
+    /// `rotation_step`, `translation_step` (the GLR step detectors); among the warnings,
+    /// `nis_high` (the windowed NIS crossed its upper chi-square bound).
+    pub kind: &'static str,
+    /// The test statistic (chi-square(3) for steps, the window's NIS sum otherwise).
+    pub statistic: f64,
+    /// Estimated step: rotation in deg or translation in mm, per axis (zero for `nis_high`).
+    pub step: [f64; 3],
+}
+
+/// One update of one sensor.
+#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+pub struct NisPoint {
+    /// IMU time, s after the first IMU sample.
+    pub t_s: f64,
+    /// NIS / dof of this update.
+    pub nis_per_dof: f64,
+    /// The gate / dof (99.9 % chi-square).
+    pub gate_per_dof: f64,
+    /// Fused (inside the gate).
+    pub accepted: bool,
+    /// The windowed NIS / dof of the health monitor.
+    pub window_nis_per_dof: f64,
+}
+
+/// Per-DoF excitation (`1 - sigma / prior`) of the observability run at one update: rotation
+/// x, y, z, translation x, y, z, time offset.
+#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+pub struct ExcitationPoint {
+    /// IMU time, s after the first IMU sample.
+    pub t_s: f64,
+    /// Excitation per DoF.
+    pub excitation: [f64; 7],
+}
+
+/// Timeline and summary of one sensor.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct SensorReport {
+    /// `pose0` or `pose1`.
+    pub name: &'static str,
+    /// Every update of the monitor run.
+    pub nis: Vec<NisPoint>,
+    /// Excitation over time (observability run).
+    pub excitation: Vec<ExcitationPoint>,
+    /// Per-DoF observability at the end of the observability run.
+    pub observability: Vec<DofObservability>,
+    /// Updates fused / rejected by the gate / skipped (with reasons in `skipped`).
+    pub accepted: usize,
+    /// Rejected by the gate.
+    pub rejected: usize,
+    /// Measurements that could not be used, with the reason.
+    pub skipped: Vec<String>,
+    /// The monitor's final estimate (in the report as `final_*`).
+    #[serde(skip)]
+    pub estimate: ExtrinsicEstimate,
+    /// Final `T_imu_pose` (4x4, row-major).
+    pub final_t_imu_pose: [[f64; 4]; 4],
+    /// Final time offset, s.
+    pub final_timeshift_s: f64,
+    /// Final 1-sigma per rotation axis, deg.
+    pub final_sigma_rot_deg: [f64; 3],
+    /// Final 1-sigma per translation axis, m.
+    pub final_sigma_trans_m: [f64; 3],
+    /// Rotation between the calibration of record and the final estimate, deg.
+    pub rotation_change_deg: f64,
+    /// Translation change, m.
+    pub translation_change_m: f64,
+}
+
+/// What the monitor found.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct MonitorReport {
+    /// First IMU stamp, ns (times are seconds after it).
+    pub start_stamp_ns: u64,
+    /// Length of the IMU record, s.
+    pub duration_s: f64,
+    /// How the IMU state was started.
+    pub start: String,
+    /// The planar rotation axis (IMU frame) and the axis ratio, when the motion is planar.
+    pub planar_axis: Option<[f64; 3]>,
+    /// Second / first eigenvalue of the rotation scatter, when planar.
+    pub planar_axis_ratio: Option<f64>,
+    /// Every alarm (a detected step) in time order.
+    pub alarms: Vec<Alarm>,
+    /// Warnings in time order: the windowed NIS test crossing its upper bound (`nis_high`),
+    /// a consistency signal, not a detection (docs/monitor.md has its measured rate).
+    pub warnings: Vec<Alarm>,
+    /// `pose0`, `pose1`.
+    pub sensors: Vec<SensorReport>,
+}
+
+impl MonitorReport {
+    /// The observability rows that are not observed, as `"<sensor> <dof>: <status>: <reason>"`.
+    pub fn unobservable_words(&self) -> Vec<String> {
+        self.sensors
+            .iter()
+            .flat_map(|s| {
+                s.observability
+                    .iter()
+                    .filter(|r| r.status != "observed")
+                    .map(move |r| format!("{} {}: {}: {}", s.name, r.dof, r.status, r.reason))
+            })
+            .collect()
+    }
+
+    /// The first alarm of `sensor` at or after `t_s`.
+    pub fn first_alarm_after(&self, sensor: &str, t_s: f64) -> Option<&Alarm> {
+        self.alarms
+            .iter()
+            .find(|a| a.sensor == sensor && a.t_s >= t_s)
+    }
+}

@@ -1,0 +1,161 @@
+//! `msreg monitor <dataset>`: the command-line face of [`super::monitor`].
+//!
+//! Exit codes: 0 when the replay ran, alarms or not (finding a knock is the monitor doing its
+//! job; the alarms are printed and in the report); with `--fail-on-alarm`, 1 when an alarm
+//! was raised; 1 when the filter could not be started; 2 on bad input.
+
+use std::path::PathBuf;
+
+use anyhow::{anyhow, Context};
+use clap::Args;
+
+use super::{monitor, MonitorError, MonitorInput, MonitorOptions, MonitorReport};
+use crate::dataset::{
+    read_pose_csv, Dataset, PosePairCalibration, PoseRecord, PoseSensorYaml,
+    CALIBRATION_OF_RECORD_YAML,
+};
+
+/// `msreg monitor`.
+#[derive(Debug, Args)]
+pub struct MonitorArgs {
+    /// Dataset directory: imu0/, pose0/, pose1/ (CONVENTIONS.md).
+    pub dataset: PathBuf,
+    /// The calibration of record (a result file with `pose0` and `pose1` sections); default
+    /// `<dataset>/calibration.yaml`.
+    #[arg(long)]
+    pub initial: Option<PathBuf>,
+    /// Timeline plot (SVG).
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+    /// JSON report.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Exit 1 when an alarm was raised.
+    #[arg(long)]
+    pub fail_on_alarm: bool,
+}
+
+/// How the command ended, for the exit code.
+#[derive(Debug, Clone, PartialEq)]
+pub enum MonitorOutcome {
+    /// Ran; no alarm, or alarms without `--fail-on-alarm`.
+    Ran,
+    /// Alarms with `--fail-on-alarm`, or the filter could not start (the reason).
+    Failed(String),
+}
+
+fn pose1(dataset: &Dataset) -> anyhow::Result<(Vec<PoseRecord>, PoseSensorYaml)> {
+    let csv = dataset.path("pose1/data.csv");
+    let yaml = dataset.path("pose1/sensor.yaml");
+    for p in [&csv, &yaml] {
+        if !p.is_file() {
+            return Err(anyhow!(
+                "{}: missing (the monitor needs a second pose sensor)",
+                p.display()
+            ));
+        }
+    }
+    Ok((read_pose_csv(&csv)?, PoseSensorYaml::read(&yaml)?))
+}
+
+/// Runs the command; bad input is an `Err` (exit 2).
+pub fn run(args: &MonitorArgs) -> anyhow::Result<MonitorOutcome> {
+    let dataset = Dataset::open(&args.dataset)?;
+    let (poses1, noise1) = pose1(&dataset)?;
+    let prior_path = args
+        .initial
+        .clone()
+        .unwrap_or_else(|| dataset.path(CALIBRATION_OF_RECORD_YAML));
+    let prior = PosePairCalibration::read(&prior_path)?;
+    let missing = |k: &str| anyhow!("{}: no `{k}` section", prior_path.display());
+    let prior = [
+        prior.pose0.ok_or_else(|| missing("pose0"))?,
+        prior.pose1.ok_or_else(|| missing("pose1"))?,
+    ];
+    let input = MonitorInput {
+        imu: dataset.require_imu()?,
+        imu_noise: dataset.require_imu_noise()?,
+        poses: [dataset.require_pose0()?, &poses1],
+        pose_noise: [dataset.require_pose0_sensor()?, &noise1],
+        prior,
+    };
+    let report = match monitor(&input, &MonitorOptions::default()) {
+        Ok(r) => r,
+        Err(MonitorError::BadInput(m)) => return Err(anyhow!("{}: {m}", args.dataset.display())),
+        Err(e @ MonitorError::NoStart(_)) => return Ok(MonitorOutcome::Failed(e.to_string())),
+    };
+    print_report(&report);
+    write_outputs(args, &report)?;
+    Ok(if args.fail_on_alarm && !report.alarms.is_empty() {
+        MonitorOutcome::Failed(format!("{} alarm(s) raised", report.alarms.len()))
+    } else {
+        MonitorOutcome::Ran
+    })
+}
+
+fn write_outputs(args: &MonitorArgs, report: &MonitorReport) -> anyhow::Result<()> {
+    if let Some(path) = &args.report {
+        let text = serde_json::to_string_pretty(report)?;
+        std::fs::write(path, text).with_context(|| path.display().to_string())?;
+        eprintln!("msreg: wrote {}", path.display());
+    }
+    if let Some(path) = &args.plot {
+        super::timeline::write_timeline_svg(path, report)?;
+        eprintln!("msreg: wrote {}", path.display());
+    }
+    Ok(())
+}
+
+/// Alarms, per-sensor summary and the unobservable DoFs on stdout.
+pub fn print_report(r: &MonitorReport) {
+    println!(
+        "monitor: {:.1} s replayed; IMU start: {}",
+        r.duration_s, r.start
+    );
+    if let (Some(a), Some(q)) = (r.planar_axis, r.planar_axis_ratio) {
+        println!(
+            "planar motion: rotation axis [{:.3}, {:.3}, {:.3}] (IMU frame), axis ratio {q:.3}",
+            a[0], a[1], a[2]
+        );
+    }
+    if r.alarms.is_empty() {
+        println!("alarms: none");
+    }
+    for a in &r.alarms {
+        println!(
+            "ALARM {:8.2} s  {}  {}  statistic {:.1}  step [{:.3}, {:.3}, {:.3}] {}",
+            a.t_s,
+            a.sensor,
+            a.kind,
+            a.statistic,
+            a.step[0],
+            a.step[1],
+            a.step[2],
+            if a.kind == "translation_step" {
+                "mm"
+            } else {
+                "deg"
+            }
+        );
+    }
+    for w in &r.warnings {
+        println!(
+            "warning {:6.2} s  {}  {}  windowed NIS/dof {:.2}",
+            w.t_s, w.sensor, w.kind, w.statistic
+        );
+    }
+    for s in &r.sensors {
+        println!(
+            "{}: {} updates fused, {} rejected, {} skipped; final estimate moved {:.3} deg, {:.1} mm from the calibration of record",
+            s.name,
+            s.accepted,
+            s.rejected,
+            s.skipped.len(),
+            s.rotation_change_deg,
+            s.translation_change_m * 1e3
+        );
+    }
+    for w in r.unobservable_words() {
+        println!("{w}");
+    }
+}

@@ -1,0 +1,169 @@
+//! How the monitor's filter starts: the IMU state from a standstill or, on a moving vehicle,
+//! from the dynamic alignment of the IMU with `pose0`'s odometry (both through the pose-IMU
+//! pipeline's code), the extrinsics and time offsets from the calibration of record.
+
+use msreg_estimator::filter::MonitorEkf;
+use msreg_estimator::{FilterConfig, InitialState};
+use nalgebra::{Isometry3, Vector3};
+
+use super::{MonitorError, MonitorInput};
+use crate::calibrate::convert;
+use crate::calibrate::gyro_bias::{self, GyroBiasEstimate};
+use crate::calibrate::init::{self, RotationIncrement, Standstill};
+use crate::calibrate::planar::{self, PlanarMotion};
+use crate::calibrate::pose_imu::{moving_start, nominal_period_ns};
+
+/// Shortest stationary start used for the IMU prior, s.
+const MIN_STANDSTILL_S: f64 = 1.0;
+/// Smallest gyro-bias sigma of a bias fitted to motion, rad/s (as the pose-IMU pipeline).
+const MIN_FITTED_GYRO_BIAS_SIGMA: f64 = 2e-3;
+/// Floors of the moving start's tilt (rad) and velocity (m/s) sigmas (as the pose-IMU
+/// pipeline: the alignment's own sigmas ignore the time-offset error).
+const MIN_TILT_SIGMA: f64 = 0.6 * std::f64::consts::PI / 180.0;
+const MIN_VELOCITY_SIGMA: f64 = 0.1;
+
+/// Per-sensor prior sigmas of one run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ExtrinsicSigmas {
+    /// Rotation per axis, rad.
+    pub rotation: f64,
+    /// Translation per axis, m.
+    pub translation: f64,
+    /// Time offset, s.
+    pub time_offset: f64,
+}
+
+/// What the start found (report words and the planar axis).
+#[derive(Debug, Clone)]
+pub struct Start {
+    /// The IMU prior, in words.
+    pub imu_words: String,
+    /// Planar motion found in the rotation increments of `pose0` against the gyro.
+    pub planar: Option<PlanarMotion>,
+    /// The standstill, if the recording starts with one (zero-velocity updates run there).
+    pub standstill: Option<Standstill>,
+    imu: InitialState<f64, 2>,
+}
+
+/// `pose0`'s rotation increments on the IMU clock (prior time offset).
+fn increments_on_imu_clock(input: &MonitorInput, s: usize) -> Vec<RotationIncrement> {
+    let poses = input.poses[s];
+    let td_ns = (input.prior[s].timeshift_s * 1e9).round() as i64;
+    let shift = |t: u64| t.saturating_add_signed(td_ns);
+    init::pose_increments(poses, nominal_period_ns(poses).saturating_mul(10))
+        .into_iter()
+        .map(|(a, b, q)| (shift(a), shift(b), q))
+        .collect()
+}
+
+/// The IMU prior and planar detection.
+pub fn start(input: &MonitorInput) -> Result<Start, MonitorError> {
+    let imu = input.imu;
+    let r0 = input.prior[0].transform.rotation;
+    let increments = increments_on_imu_clock(input, 0);
+    let standstill = init::detect_standstill(imu, MIN_STANDSTILL_S);
+    let fit = match &standstill {
+        Some(_) => None,
+        None => gyro_bias::estimate_gyro_bias(imu, &increments, &r0, &Vector3::zeros()),
+    };
+    let bias = standstill
+        .as_ref()
+        .map(|s| s.gyro_mean)
+        .or(fit.as_ref().map(|f| f.bias))
+        .unwrap_or_else(Vector3::zeros);
+    let planar = planar::detect(&init::rotation_pairs(imu, increments, &bias));
+    let (state, imu_words) = match &standstill {
+        Some(s) => at_rest(s)?,
+        None => moving(input, fit.as_ref())?,
+    };
+    Ok(Start {
+        imu_words,
+        planar,
+        standstill,
+        imu: state,
+    })
+}
+
+fn at_rest(s: &Standstill) -> Result<(InitialState<f64, 2>, String), MonitorError> {
+    let mut state = InitialState::<f64, 2>::at_rest(s.accel_mean).ok_or_else(|| {
+        MonitorError::BadInput(format!(
+            "imu0/data.csv: mean accelerometer reading {:.2} m/s^2 at rest is not gravity",
+            s.accel_mean.norm()
+        ))
+    })?;
+    state.imu.gyro_bias = s.gyro_mean;
+    let words = format!("standstill of {} samples: gravity and gyro bias", s.samples);
+    Ok((state, words))
+}
+
+fn moving(
+    input: &MonitorInput,
+    fit: Option<&GyroBiasEstimate>,
+) -> Result<(InitialState<f64, 2>, String), MonitorError> {
+    let r0 = input.prior[0].transform.rotation;
+    let prior = moving_start(
+        input.imu,
+        input.poses[0],
+        &r0,
+        (fit, input.prior[0].timeshift_s),
+        input.imu_noise,
+    )
+    .map_err(|e| MonitorError::NoStart(format!("dynamic alignment with pose0 failed: {e:?}")))?;
+    let accel = input.imu[0].accel;
+    let mut state = InitialState::<f64, 2>::at_rest(accel)
+        .or_else(|| InitialState::<f64, 2>::at_rest(Vector3::new(0.0, 0.0, 9.81)))
+        .ok_or_else(|| MonitorError::NoStart("no IMU prior".into()))?;
+    state.imu.rotation =
+        convert::pose::<f64>(&Isometry3::from_parts(Default::default(), prior.rotation)).rotation;
+    state.imu.velocity = prior.velocity;
+    state.imu.gyro_bias = prior.gyro_bias;
+    state.imu.accel_bias = prior.accel_bias;
+    state.sigma_orientation = prior.sigma_orientation.max(MIN_TILT_SIGMA);
+    state.sigma_velocity = prior.sigma_velocity.max(MIN_VELOCITY_SIGMA);
+    state.sigma_accel_bias = prior.sigma_accel_bias.max(0.05);
+    state.sigma_gyro_bias = fit.map_or(0.01, |f| f.sigma.amax().max(MIN_FITTED_GYRO_BIAS_SIGMA));
+    let words = format!(
+        "moving start: dynamic alignment with pose0 (tilt sigma {:.2} deg, velocity sigma \
+         {:.2} m/s), gyro bias {}",
+        state.sigma_orientation.to_degrees(),
+        state.sigma_velocity,
+        match fit {
+            Some(f) => format!("fitted to {} increments", f.pairs),
+            None => "unknown".into(),
+        }
+    );
+    Ok((state, words))
+}
+
+impl Start {
+    /// A filter at this start with the calibration of record and the given sigmas, the
+    /// lever arm along the planar axis held for both sensors.
+    pub fn filter(
+        &self,
+        input: &MonitorInput,
+        config: &FilterConfig<f64>,
+        sigmas: &[ExtrinsicSigmas; 2],
+    ) -> Result<MonitorEkf<f64>, MonitorError> {
+        let mut state = self.imu;
+        for (s, sigma) in sigmas.iter().enumerate() {
+            let prior = &input.prior[s];
+            state = state
+                .with_extrinsic(
+                    s,
+                    convert::pose::<f64>(&prior.transform),
+                    sigma.rotation,
+                    sigma.translation,
+                )
+                .with_time_offset(s, prior.timeshift_s, sigma.time_offset);
+        }
+        let mut ekf = MonitorEkf::<f64>::new(config, &state)
+            .map_err(|e| MonitorError::BadInput(format!("imu0/imu.yaml or prior: {e}")))?;
+        if let Some(p) = &self.planar {
+            for s in 0..2 {
+                ekf.hold_translation_axis(s, Some(p.axis_imu))
+                    .map_err(|e| MonitorError::NoStart(format!("planar axis: {e}")))?;
+            }
+        }
+        Ok(ekf)
+    }
+}
