@@ -674,7 +674,6 @@ pub(crate) struct CornerFeed<'a, T: Scalar> {
     /// Each image's own corner noise from its PnP fit, by stamp: motion blur doubles it in
     /// the fast part of EuRoC `imu_april` (medians 0.2-0.3 px at rest, 0.4-0.55 px at 2 rad/s).
     frame_sigma: std::collections::HashMap<u64, f64>,
-    prior: PoseImuOptions,
     reprojection: Vec<FrameReprojection>,
     buffer: Vec<CornerObservation<T>>,
     /// The first accepted image from this stamp on becomes the report's sample.
@@ -700,11 +699,13 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize>
 
 impl<'a, T: Scalar> CornerFeed<'a, T> {
     /// The feed of the camera that is sensor `sensor` of the filter, over `input`'s images.
+    /// (`_prior`, the extrinsic prior, is no longer needed: the target is placed with its
+    /// correlation to the extrinsic, [`Ekf::init_frame_relative`].)
     pub(crate) fn new(
         input: &CameraImuInput<'a>,
         options: &CameraImuOptions,
         start: &Start<'_>,
-        prior: PoseImuOptions,
+        _prior: PoseImuOptions,
         sensor: usize,
     ) -> Self {
         let frames = input.frames;
@@ -727,7 +728,6 @@ impl<'a, T: Scalar> CornerFeed<'a, T> {
                     .collect(),
                 ImageNoise::Uniform => Default::default(),
             },
-            prior,
             reprojection: Vec::new(),
             buffer: Vec::new(),
             sample_from_ns: frames.get(frames.len() / 2).map_or(0, |f| f.stamp_ns),
@@ -784,14 +784,19 @@ impl<'a, T: Scalar> CornerFeed<'a, T> {
         if ekf.frame(TARGET).is_none() {
             if let Err(why) = self.init_target(ekf, frame) {
                 self.run.skip_measurement("cam0", frame.stamp_ns, &why);
-                return;
             }
+            return;
         }
         self.fuse(ekf, frame);
     }
 
-    /// `T_G_T = T_G_I T_I_C T_C_T(PnP)` at the current estimate, with sigmas covering the
-    /// extrinsic prior's error seen at the target's distance.
+    /// `T_G_T = T_G_I T_I_C T_C_T(PnP)` at the image's IMU time, with its full
+    /// cross-covariance with the IMU pose, the extrinsic and the time offset
+    /// ([`Ekf::init_frame_relative`]): the extrinsic prior's error is in the target's pose
+    /// once, as a correlation, not a second time as independent sigmas. The PnP pose's
+    /// covariance is `sigma^2 (J^T J)^-1` with `sigma` the larger of its own residual's and
+    /// the image's fused pixel sigma. The image is consumed: its corners constrain only
+    /// `T_C_T`, which the new frame absorbs, so fusing them again would count them twice.
     fn init_target<const S: usize, const C: usize, const N: usize, const F: usize>(
         &self,
         ekf: &mut Ekf<T, S, C, N, F>,
@@ -799,21 +804,27 @@ impl<'a, T: Scalar> CornerFeed<'a, T> {
     ) -> Result<(), String> {
         let camera = self.camera.cast::<f64>();
         let pnp = pnp_of(&camera, frame).map_err(|e| format!("no PnP pose for the target: {e}"))?;
-        // The IMU pose at the image's IMU time (the image is due, so it is within reach).
-        let t_imu = ekf
-            .imu_time(self.sensor, frame.stamp_ns)
-            .map_err(|e| e.to_string())?
-            .max(ekf.time_ns());
-        let imu_pose = ekf.predict_imu(t_imu).map_err(|e| e.to_string())?.pose();
-        let t_g_c = convert::isometry(&imu_pose) * convert::isometry(&ekf.extrinsic(self.sensor));
-        let t_g_t = t_g_c * convert::isometry(&pnp.t_cam_target);
-        let (sigma_rotation, sigma_position) =
-            target_prior_sigmas(&self.prior, pnp.t_cam_target.translation.norm());
-        ekf.init_frame(
+        let n = frame.corners.len() as f64;
+        // `rms^2 = SSR / N`, the PnP covariance's `sigma^2 = SSR / (2 N - 6)`.
+        let own_sigma2 = pnp.rms_px * pnp.rms_px * n / (2.0 * n - 6.0);
+        let sigma = self.pixel_sigma.to_f64().max(
+            self.frame_sigma
+                .get(&frame.stamp_ns)
+                .copied()
+                .unwrap_or(0.0),
+        );
+        let scale = if own_sigma2 > 0.0 {
+            (sigma * sigma / own_sigma2).max(1.0)
+        } else {
+            1.0
+        };
+        let cov = (pnp.covariance * scale).map(T::lit);
+        ekf.init_frame_relative(
             TARGET,
-            convert::pose::<T>(&t_g_t),
-            T::lit(sigma_rotation),
-            T::lit(sigma_position),
+            self.sensor,
+            frame.stamp_ns,
+            &convert::pose::<T>(&convert::isometry(&pnp.t_cam_target)),
+            &cov,
         )
         .map_err(|e| format!("cannot initialise the target: {e}"))
     }
