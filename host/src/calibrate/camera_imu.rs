@@ -784,8 +784,8 @@ impl<'a, T: Scalar> CornerFeed<'a, T> {
         if ekf.frame(TARGET).is_none() {
             if let Err(why) = self.init_target(ekf, frame) {
                 self.run.skip_measurement("cam0", frame.stamp_ns, &why);
+                return;
             }
-            return;
         }
         self.fuse(ekf, frame);
     }
@@ -795,8 +795,11 @@ impl<'a, T: Scalar> CornerFeed<'a, T> {
     /// ([`Ekf::init_frame_relative`]): the extrinsic prior's error is in the target's pose
     /// once, as a correlation, not a second time as independent sigmas. The PnP pose's
     /// covariance is `sigma^2 (J^T J)^-1` with `sigma` the larger of its own residual's and
-    /// the image's fused pixel sigma. The image is consumed: its corners constrain only
-    /// `T_C_T`, which the new frame absorbs, so fusing them again would count them twice.
+    /// the image's fused pixel sigma. The image is then also fused (as the device does with
+    /// the `TargetPose` and the corner set of the same image, so that host and device fuse
+    /// the same images): its corners constrain only `T_C_T`, so that one image's
+    /// information on the target pose is counted twice, a small over-confidence that the
+    /// following images dilute.
     fn init_target<const S: usize, const C: usize, const N: usize, const F: usize>(
         &self,
         ekf: &mut Ekf<T, S, C, N, F>,
