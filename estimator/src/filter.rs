@@ -373,8 +373,9 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
                 horizon_ns: self.imu_horizon_ns().unwrap_or(self.time_ns),
             })?;
         let end = now.lerp(&ahead, t_ns);
+        let (gyro, accel) = now.mean(&end);
         let dt = T::lit((t_ns - self.time_ns) as f64 * 1e-9);
-        let step = propagate::step_linear(&self.imu, &now, &end, dt, &self.config.imu_noise);
+        let step = propagate::step(&self.imu, &gyro, &accel, dt, &self.config.imu_noise);
         Ok((step, end))
     }
 

@@ -2,17 +2,15 @@
 //!
 //! An IMU sample is the angular rate and specific force at its stamp, an instantaneous
 //! reading, as EuRoC, Kalibr and OpenVINS take it. Between two samples the signal is their
-//! linear interpolation ([`ImuSample::lerp`] gives a reading between samples), and
-//! [`step_linear`] integrates that signal to fourth order: orientation with the linear rate
-//! and its coning term, velocity and position by Simpson's rule over the orientations at the
-//! start, middle and end of the step (what RK4 on the interpolated samples does here, as in
-//! OpenVINS). The earlier scheme, the mean of the two readings with the mid-interval
-//! orientation `R Exp(w_mean dt / 2)`, missed `dw/dt dt^2 / 8` of that orientation: a
-//! specific-force error `|a| |dw/dt| dt^2 / 8` (2.5e-4 m/s^2 at 200 Hz and 8 rad/s^2);
-//! propagation alone, worst 50 ms window 1.72 -> 1.17 sigma at 200 Hz, but the camera-IMU
-//! NEES cells did not improve (docs/estimator.md). Holding one sample over
-//! the whole interval instead would delay the signal by half a period, and every time offset
-//! estimated against it by `dt / 2` (1.25 ms at 400 Hz).
+//! linear interpolation, so the step over `[t_a, t_b]` uses the mean of the readings at both
+//! ends ([`ImuSample::lerp`] gives a reading between samples). Orientation integrates that
+//! mean rate exactly, `R' = R Exp(w dt)`; velocity and position integrate the mean specific
+//! force rotated by the mid-interval orientation `R Exp(w dt / 2)`, which is exact to second
+//! order in `dt` (holding `R` at the interval start, as eq. 3.9 writes it, leaves a
+//! systematic error of `|a| |w| dt / 2` that a 400 Hz, 2 rad/s excitation turns into a
+//! spurious 0.02 m/s^2 accelerometer bias). Holding one sample over the whole interval
+//! instead would delay the signal by half a period, and every time offset estimated
+//! against it by `dt / 2` (1.25 ms at 400 Hz).
 //!
 //! IMUs whose driver outputs interval means (integrating IMUs) are re-stamped to their
 //! interval's midpoint by the dataset reader (`sample_timing` in `imu0/imu.yaml`), which
@@ -143,8 +141,8 @@ pub struct ImuStep<T: Scalar> {
     pub noise: SMatrix<T, 15, 15>,
 }
 
-/// Propagates the IMU state over `dt` seconds holding one reading `(gyro, accel)` (the
-/// constant signal: [`step_linear`] with equal readings at both ends).
+/// Propagates the IMU state over `dt` seconds with the interval's mean reading `(gyro, accel)`
+/// (see [`ImuSample::mean`]).
 pub fn step<T: Scalar>(
     x: &ImuState<T>,
     gyro: &Vector3<T>,
@@ -152,123 +150,53 @@ pub fn step<T: Scalar>(
     dt: T,
     noise: &ImuNoise<T>,
 ) -> ImuStep<T> {
-    let held = ImuSample {
-        stamp_ns: 0,
-        gyro: *gyro,
-        accel: *accel,
-    };
-    step_linear(x, &held, &held, dt, noise)
-}
-
-/// Rotation vector from the start of a step to `tau` (`dt / 2` or `dt`) under the bias-free
-/// rate `u0 -> u1` linear over `dt`, to third order (the coning term `c u0 x u1`), and its
-/// Jacobian w.r.t. the gyro bias.
-fn rotation_to<T: Scalar>(
-    u0: &Vector3<T>,
-    u1: &Vector3<T>,
-    dt: T,
-    mid: bool,
-) -> (Vector3<T>, Matrix3<T>) {
-    let (w0, w1, tau, c) = if mid {
-        // Over [0, dt/2]: the rate ends at (u0 + u1) / 2.
-        (
-            T::lit(0.375),
-            T::lit(0.125),
-            dt * T::lit(0.5),
-            dt * dt / T::lit(96.0),
-        )
-    } else {
-        (T::lit(0.5), T::lit(0.5), dt, dt * dt / T::lit(12.0))
-    };
-    let theta = (u0 * w0 + u1 * w1) * dt + u0.cross(u1) * c;
-    let d_bg = Matrix3::identity() * (-tau) + (skew(u1) - skew(u0)) * c;
-    (theta, d_bg)
-}
-
-/// Propagates the IMU state over `dt` seconds from reading `start` to reading `end`, the
-/// signal linear in between (the readings' stamps are not used). Orientation integrates the
-/// linear rate to third order (with its coning term); the rotated specific force is
-/// integrated by Simpson's rule over the start, mid-interval and end orientations, which is
-/// what RK4 on the linearly interpolated samples does for this linear system.
-pub fn step_linear<T: Scalar>(
-    x: &ImuState<T>,
-    start: &ImuSample<T>,
-    end: &ImuSample<T>,
-    dt: T,
-    noise: &ImuNoise<T>,
-) -> ImuStep<T> {
-    let (half, sixth) = (T::lit(0.5), T::lit(1.0 / 6.0));
-    let (u0, u1) = (start.gyro - x.gyro_bias, end.gyro - x.gyro_bias);
-    let a = [
-        start.accel - x.accel_bias,
-        (start.accel + end.accel) * half - x.accel_bias,
-        end.accel - x.accel_bias,
-    ];
+    let half = T::lit(0.5);
+    let w = gyro - x.gyro_bias;
+    let a = accel - x.accel_bias;
     let g = Vector3::new(T::zero(), T::zero(), -T::lit(GRAVITY));
-    let (theta_mid, d_mid) = rotation_to(&u0, &u1, dt, true);
-    let (theta_end, d_end) = rotation_to(&u0, &u1, dt, false);
-    let r0 = x.rotation.to_rotation_matrix().into_inner();
-    let e = [
-        Matrix3::identity(),
-        exp(&theta_mid).to_rotation_matrix().into_inner(),
-        exp(&theta_end).to_rotation_matrix().into_inner(),
-    ];
-    let f = |k: usize| r0 * e[k] * a[k];
-    let (f0, fm, f1) = (f(0), f(1), f(2));
-    let dv = (f0 + fm * T::lit(4.0) + f1) * (dt * sixth);
-    let dp = (f0 + fm * T::lit(2.0)) * (dt * dt * sixth);
+
+    let dq = exp(&(w * dt));
+    let dq_half = exp(&(w * (dt * half)));
+    let r_mid = (x.rotation * dq_half).to_rotation_matrix().into_inner();
+    let acc_g = r_mid * a + g;
 
     let state = ImuState {
-        rotation: crate::lie::renormalize(x.rotation * exp(&theta_end)),
-        position: x.position + x.velocity * dt + dp + g * (half * dt * dt),
-        velocity: x.velocity + dv + g * dt,
+        rotation: crate::lie::renormalize(x.rotation * dq),
+        position: x.position + x.velocity * dt + acc_g * (half * dt * dt),
+        velocity: x.velocity + acc_g * dt,
         gyro_bias: x.gyro_bias,
         accel_bias: x.accel_bias,
     };
 
-    // Sensitivities of each rotated specific force `R0 E_k a_k` to the errors.
-    let jr = [
-        Matrix3::zeros(),
-        right_jacobian(&theta_mid) * d_mid,
-        right_jacobian(&theta_end) * d_end,
-    ];
-    let d_theta = |k: usize| -(r0 * e[k] * skew(&a[k]) * e[k].transpose());
-    let d_bg = |k: usize| -(r0 * e[k] * skew(&a[k]) * jr[k]);
-    let d_ba = |k: usize| -(r0 * e[k]);
-    let simpson_v =
-        |d: &dyn Fn(usize) -> Matrix3<T>| (d(0) + d(1) * T::lit(4.0) + d(2)) * (dt * sixth);
-    let simpson_p =
-        |d: &dyn Fn(usize) -> Matrix3<T>| (d(0) + d(1) * T::lit(2.0)) * (dt * dt * sixth);
+    // Sensitivities of the rotated specific force R_mid a to the errors.
+    let e_half_t = dq_half.to_rotation_matrix().into_inner().transpose();
+    let ra_x = r_mid * skew(&a);
+    let d_force_d_theta = -(ra_x * e_half_t);
+    let d_force_d_bg = ra_x * right_jacobian(&(w * (dt * half))) * (dt * half);
+    let d_force_d_ba = -r_mid;
+    let d_theta_d_bg = -(right_jacobian(&(w * dt)) * dt);
 
     let mut phi = SMatrix::<T, 15, 15>::identity();
     let (o, p, v, bg, ba) = BLOCKS;
-    set3(&mut phi, o, o, &e[2].transpose());
-    set3(&mut phi, o, bg, &jr[2]);
-    set3(&mut phi, p, o, &simpson_p(&d_theta));
+    let dt2 = half * dt * dt;
+    set3(
+        &mut phi,
+        o,
+        o,
+        &dq.to_rotation_matrix().into_inner().transpose(),
+    );
+    set3(&mut phi, o, bg, &d_theta_d_bg);
+    set3(&mut phi, p, o, &(d_force_d_theta * dt2));
     set3(&mut phi, p, v, &(Matrix3::identity() * dt));
-    set3(&mut phi, p, bg, &simpson_p(&d_bg));
-    set3(&mut phi, p, ba, &simpson_p(&d_ba));
-    set3(&mut phi, v, o, &simpson_v(&d_theta));
-    set3(&mut phi, v, bg, &simpson_v(&d_bg));
-    set3(&mut phi, v, ba, &simpson_v(&d_ba));
+    set3(&mut phi, p, bg, &(d_force_d_bg * dt2));
+    set3(&mut phi, p, ba, &(d_force_d_ba * dt2));
+    set3(&mut phi, v, o, &(d_force_d_theta * dt));
+    set3(&mut phi, v, bg, &(d_force_d_bg * dt));
+    set3(&mut phi, v, ba, &(d_force_d_ba * dt));
 
-    ImuStep {
-        state,
-        noise: discrete_noise(&phi, dt, noise),
-        transition: phi,
-    }
-}
-
-/// `Q_d = G Q G^T`: white noise enters exactly like a bias error held over the step, bias
-/// walks add on the bias blocks. The gyro noise reaches the orientation, position and
-/// velocity rows (the first 9), the accelerometer noise position and velocity, so `Q` is
-/// formed on those blocks only.
-fn discrete_noise<T: Scalar>(
-    phi: &SMatrix<T, 15, 15>,
-    dt: T,
-    noise: &ImuNoise<T>,
-) -> SMatrix<T, 15, 15> {
-    let (o, p, _, bg, ba) = BLOCKS;
+    // White noise enters exactly like a bias error; bias walks add on the bias blocks. The
+    // gyro noise reaches the orientation, position and velocity rows (the first 9), the
+    // accelerometer noise position and velocity, so `Q` is formed on those blocks only.
     const _: () = assert!(BLOCKS.0 == 0 && BLOCKS.1 == 3 && BLOCKS.2 == 6);
     let g_gyro = phi.fixed_view::<9, 3>(o, bg).clone_owned();
     let g_accel = phi.fixed_view::<6, 3>(p, ba).clone_owned();
@@ -285,7 +213,12 @@ fn discrete_noise<T: Scalar>(
         q[(bg + i, bg + i)] += walk_g;
         q[(ba + i, ba + i)] += walk_a;
     }
-    q
+
+    ImuStep {
+        state,
+        transition: phi,
+        noise: q,
+    }
 }
 
 /// `Phi * m` for a transition with the structure every product of IMU steps keeps: the
@@ -417,60 +350,6 @@ mod tests {
         });
         let analytic = step(&x, &gyro, &accel, dt, &noise).transition;
         assert_mat_close(&analytic, &numeric, 1e-6);
-    }
-
-    /// The interpolating step: different readings at both ends, a long step.
-    #[test]
-    fn linear_step_transition_matches_central_differences() {
-        let x = moving_state();
-        let reading = |gyro: [f64; 3], accel: [f64; 3]| ImuSample {
-            stamp_ns: 0,
-            gyro: Vector3::from(gyro),
-            accel: Vector3::from(accel),
-        };
-        let a = reading([1.5, -2.0, 0.7], [1.0, 3.0, 9.0]);
-        let b = reading([0.4, -1.1, 2.2], [-2.0, 4.0, 8.0]);
-        let (dt, noise) = (0.05, ImuNoise::vn300());
-        let nominal = step_linear(&x, &a, &b, dt, &noise).state;
-        let numeric = central_diff::<15, 15>(|d: SVector<f64, 15>| {
-            boxminus(
-                &step_linear(&boxplus(&x, &d), &a, &b, dt, &noise).state,
-                &nominal,
-            )
-        });
-        assert_mat_close(
-            &step_linear(&x, &a, &b, dt, &noise).transition,
-            &numeric,
-            1e-6,
-        );
-    }
-
-    /// Against a fine integration of the linearly interpolated signal: the step's error is
-    /// fourth order in `dt` (halving `dt` divides it by ~16), the mean-reading scheme's was
-    /// third (its mid-interval orientation `Exp(w_mean dt / 2)` misses `dw/dt dt^2 / 8`).
-    #[test]
-    fn linear_step_converges_at_fourth_order() {
-        let x = moving_state();
-        let reading = |t: f64| ImuSample {
-            stamp_ns: 0,
-            gyro: Vector3::new(1.5, -2.0, 0.7) + Vector3::new(-20.0, 18.0, 30.0) * t,
-            accel: Vector3::new(1.0, 3.0, 9.0) + Vector3::new(-60.0, 20.0, -20.0) * t,
-        };
-        let noise = ImuNoise::vn300();
-        let fine = |dt: f64| {
-            let n = 4000;
-            let h = dt / n as f64;
-            (0..n).fold(x, |s, k| {
-                let (t0, t1) = (k as f64 * h, (k + 1) as f64 * h);
-                step_linear(&s, &reading(t0), &reading(t1), h, &noise).state
-            })
-        };
-        let error = |dt: f64| {
-            let coarse = step_linear(&x, &reading(0.0), &reading(dt), dt, &noise).state;
-            boxminus(&coarse, &fine(dt)).fixed_rows::<9>(0).norm()
-        };
-        let (e1, e2) = (error(0.01), error(0.005));
-        assert!(e1 / e2 > 12.0, "{e1:e} / {e2:e}");
     }
 
     #[test]
