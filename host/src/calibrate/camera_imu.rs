@@ -674,6 +674,7 @@ pub(crate) struct CornerFeed<'a, T: Scalar> {
     /// Each image's own corner noise from its PnP fit, by stamp: motion blur doubles it in
     /// the fast part of EuRoC `imu_april` (medians 0.2-0.3 px at rest, 0.4-0.55 px at 2 rad/s).
     frame_sigma: std::collections::HashMap<u64, f64>,
+    prior: PoseImuOptions,
     reprojection: Vec<FrameReprojection>,
     buffer: Vec<CornerObservation<T>>,
     /// The first accepted image from this stamp on becomes the report's sample.
@@ -699,13 +700,11 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize>
 
 impl<'a, T: Scalar> CornerFeed<'a, T> {
     /// The feed of the camera that is sensor `sensor` of the filter, over `input`'s images.
-    /// (`_prior`, the extrinsic prior, is no longer needed: the target is placed with its
-    /// correlation to the extrinsic, [`Ekf::init_frame_relative`].)
     pub(crate) fn new(
         input: &CameraImuInput<'a>,
         options: &CameraImuOptions,
         start: &Start<'_>,
-        _prior: PoseImuOptions,
+        prior: PoseImuOptions,
         sensor: usize,
     ) -> Self {
         let frames = input.frames;
@@ -728,6 +727,7 @@ impl<'a, T: Scalar> CornerFeed<'a, T> {
                     .collect(),
                 ImageNoise::Uniform => Default::default(),
             },
+            prior,
             reprojection: Vec::new(),
             buffer: Vec::new(),
             sample_from_ns: frames.get(frames.len() / 2).map_or(0, |f| f.stamp_ns),
@@ -793,13 +793,12 @@ impl<'a, T: Scalar> CornerFeed<'a, T> {
     /// `T_G_T = T_G_I T_I_C T_C_T(PnP)` at the image's IMU time, with its full
     /// cross-covariance with the IMU pose, the extrinsic and the time offset
     /// ([`Ekf::init_frame_relative`]): the extrinsic prior's error is in the target's pose
-    /// once, as a correlation, not a second time as independent sigmas. The PnP pose's
-    /// covariance is `sigma^2 (J^T J)^-1` with `sigma` the larger of its own residual's and
-    /// the image's fused pixel sigma. The image is then also fused (as the device does with
-    /// the `TargetPose` and the corner set of the same image, so that host and device fuse
-    /// the same images): its corners constrain only `T_C_T`, so that one image's
-    /// information on the target pose is counted twice, a small over-confidence that the
-    /// following images dilute.
+    /// once, as a correlation, not a second time as independent sigmas. The PnP pose gets
+    /// the documented conservative sigmas of [`target_prior_sigmas`] (independent per axis),
+    /// the same the `link` replay sends the device in its `TargetPose`, so that host and
+    /// device start alike (the PnP fit's own covariance, `sigma^2 (J^T J)^-1`, is tighter;
+    /// with it the host's f64 RepErrCal and the device's f32 differed by 2.8 host sigma in
+    /// translation in the camera HIL test). The image is then also fused.
     fn init_target<const S: usize, const C: usize, const N: usize, const F: usize>(
         &self,
         ekf: &mut Ekf<T, S, C, N, F>,
@@ -807,21 +806,16 @@ impl<'a, T: Scalar> CornerFeed<'a, T> {
     ) -> Result<(), String> {
         let camera = self.camera.cast::<f64>();
         let pnp = pnp_of(&camera, frame).map_err(|e| format!("no PnP pose for the target: {e}"))?;
-        let n = frame.corners.len() as f64;
-        // `rms^2 = SSR / N`, the PnP covariance's `sigma^2 = SSR / (2 N - 6)`.
-        let own_sigma2 = pnp.rms_px * pnp.rms_px * n / (2.0 * n - 6.0);
-        let sigma = self.pixel_sigma.to_f64().max(
-            self.frame_sigma
-                .get(&frame.stamp_ns)
-                .copied()
-                .unwrap_or(0.0),
-        );
-        let scale = if own_sigma2 > 0.0 {
-            (sigma * sigma / own_sigma2).max(1.0)
-        } else {
-            1.0
-        };
-        let cov = (pnp.covariance * scale).map(T::lit);
+        let (r, p) = target_prior_sigmas(&self.prior, pnp.t_cam_target.translation.norm());
+        let cov = Matrix6::from_diagonal(&nalgebra::Vector6::new(
+            r * r,
+            r * r,
+            r * r,
+            p * p,
+            p * p,
+            p * p,
+        ))
+        .map(T::lit);
         ekf.init_frame_relative(
             TARGET,
             self.sensor,
