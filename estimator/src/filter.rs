@@ -415,6 +415,9 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
 }
 
 mod clones;
+mod frame_relative;
+#[cfg(test)]
+mod frame_relative_tests;
 mod frames;
 mod fuse;
 mod holds;

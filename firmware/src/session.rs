@@ -523,21 +523,24 @@ impl Session {
         }
     }
 
-    /// `T_G_T = T_G_I T_I_C T_C_T` at the current IMU state; the target frame's prior.
+    /// `T_G_T = T_G_I T_I_C T_C_T` at the image's IMU time, with its cross-covariance with
+    /// the IMU pose, the extrinsic and the time offset (`Ekf::init_frame_relative`); the
+    /// message's sigmas are those of the measured `T_C_T` (independent per axis).
     #[inline(never)]
     fn init_target<W: embedded_io::Write>(&mut self, w: &mut W, t: &TargetPose, seq: u32) {
         let Some(Filter::CameraImu(CameraFilter { ekf, .. })) = self.filter.as_mut() else {
             return;
         };
-        // The IMU pose at the image's IMU time (due, so within the look-ahead).
-        let imu_pose = ekf
-            .imu_time(SENSOR, t.stamp_ns)
-            .and_then(|t_imu| ekf.predict_imu(t_imu.max(ekf.time_ns())))
-            .map_or_else(|_| ekf.imu().pose(), |state| state.pose());
-        let t_g_t = imu_pose
-            .compose(&ekf.extrinsic(SENSOR))
-            .compose(&pose(&t.t_cam_target));
-        match ekf.init_frame(TARGET, t_g_t, t.sigma_rotation_rad, t.sigma_position_m) {
+        let (r, p) = (t.sigma_rotation_rad, t.sigma_position_m);
+        let cov = nalgebra::SMatrix::<f32, 6, 6>::from_diagonal(&nalgebra::SVector::from([
+            r * r,
+            r * r,
+            r * r,
+            p * p,
+            p * p,
+            p * p,
+        ]));
+        match ekf.init_frame_relative(TARGET, SENSOR, t.stamp_ns, &pose(&t.t_cam_target), &cov) {
             Ok(()) => defmt::info!(
                 "target initialised at {=u64} ns, {=f32} m from the camera",
                 t.stamp_ns,

@@ -790,8 +790,15 @@ impl<'a, T: Scalar> CornerFeed<'a, T> {
         self.fuse(ekf, frame);
     }
 
-    /// `T_G_T = T_G_I T_I_C T_C_T(PnP)` at the current estimate, with sigmas covering the
-    /// extrinsic prior's error seen at the target's distance.
+    /// `T_G_T = T_G_I T_I_C T_C_T(PnP)` at the image's IMU time, with its full
+    /// cross-covariance with the IMU pose, the extrinsic and the time offset
+    /// ([`Ekf::init_frame_relative`]): the extrinsic prior's error is in the target's pose
+    /// once, as a correlation, not a second time as independent sigmas. The PnP pose gets
+    /// the documented conservative sigmas of [`target_prior_sigmas`] (independent per axis),
+    /// the same the `link` replay sends the device in its `TargetPose`, so that host and
+    /// device start alike (the PnP fit's own covariance, `sigma^2 (J^T J)^-1`, is tighter;
+    /// with it the host's f64 RepErrCal and the device's f32 differed by 2.8 host sigma in
+    /// translation in the camera HIL test). The image is then also fused.
     fn init_target<const S: usize, const C: usize, const N: usize, const F: usize>(
         &self,
         ekf: &mut Ekf<T, S, C, N, F>,
@@ -799,21 +806,22 @@ impl<'a, T: Scalar> CornerFeed<'a, T> {
     ) -> Result<(), String> {
         let camera = self.camera.cast::<f64>();
         let pnp = pnp_of(&camera, frame).map_err(|e| format!("no PnP pose for the target: {e}"))?;
-        // The IMU pose at the image's IMU time (the image is due, so it is within reach).
-        let t_imu = ekf
-            .imu_time(self.sensor, frame.stamp_ns)
-            .map_err(|e| e.to_string())?
-            .max(ekf.time_ns());
-        let imu_pose = ekf.predict_imu(t_imu).map_err(|e| e.to_string())?.pose();
-        let t_g_c = convert::isometry(&imu_pose) * convert::isometry(&ekf.extrinsic(self.sensor));
-        let t_g_t = t_g_c * convert::isometry(&pnp.t_cam_target);
-        let (sigma_rotation, sigma_position) =
-            target_prior_sigmas(&self.prior, pnp.t_cam_target.translation.norm());
-        ekf.init_frame(
+        let (r, p) = target_prior_sigmas(&self.prior, pnp.t_cam_target.translation.norm());
+        let cov = Matrix6::from_diagonal(&nalgebra::Vector6::new(
+            r * r,
+            r * r,
+            r * r,
+            p * p,
+            p * p,
+            p * p,
+        ))
+        .map(T::lit);
+        ekf.init_frame_relative(
             TARGET,
-            convert::pose::<T>(&t_g_t),
-            T::lit(sigma_rotation),
-            T::lit(sigma_position),
+            self.sensor,
+            frame.stamp_ns,
+            &convert::pose::<T>(&convert::isometry(&pnp.t_cam_target)),
+            &cov,
         )
         .map_err(|e| format!("cannot initialise the target: {e}"))
     }
