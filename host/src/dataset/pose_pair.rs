@@ -9,6 +9,7 @@
 
 use std::path::Path;
 
+use super::csv::read_text;
 use super::error::DatasetError;
 use super::result::{CalibrationResult, ExtrinsicEstimate};
 use super::yaml::write_text;
@@ -47,18 +48,7 @@ impl PosePairCalibration {
     /// Reads `path` (a result file; other sections are ignored).
     pub fn read(path: impl AsRef<Path>) -> Result<Self, DatasetError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| {
-            if source.kind() == std::io::ErrorKind::NotFound {
-                DatasetError::MissingFile {
-                    path: path.to_path_buf(),
-                }
-            } else {
-                DatasetError::Io {
-                    path: path.to_path_buf(),
-                    source,
-                }
-            }
-        })?;
+        let text = read_text(path)?;
         Self::parse(path, &text)
     }
 
