@@ -359,11 +359,15 @@ fn check_cell(label: &str, outcomes: &[Outcome]) -> Vec<String> {
 }
 
 /// One pipeline's acceptance cells at 400 and 200 Hz, 10 seeds each, 60 s; both rates run
-/// and print before anything is asserted.
+/// and print before anything is asserted. `MSREG_RATES=200` (comma-separated, Hz) runs only
+/// the named rates, for studies of one cell.
 fn acceptance(pipeline: Pipeline, seeds: std::ops::Range<u64>, start: Start) {
     let seeds: Vec<u64> = seeds.collect();
     let mut failures = Vec::new();
-    for rate in [400.0, 200.0] {
+    let rates: Vec<f64> = std::env::var("MSREG_RATES").map_or(vec![400.0, 200.0], |v| {
+        v.split(',').map(|r| r.parse().unwrap()).collect()
+    });
+    for rate in rates {
         let outcomes = run_from(pipeline, rate, &seeds, 60.0, start);
         failures.extend(check_cell(
             &format!("{pipeline:?} {rate} Hz {start:?}"),
