@@ -365,7 +365,12 @@ fn acceptance(pipeline: Pipeline, seeds: std::ops::Range<u64>, start: Start) {
     let seeds: Vec<u64> = seeds.collect();
     let mut failures = Vec::new();
     let rates: Vec<f64> = std::env::var("MSREG_RATES").map_or(vec![400.0, 200.0], |v| {
-        v.split(',').map(|r| r.parse().unwrap()).collect()
+        v.split(',')
+            .map(|r| {
+                r.parse()
+                    .unwrap_or_else(|e| panic!("MSREG_RATES: {r:?}: {e}"))
+            })
+            .collect()
     });
     for rate in rates {
         let outcomes = run_from(pipeline, rate, &seeds, 60.0, start);
