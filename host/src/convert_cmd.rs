@@ -1,7 +1,7 @@
 //! `msreg convert <bag|mcap> <dataset-dir>`: a ROS 1 bag or an MCAP file to the dataset
 //! layout, with a progress bar, a summary table and the sanity-check warnings.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::Args;
@@ -22,34 +22,34 @@ pub struct ConvertArgs {
 }
 
 /// The flags that say how to read a bag: one topic per sensor and the noise / camera files
-/// a bag does not carry (CONVENTIONS.md). Meant to be flattened into every command that
-/// takes a bag (`#[command(flatten)]`).
+/// a bag does not carry (CONVENTIONS.md). Flattened into `msreg convert` and `msreg
+/// calibrate` (global there, so they may follow the pipeline's name).
 #[derive(Debug, Clone, Default, Args)]
 pub struct BagFlags {
     /// IMU topic (sensor_msgs/Imu) -> imu0/; default: the only one; `none` skips.
-    #[arg(long)]
+    #[arg(long, global = true)]
     pub imu: Option<String>,
     /// LiDAR topic (sensor_msgs/PointCloud2) -> lidar0/; default: the only one.
-    #[arg(long)]
+    #[arg(long, global = true)]
     pub lidar: Option<String>,
     /// Camera topic (sensor_msgs/Image or CompressedImage) -> cam0/; default: the only one.
-    #[arg(long)]
+    #[arg(long, global = true)]
     pub camera: Option<String>,
     /// Pose topic (nav_msgs/Odometry, geometry_msgs/PoseStamped) -> pose0/; default: the
     /// only one.
-    #[arg(long)]
+    #[arg(long, global = true)]
     pub pose: Option<String>,
     /// Kalibr imu.yaml with the IMU's noise figures (a bag has none; default: docs/bags.md).
-    #[arg(long)]
+    #[arg(long, global = true)]
     pub imu_config: Option<PathBuf>,
     /// pose0/sensor.yaml with the pose sensor's increment noise.
-    #[arg(long)]
+    #[arg(long, global = true)]
     pub pose_config: Option<PathBuf>,
     /// Kalibr camera.yaml copied to cam0/camera.yaml.
-    #[arg(long)]
+    #[arg(long, global = true)]
     pub camera_config: Option<PathBuf>,
     /// Kalibr target.yaml copied to the dataset.
-    #[arg(long)]
+    #[arg(long, global = true)]
     pub target: Option<PathBuf>,
 }
 
@@ -77,6 +77,66 @@ impl BagFlags {
             target_yaml: self.target.clone(),
         })
     }
+}
+
+impl BagFlags {
+    /// True when any flag was given.
+    fn any(&self) -> bool {
+        [&self.imu, &self.lidar, &self.camera, &self.pose]
+            .iter()
+            .any(|f| f.is_some())
+            || [
+                &self.imu_config,
+                &self.pose_config,
+                &self.camera_config,
+                &self.target,
+            ]
+            .iter()
+            .any(|f| f.is_some())
+    }
+}
+
+/// Whether `path` names a ROS 1 bag or an MCAP file (by its extension; the readers check
+/// the magic bytes).
+fn is_bag(path: &Path) -> bool {
+    path.is_file()
+        && path
+            .extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| e.eq_ignore_ascii_case("bag") || e.eq_ignore_ascii_case("mcap"))
+}
+
+/// For `msreg calibrate`: when `dataset` is a bag, converts it into a temporary dataset
+/// (printing the conversion table and warnings, as `msreg convert` does) and points
+/// `dataset` there. The returned guard removes the temporary dataset when dropped. Topic
+/// or config flags given with a dataset directory are an error: they would be ignored.
+pub fn dataset_from_bag(
+    dataset: &mut PathBuf,
+    flags: &BagFlags,
+) -> anyhow::Result<Option<tempfile::TempDir>> {
+    if !is_bag(dataset) {
+        if flags.any() {
+            anyhow::bail!(
+                "{}: the topic and config flags (--imu, --pose, --imu-config, ...) apply to a \
+                 .bag or .mcap file; this is not one (convert a bag with `msreg convert`)",
+                dataset.display()
+            );
+        }
+        return Ok(None);
+    }
+    let scratch = tempfile::Builder::new().prefix("msreg-bag-").tempdir()?;
+    let args = ConvertArgs {
+        bag: dataset.clone(),
+        dataset: scratch.path().join("dataset"),
+        flags: flags.clone(),
+    };
+    run(&args)?;
+    eprintln!(
+        "msreg: calibrating {} through that temporary dataset (keep one with `msreg convert`)",
+        dataset.display()
+    );
+    *dataset = args.dataset;
+    Ok(Some(scratch))
 }
 
 /// Runs the conversion and prints what it did (stderr).

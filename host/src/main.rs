@@ -38,8 +38,12 @@ enum Command {
         #[command(subcommand)]
         scenario: Scenario,
     },
-    /// Calibrate from a dataset directory.
+    /// Calibrate from a dataset directory, or straight from a ROS 1 bag / MCAP file (read
+    /// through a temporary dataset with the topic and config flags of `msreg convert`).
     Calibrate {
+        /// Topics and noise files when the dataset argument is a bag.
+        #[command(flatten)]
+        bag: convert_cmd::BagFlags,
         #[command(subcommand)]
         task: Task,
     },
@@ -158,7 +162,7 @@ enum Task {
 
 #[derive(Args)]
 struct CalibratePoseImu {
-    /// Dataset directory (imu0/, pose0/).
+    /// Dataset directory (imu0/, pose0/), or a ROS 1 bag / MCAP file.
     dataset: PathBuf,
     /// Result YAML.
     #[arg(short, long, default_value = "result.yaml")]
@@ -206,12 +210,10 @@ fn main() -> ExitCode {
 
 fn run(command: Command) -> Result<(), Failure> {
     match command {
+        Command::Calibrate { bag, task } => calibrate(&bag, task),
         Command::Simulate {
             scenario: Scenario::PoseImu(args),
         } => simulate_pose_imu(&args),
-        Command::Calibrate {
-            task: Task::PoseImu(args),
-        } => calibrate_pose_imu(&args),
         Command::Simulate {
             scenario: Scenario::LidarImu(args),
         } => Ok(msreg_host::calibrate::lidar_imu::cli::simulate(&args)?),
@@ -221,32 +223,12 @@ fn run(command: Command) -> Result<(), Failure> {
         Command::Simulate {
             scenario: Scenario::Joint(args),
         } => Ok(msreg_host::sim::joint_cli::simulate(&args)?),
-        Command::Calibrate {
-            task: Task::LidarImu(args),
-        } => exit_code_of(msreg_host::calibrate::lidar_imu::cli::calibrate(&args)?),
         Command::Simulate {
             scenario: Scenario::LidarCamera(args),
         } => Ok(msreg_host::lidar_camera::cli::simulate(&args)?),
         Command::Simulate {
             scenario: Scenario::Infra(args),
         } => Ok(msreg_host::infra::cli::simulate(&args)?),
-        Command::Calibrate {
-            task: Task::LidarCamera(args),
-        } => exit_code_of(msreg_host::lidar_camera::cli::calibrate(&args)?),
-        Command::Calibrate {
-            task: Task::CameraImu(args),
-        } => exit_code_of(msreg_host::calibrate::camera_imu::cli::run(&args)?),
-        Command::Calibrate {
-            task: Task::Joint(args),
-        } => exit_code_of(msreg_host::calibrate::joint::cli::run(&args)?),
-        Command::Calibrate {
-            task: Task::Infra(args),
-        } => match msreg_host::infra::cli::calibrate(&args)? {
-            true => Ok(()),
-            false => Err(Failure::NotConverged(
-                "some infrastructure cameras could not be registered (listed above)".into(),
-            )),
-        },
         Command::Eval {
             result,
             dataset,
@@ -288,6 +270,41 @@ fn run(command: Command) -> Result<(), Failure> {
                 "NDT did not converge or the geometry is degenerate".into(),
             )),
         },
+    }
+}
+
+/// `msreg calibrate <task>`: a bag given as the dataset is converted first (its temporary
+/// dataset lives until the calibration has written its outputs).
+fn calibrate(bag: &convert_cmd::BagFlags, mut task: Task) -> Result<(), Failure> {
+    let _converted = convert_cmd::dataset_from_bag(task.dataset_mut(), bag)?;
+    match task {
+        Task::PoseImu(args) => calibrate_pose_imu(&args),
+        Task::LidarImu(args) => {
+            exit_code_of(msreg_host::calibrate::lidar_imu::cli::calibrate(&args)?)
+        }
+        Task::LidarCamera(args) => exit_code_of(msreg_host::lidar_camera::cli::calibrate(&args)?),
+        Task::CameraImu(args) => exit_code_of(msreg_host::calibrate::camera_imu::cli::run(&args)?),
+        Task::Joint(args) => exit_code_of(msreg_host::calibrate::joint::cli::run(&args)?),
+        Task::Infra(args) => match msreg_host::infra::cli::calibrate(&args)? {
+            true => Ok(()),
+            false => Err(Failure::NotConverged(
+                "some infrastructure cameras could not be registered (listed above)".into(),
+            )),
+        },
+    }
+}
+
+impl Task {
+    /// The dataset argument every calibration takes.
+    fn dataset_mut(&mut self) -> &mut PathBuf {
+        match self {
+            Task::PoseImu(args) => &mut args.dataset,
+            Task::LidarImu(args) => &mut args.dataset,
+            Task::LidarCamera(args) => &mut args.dataset,
+            Task::CameraImu(args) => &mut args.dataset,
+            Task::Joint(args) => &mut args.dataset,
+            Task::Infra(args) => &mut args.dataset,
+        }
     }
 }
 

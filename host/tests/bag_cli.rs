@@ -85,3 +85,64 @@ fn real_bag_converts_and_pose_imu_reads_it() -> TestResult {
     assert!(dir.path().join("result.yaml").is_file());
     Ok(())
 }
+
+/// Issue 16's acceptance command: `msreg calibrate pose-imu <bag> --imu .. --pose ..` reads
+/// the bag directly (through a temporary dataset) and ends as the converted directory does:
+/// the planar motion's unobservable height named, the skid-steer odometry refused (exit 1).
+#[test]
+fn real_bag_calibrates_directly() -> TestResult {
+    let bag = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/data/real/robot_localization-test2.bag");
+    if !bag.is_file() {
+        eprintln!("SKIP: {} is absent (needs ../shared/data)", bag.display());
+        return Ok(());
+    }
+    let dir = tempfile::tempdir()?;
+    let out = msreg()
+        .args(["calibrate", "pose-imu"])
+        .arg(&bag)
+        .args([
+            "--imu",
+            "/imu/data",
+            "--pose",
+            "/jackal_velocity_controller/odom",
+        ])
+        .arg("-o")
+        .arg(dir.path().join("result.yaml"))
+        .output()?;
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("warning: a bag carries no IMU noise figures"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("through that temporary dataset"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("warning: translation along") && stderr.contains("not observable"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("as much as the gyro"), "{stderr}");
+    assert!(dir.path().join("result.yaml").is_file());
+    Ok(())
+}
+
+/// Topic flags with a dataset directory would be silently ignored: exit 2, naming the path.
+#[test]
+fn topic_flags_with_a_directory_exit_2() -> TestResult {
+    let dir = tempfile::tempdir()?;
+    let out = msreg()
+        .args(["calibrate", "pose-imu"])
+        .arg(dir.path())
+        .args(["--imu", "/imu/data"])
+        .output()?;
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains(&*dir.path().to_string_lossy()) && stderr.contains(".bag or .mcap"),
+        "{stderr}"
+    );
+    Ok(())
+}
