@@ -109,6 +109,9 @@ enum Scenario {
     /// On-vehicle monitoring: a car-like drive with IMU, LiDAR odometry (pose0) and camera
     /// visual odometry (pose1), a camera knock partway through.
     Drive(msreg_host::sim::drive_cli::SimulateDrive),
+    /// A static downward fisheye at an intersection in a prior map (LiDAR map with
+    /// reflectivity, satellite ortho image, GPS prior, survey points).
+    PriorMap(msreg_host::sim::prior_map_cli::SimulatePriorMap),
 }
 
 #[derive(Args)]
@@ -158,6 +161,9 @@ enum Task {
     /// Joint LiDAR-IMU-camera calibration in one EKF (chapter 5): LiDAR relative poses,
     /// checkerboard corners and the board plane both sensors see.
     Joint(msreg_host::calibrate::joint::cli::CalibrateJoint),
+    /// A static (fisheye) camera registered in a prior map: LiDAR map with reflectivity,
+    /// satellite ortho image, GPS prior (chapter 7; ORB + PnP, then mutual information).
+    PriorMap(msreg_host::mi::prior_map::cli::CalibratePriorMap),
 }
 
 #[derive(Args)]
@@ -257,6 +263,12 @@ fn run(command: Command) -> Result<(), Failure> {
         Command::Simulate {
             scenario: Scenario::Drive(args),
         } => Ok(msreg_host::sim::drive_cli::simulate(&args)?),
+        Command::Simulate {
+            scenario: Scenario::PriorMap(args),
+        } => Ok(msreg_host::sim::prior_map_cli::simulate(&args)?),
+        Command::Calibrate {
+            task: Task::PriorMap(args),
+        } => exit_code_of(msreg_host::mi::prior_map::cli::calibrate(&args)?),
         Command::Monitor(args) => match msreg_host::monitor::cli::run(&args)? {
             msreg_host::monitor::cli::MonitorOutcome::Ran => Ok(()),
             msreg_host::monitor::cli::MonitorOutcome::Failed(why) => {

@@ -15,6 +15,7 @@
 pub mod cli;
 pub mod histogram;
 pub mod markings;
+pub mod prior_map;
 pub mod scene;
 pub mod search;
 pub mod synthetic;

@@ -36,6 +36,9 @@ pub mod lidar;
 mod odometry;
 mod output;
 mod plate;
+pub mod prior_map;
+pub mod prior_map_cli;
+pub mod prior_map_scene;
 mod signal;
 mod trajectory;
 

@@ -31,9 +31,18 @@ struct Report {
     scan: String,
     points_used: usize,
     grid_evaluations: usize,
+    mi_initial: f64,
+    #[serde(flatten)]
+    refined: RefinedSummary,
+    t_cam_lidar: [[f64; 4]; 4],
+    seconds: f64,
+}
+
+/// The report fields of a refinement: iterations, MI / NMI, sigmas, observability.
+#[derive(Serialize)]
+pub struct RefinedSummary {
     iterations: usize,
     converged: bool,
-    mi_initial: f64,
     mi: f64,
     nmi: f64,
     mi_hard: f64,
@@ -42,8 +51,50 @@ struct Report {
     sigma_rot_deg: [f64; 3],
     sigma_trans_m: [f64; 3],
     observability: Vec<(String, Observability)>,
-    t_cam_lidar: [[f64; 4]; 4],
-    seconds: f64,
+}
+
+impl RefinedSummary {
+    /// The summary of `r` (sigmas from its covariance).
+    pub fn of(r: &Refined) -> Self {
+        let estimate = ExtrinsicEstimate::from_covariance(r.x, 0.0, &r.covariance);
+        Self {
+            iterations: r.iterations,
+            converged: r.converged,
+            mi: r.smoothed.mi,
+            nmi: r.smoothed.nmi,
+            mi_hard: r.hard.mi,
+            nmi_hard: r.hard.nmi,
+            n_eff: r.n_eff,
+            sigma_rot_deg: estimate.sigma_rot_deg.into(),
+            sigma_trans_m: estimate.sigma_trans_m.into(),
+            observability: DOF_NAMES
+                .iter()
+                .zip(&r.observability)
+                .map(|(n, o)| (n.to_string(), *o))
+                .collect(),
+        }
+    }
+}
+
+/// Exit code 0 or 1 of a refinement: not converged, or a DoF without a clear maximum.
+pub fn outcome_of(refined: &Refined) -> Outcome {
+    let poor: Vec<&str> = DOF_NAMES
+        .iter()
+        .zip(&refined.observability)
+        .filter(|(_, o)| **o == Observability::Poor)
+        .map(|(n, _)| *n)
+        .collect();
+    if !refined.converged {
+        Outcome::NotConverged("the MI refinement hit its iteration limit".into())
+    } else if !poor.is_empty() {
+        Outcome::NotConverged(format!(
+            "the MI has no clear maximum along {} (flat or not a maximum there; see \
+             docs/prior_map.md)",
+            poor.join(", ")
+        ))
+    } else {
+        Outcome::Converged
+    }
 }
 
 /// The scan file of `lidar0/` nearest in time to `stamp`.
@@ -132,26 +183,10 @@ pub fn calibrate(args: &TargetlessArgs<'_>) -> anyhow::Result<Outcome> {
     ));
     write_overlay(&before, &image, &cloud, &camera, &initial)?;
     if let Some(path) = args.report {
-        let report = make_report(args, &image_path, &scan_path, &result, &estimate, seconds);
+        let report = make_report(args, &image_path, &scan_path, &result, seconds);
         crate::report::write_report_with_images(path, &report, &[before.clone(), overlay.clone()])?;
     }
-    let poor: Vec<&str> = DOF_NAMES
-        .iter()
-        .zip(&refined.observability)
-        .filter(|(_, o)| **o == Observability::Poor)
-        .map(|(n, _)| *n)
-        .collect();
-    Ok(if !refined.converged {
-        Outcome::NotConverged("the MI refinement hit its iteration limit".into())
-    } else if !poor.is_empty() {
-        Outcome::NotConverged(format!(
-            "the MI has no clear maximum along {} (flat or not a maximum there; see \
-             docs/prior_map.md)",
-            poor.join(", ")
-        ))
-    } else {
-        Outcome::Converged
-    })
+    Ok(outcome_of(refined))
 }
 
 /// A YAML section with the MI / NMI scores and per-DoF observability.
@@ -198,7 +233,6 @@ fn make_report(
     image: &Path,
     scan: &Path,
     result: &TargetlessResult,
-    estimate: &ExtrinsicEstimate,
     seconds: f64,
 ) -> Report {
     let r = &result.refined;
@@ -209,21 +243,8 @@ fn make_report(
         scan: scan.display().to_string(),
         points_used: result.points_used,
         grid_evaluations: result.grid_evaluations,
-        iterations: r.iterations,
-        converged: r.converged,
         mi_initial: f64::NAN,
-        mi: r.smoothed.mi,
-        nmi: r.smoothed.nmi,
-        mi_hard: r.hard.mi,
-        nmi_hard: r.hard.nmi,
-        n_eff: r.n_eff,
-        sigma_rot_deg: estimate.sigma_rot_deg.into(),
-        sigma_trans_m: estimate.sigma_trans_m.into(),
-        observability: DOF_NAMES
-            .iter()
-            .zip(&r.observability)
-            .map(|(n, o)| (n.to_string(), *o))
-            .collect(),
+        refined: RefinedSummary::of(r),
         t_cam_lidar: std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)])),
         seconds,
     }

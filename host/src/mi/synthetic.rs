@@ -11,6 +11,7 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector2, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
+use rayon::prelude::*;
 
 use crate::vision::GrayImage;
 
@@ -110,6 +111,52 @@ pub fn synthetic_ground(seed: u64, n_points: usize) -> SyntheticGround {
     }
 }
 
+/// Ray-casts every pixel of `camera` at `t_world_cam` onto the ground plane z = 0 of the
+/// world and shades the hit point: `shade(ground, pixel)` with `ground` the world (x, y)
+/// of the hit, averaged over `samples` x `samples` sub-pixel rays; `None` where the
+/// pixel's centre ray misses the ground (above the horizon). Row-major, parallel over rows.
+pub fn ray_cast_ground<F>(
+    camera: &Camera<f64>,
+    t_world_cam: &Isometry3<f64>,
+    samples: usize,
+    shade: F,
+) -> Vec<Option<f64>>
+where
+    F: Fn(Vector2<f64>, Vector2<f64>) -> f64 + Sync,
+{
+    let (w, h) = (camera.resolution.0 as usize, camera.resolution.1 as usize);
+    let n = samples.max(1);
+    let hit = |u: f64, v: f64| -> Option<Vector2<f64>> {
+        let d = t_world_cam.rotation * camera.unproject(&Vector2::new(u, v))?;
+        if d.z >= -1e-3 {
+            return None;
+        }
+        let s = -t_world_cam.translation.vector.z / d.z;
+        Some((t_world_cam.translation.vector + d * s).xy())
+    };
+    (0..w * h)
+        .into_par_iter()
+        .with_min_len(w.max(1))
+        .map(|i| {
+            let (u, v) = ((i % w) as f64, (i / w) as f64);
+            hit(u, v)?;
+            let mut sum = 0.0;
+            let mut count = 0.0;
+            for a in 0..n {
+                for b in 0..n {
+                    let du = (a as f64 + 0.5) / n as f64 - 0.5;
+                    let dv = (b as f64 + 0.5) / n as f64 - 0.5;
+                    if let Some(g) = hit(u + du, v + dv) {
+                        sum += shade(g, Vector2::new(u + du, v + dv));
+                        count += 1.0;
+                    }
+                }
+            }
+            Some(sum / count)
+        })
+        .collect()
+}
+
 /// Ray-casts every pixel onto z = 0; appearance: gamma 0.6, vignetting, noise 3 grey levels.
 fn render(
     camera: &Camera<f64>,
@@ -119,20 +166,13 @@ fn render(
 ) -> GrayImage {
     let (w, h) = (camera.resolution.0 as usize, camera.resolution.1 as usize);
     let noise = Normal::new(0.0, 3.0).unwrap_or_else(|_| unreachable!("positive sigma"));
-    let mut data = vec![0.0f32; w * h];
-    for (i, px) in data.iter_mut().enumerate() {
-        let (u, v) = ((i % w) as f64, (i / w) as f64);
-        let mut value = 20.0;
-        if let Some(b) = camera.unproject(&Vector2::new(u, v)) {
-            let d = t_world_cam.rotation * b;
-            if d.z < -1e-3 {
-                let s = -t_world_cam.translation.vector.z / d.z;
-                let g = t_world_cam.translation.vector + d * s;
-                let r2 = ((u - 319.5).powi(2) + (v - 239.5).powi(2)) / (320.0f64 * 320.0);
-                value = (30.0 + 200.0 * texture.at(g.x, g.y).powf(0.6)) * (1.0 - 0.35 * r2);
-            }
-        }
-        *px = (value + noise.sample(rng)) as f32;
-    }
+    let shaded = ray_cast_ground(camera, t_world_cam, 1, |g, px| {
+        let r2 = ((px.x - 319.5).powi(2) + (px.y - 239.5).powi(2)) / (320.0f64 * 320.0);
+        (30.0 + 200.0 * texture.at(g.x, g.y).powf(0.6)) * (1.0 - 0.35 * r2)
+    });
+    let data = shaded
+        .iter()
+        .map(|value| (value.unwrap_or(20.0) + noise.sample(rng)) as f32)
+        .collect();
     GrayImage::from_vec(w, h, data).unwrap_or_else(|| GrayImage::new(w, h, 0.0))
 }

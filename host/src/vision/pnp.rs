@@ -93,6 +93,23 @@ pub fn solve_pnp(
     refine(camera, points_in_target, pixels, start)
 }
 
+/// Refines `start` (`T_cam_target`) by the reprojection Levenberg-Marquardt on any 3-D
+/// target points (not only planar ones), as the last step of [`solve_pnp`].
+pub fn refine_pnp(
+    camera: &Camera<f64>,
+    points_in_target: &[Vector3<f64>],
+    pixels: &[Vector2<f64>],
+    start: Pose<f64>,
+) -> Result<PnpSolution, PnpError> {
+    if points_in_target.len() != pixels.len() || pixels.len() < 4 {
+        return Err(PnpError::TooFewPoints {
+            points: points_in_target.len(),
+            pixels: pixels.len(),
+        });
+    }
+    refine(camera, points_in_target, pixels, start)
+}
+
 /// The pose from the plane-to-bearing homography (Hartley-normalised target points).
 fn homography_pose(
     points: &[Vector3<f64>],

@@ -1,0 +1,256 @@
+//! A static camera registered in a prior map (dissertation chapter 7): `T_world_cam` of a
+//! downward fisheye from a LiDAR map with reflectivity, a satellite ortho image and a
+//! coarse GPS prior. Method and measurements: docs/prior_map.md.
+//!
+//! - [`input`]: the dataset (CONVENTIONS.md "Camera in a prior map").
+//! - [`orb`]: ORB features; [`init`]: rectification, matching against the satellite crop,
+//!   RANSAC and PnP, or PnP on user correspondences.
+//! - [`register`] (this file): the MI stage with the engine of [`crate::mi`]: the parallel
+//!   coarse-to-fine grid over (x, y, z, yaw), then the 6-DoF refinement on the smoothed
+//!   MI with curvature sigmas and per-DoF observability.
+//! - [`cli`]: `msreg calibrate prior-map`.
+
+pub mod cli;
+pub mod init;
+pub mod input;
+pub mod orb;
+
+use msreg_estimator::camera::Camera;
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+
+use super::scene::{MiScene, PoseParam};
+use super::search::{grid_search, refine, GridAxis, GridScore, RefineOptions, Refined};
+use init::{initialise, InitError, InitOptions, Initialisation};
+use input::{PriorMapInput, Survey};
+
+/// Settings of the whole registration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RegisterOptions {
+    /// Initialisation.
+    pub init: InitOptions,
+    /// Grid half ranges of x, y, z (m) and yaw (rad) around the initial pose.
+    pub grid_half: [f64; 4],
+    /// Values each side of the centre per axis and level.
+    pub grid_steps: usize,
+    /// Grid levels.
+    pub grid_levels: usize,
+    /// Points in the grid (every n-th of those in view).
+    pub grid_points: usize,
+    /// Image blurs of the grid and the successive refinements (px), coarse to fine.
+    pub grid_blur_px: f64,
+    /// Refinement blurs (px).
+    pub refine_blur_px: Vec<f64>,
+    /// Refinement settings.
+    pub refine: RefineOptions,
+    /// Map points used: at most this far off the optical axis (deg) at the initial pose.
+    pub max_view_deg: f64,
+    /// Fewest map points in view.
+    pub min_points: usize,
+}
+
+impl Default for RegisterOptions {
+    fn default() -> Self {
+        Self {
+            init: InitOptions::default(),
+            grid_half: [0.5, 0.5, 0.3, 2f64.to_radians()],
+            grid_steps: 2,
+            grid_levels: 3,
+            grid_points: 6000,
+            grid_blur_px: 4.0,
+            refine_blur_px: vec![4.0, 1.0],
+            refine: RefineOptions::default(),
+            max_view_deg: 70.0,
+            min_points: 2000,
+        }
+    }
+}
+
+/// Why the registration could not run (beyond bad files).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum RegisterError {
+    /// No initial pose.
+    #[error(transparent)]
+    Init(#[from] InitError),
+    /// Too few map points in view at the initial pose.
+    #[error("only {visible} map points are in view at the initial pose (need {needed})")]
+    TooFewPoints {
+        /// In view.
+        visible: usize,
+        /// Needed.
+        needed: usize,
+    },
+}
+
+/// The result.
+#[derive(Clone, Debug)]
+pub struct Registration {
+    /// The initial pose and how it was found.
+    pub init: Initialisation,
+    /// `T_world_cam` after the grid.
+    pub after_grid: Isometry3<f64>,
+    /// The final refinement (`x` = `T_world_cam`, covariance `[omega_cam; v_world]`).
+    pub refined: Refined,
+    /// Map points used.
+    pub points_used: usize,
+    /// Grid candidates evaluated.
+    pub grid_evaluations: usize,
+}
+
+/// The map points within `max_view_deg` of the optical axis and inside the image at
+/// `t_world_cam`, with their reflectivity.
+pub fn points_in_view(
+    input: &PriorMapInput,
+    t_world_cam: &Isometry3<f64>,
+    max_view_deg: f64,
+) -> (Vec<Vector3<f64>>, Vec<f32>) {
+    let t_cam_world = t_world_cam.inverse();
+    let cos_max = max_view_deg.to_radians().cos();
+    input
+        .map
+        .points
+        .iter()
+        .filter(|p| {
+            let pc = t_cam_world * nalgebra::Point3::from(p.xyz);
+            pc.z > cos_max * pc.coords.norm()
+                && input
+                    .camera
+                    .project(&pc.coords)
+                    .is_some_and(|q| input.camera.in_image(&q.pixel, 2.0))
+        })
+        .map(|p| (p.xyz, p.intensity))
+        .unzip()
+}
+
+/// The MI stage from `start` (`T_world_cam`): grid over (x, y, z, yaw), then refinements.
+pub fn register_mi(
+    input: &PriorMapInput,
+    start: &Isometry3<f64>,
+    options: &RegisterOptions,
+) -> Result<(Isometry3<f64>, Refined, usize, usize), RegisterError> {
+    let (points, intensities) = points_in_view(input, start, options.max_view_deg);
+    if points.len() < options.min_points {
+        return Err(RegisterError::TooFewPoints {
+            visible: points.len(),
+            needed: options.min_points,
+        });
+    }
+    let used = points.len();
+    let scene = MiScene::new(
+        points,
+        &intensities,
+        &input.image,
+        input.camera,
+        options.grid_blur_px,
+    );
+    let axes = options.grid_half.map(|half_range| GridAxis {
+        half_range,
+        steps: options.grid_steps,
+    });
+    let pose = |v: &[f64]| {
+        Isometry3::from_parts(
+            Translation3::from(start.translation.vector + Vector3::new(v[0], v[1], v[2])),
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), v[3]) * start.rotation,
+        )
+    };
+    let grid = grid_search(
+        &scene.subsampled(used / options.grid_points.max(1)),
+        &axes,
+        options.grid_levels,
+        GridScore::Hard,
+        |v| pose(v).inverse(),
+    );
+    let after_grid = pose(&grid.best);
+    let param = PoseParam::SourceFromCam;
+    let mut x = after_grid;
+    let mut last = None;
+    for &blur in &options.refine_blur_px {
+        let r = refine(
+            &scene.with_image(&input.image, blur),
+            param,
+            &x,
+            &options.refine,
+        );
+        x = r.x;
+        last = Some(r);
+    }
+    let refined = last.unwrap_or_else(|| refine(&scene, param, &x, &options.refine));
+    Ok((after_grid, refined, used, grid.evaluations))
+}
+
+/// Initialisation, then the MI stage.
+pub fn register(
+    input: &PriorMapInput,
+    options: &RegisterOptions,
+) -> Result<Registration, RegisterError> {
+    let init = initialise(input, &options.init)?;
+    let (after_grid, refined, points_used, grid_evaluations) =
+        register_mi(input, &init.t_world_cam, options)?;
+    Ok(Registration {
+        init,
+        after_grid,
+        refined,
+        points_used,
+        grid_evaluations,
+    })
+}
+
+/// Reprojection error (px) of each survey point under `t_world_cam` (NaN where it does not
+/// project).
+pub fn survey_errors(
+    camera: &Camera<f64>,
+    t_world_cam: &Isometry3<f64>,
+    survey: &[Survey],
+) -> Vec<f64> {
+    let t = t_world_cam.inverse();
+    survey
+        .iter()
+        .map(|s| {
+            let pc = t * nalgebra::Point3::from(s.xyz);
+            match camera.project(&pc.coords) {
+                Some(q) if pc.z > 0.0 => (q.pixel - s.uv).norm(),
+                _ => f64::NAN,
+            }
+        })
+        .collect()
+}
+
+/// Median of the finite values (NaN when none).
+pub fn median(values: &[f64]) -> f64 {
+    let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Rotation about the world z axis taking `truth` to `estimate` (rad): the yaw error.
+pub fn yaw_error(estimate: &Isometry3<f64>, truth: &Isometry3<f64>) -> f64 {
+    (estimate.rotation * truth.rotation.inverse())
+        .scaled_axis()
+        .z
+}
+
+/// The `cam0` section of a result or ground-truth file: `T_world_cam` with sigmas.
+pub fn t_world_cam_yaml(t: &Isometry3<f64>, sigma_rot_deg: [f64; 3], sigma_m: [f64; 3]) -> String {
+    let m = t.to_homogeneous();
+    let rows: Vec<String> = (0..4)
+        .map(|i| {
+            format!(
+                "[{}, {}, {}, {}]",
+                m[(i, 0)],
+                m[(i, 1)],
+                m[(i, 2)],
+                m[(i, 3)]
+            )
+        })
+        .collect();
+    let list = |v: [f64; 3]| format!("[{}, {}, {}]", v[0], v[1], v[2]);
+    format!(
+        "cam0:\n  # p_world = T_world_cam * p_cam\n  T_world_cam: [{}]\n  sigma_rot_deg: {}\n  \
+         sigma_trans_m: {}\n",
+        rows.join(",\n                "),
+        list(sigma_rot_deg),
+        list(sigma_m)
+    )
+}
