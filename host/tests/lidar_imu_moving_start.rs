@@ -61,6 +61,7 @@ struct Outcome {
     seed: u64,
     rate_hz: f64,
     cut_s: f64,
+    td_true_ms: f64,
     td_err_ms: f64,
     td_sigma_ms: f64,
     rot_deg: f64,
@@ -68,6 +69,10 @@ struct Outcome {
     nees: f64,
     inside: bool,
     converged: bool,
+    /// Health events (alarms) the monitor raised.
+    alarms: usize,
+    /// Updates rejected by the gate.
+    rejected: usize,
     /// Why the pipeline did not converge, and the moving-start initialisation it chose.
     notes: String,
 }
@@ -122,6 +127,7 @@ fn run(seed: u64, rate_hz: f64, duration_s: f64) -> Outcome {
         seed,
         rate_hz,
         cut_s: sim.seconds(cut),
+        td_true_ms: config.lidar.time_offset_s * 1e3,
         td_err_ms: td_err * 1e3,
         td_sigma_ms: c.time_offset_sigma_s * 1e3,
         rot_deg: r.norm().to_degrees(),
@@ -130,10 +136,18 @@ fn run(seed: u64, rate_hz: f64, duration_s: f64) -> Outcome {
         inside: (0..6).all(|i| e[i].abs() <= 3.0 * c.covariance[(i, i)].sqrt())
             && td_err.abs() <= 3.0 * c.time_offset_sigma_s,
         converged: c.report.filter.converged,
+        alarms: c.report.filter.events.len(),
+        rejected: c.report.filter.updates_rejected,
         notes: format!(
-            "{}; {}",
+            "{}; {}; alarms at {:?}",
             c.report.filter.moving_start,
-            c.report.filter.reasons.join("; ")
+            c.report.filter.reasons.join("; "),
+            c.report
+                .filter
+                .events
+                .iter()
+                .map(|e| format!("{:.1} s {} {:.2e}", e.t_s, e.kind, e.magnitude))
+                .collect::<Vec<_>>()
         ),
     }
 }
@@ -141,12 +155,13 @@ fn run(seed: u64, rate_hz: f64, duration_s: f64) -> Outcome {
 fn check(outcomes: &[Outcome]) {
     for o in outcomes {
         println!(
-            "LiDAR-IMU moving start {:>3} Hz seed {}: cut at {:.2} s, t_d error {:+.4} ms \
-             (sigma {:.4}), rotation {:.4} deg, translation {:.2} mm, NEES {:.2}, inside 3 \
-             sigma {}, converged {} ({})",
+            "LiDAR-IMU moving start {:>3} Hz seed {}: cut at {:.2} s, t_d {:+.3} ms, error \
+             {:+.4} ms (sigma {:.4}), rotation {:.4} deg, translation {:.2} mm, NEES {:.2}, inside 3 \
+             sigma {}, converged {}, {} alarms, {} updates gated ({})",
             o.rate_hz,
             o.seed,
             o.cut_s,
+            o.td_true_ms,
             o.td_err_ms,
             o.td_sigma_ms,
             o.rot_deg,
@@ -154,11 +169,14 @@ fn check(outcomes: &[Outcome]) {
             o.nees,
             o.inside,
             o.converged,
+            o.alarms,
+            o.rejected,
             o.notes
         );
     }
     for o in outcomes {
         assert!(o.converged, "{o:?}");
+        assert_eq!(o.alarms, 0, "{o:?}");
         assert!(o.td_err_ms.abs() < MAX_TIME_OFFSET_ERROR_MS, "{o:?}");
         // The LiDAR-IMU bounds of docs/lidar_imu.md's CI scenario (~3x its worst seed).
         assert!(o.rot_deg < 0.035 && o.trans_mm < 2.6, "{o:?}");
@@ -166,9 +184,10 @@ fn check(outcomes: &[Outcome]) {
     }
 }
 
-/// One seed per rate, 30 s cut at peak motion.
+/// One seed per rate, 30 s cut at peak motion (CI). Before the moving start fed the LiDAR
+/// odometry to the dynamic alignment, 400 Hz did not converge on this seed (0.28 deg /
+/// 383 mm, 123 of 128 updates gated; docs/lidar_imu.md).
 #[test]
-#[ignore = "fails at 400 Hz (seed 7 does not converge: 0.28 deg / 383 mm); open, docs/lidar_imu.md"]
 fn moving_start_converges_at_400_and_200_hz() {
     let outcomes: Vec<Outcome> = [400.0, 200.0]
         .into_iter()
@@ -182,8 +201,19 @@ fn moving_start_converges_at_400_and_200_hz() {
 #[test]
 #[ignore = "acceptance run, ~8 min on 2 cores"]
 fn ten_seeds_moving_start() {
-    let seeds: Vec<u64> = (2000..2010).collect();
-    for rate in [400.0, 200.0] {
+    // `MSREG_SEED_LIST=a,b,..` and `MSREG_RATES=400` run other seeds or one rate (studies).
+    let list = |name: &str, default: Vec<f64>| -> Vec<f64> {
+        std::env::var(name).map_or(default, |v| {
+            v.split(',')
+                .map(|x| x.trim().parse().expect("a number"))
+                .collect()
+        })
+    };
+    let seeds: Vec<u64> = list("MSREG_SEED_LIST", (2000..2010u32).map(f64::from).collect())
+        .into_iter()
+        .map(|s| s as u64)
+        .collect();
+    for rate in list("MSREG_RATES", vec![400.0, 200.0]) {
         let outcomes = par_map(&seeds, |seed| run(seed, rate, 60.0));
         check(&outcomes);
         let n = outcomes.len() as f64;

@@ -36,6 +36,7 @@
 //!    scan file stops the run with an error naming it.
 
 pub mod cli;
+pub mod moving;
 
 use std::time::Instant;
 
@@ -48,8 +49,8 @@ use super::extrinsic::ImuExtrinsicCalibration;
 use super::gyro_bias::GyroBiasEstimate;
 use super::init::{self, RotationInit, Standstill};
 use super::pose_imu::{
-    drive_imu, finish, hand_eye_and_gyro_bias, start_filter, FilterStart, ImuHooks, PoseImuError,
-    PoseImuOptions, PoseImuReport, Run, Timing, HAND_EYE_MIN_PAIRS,
+    describe_moving_start, drive_imu, finish, hand_eye_and_gyro_bias, start_filter, FilterStart,
+    ImuHooks, PoseImuError, PoseImuOptions, PoseImuReport, Run, Timing, HAND_EYE_MIN_PAIRS,
 };
 use crate::dataset::{ImuNoiseYaml, ImuRecord};
 use crate::lidar::deskew::{imu_time, DeskewedScan};
@@ -405,21 +406,17 @@ pub fn calibrate<T: Scalar>(
     }
     let started = Instant::now();
     let standstill = init::detect_standstill(imu, options.filter.min_standstill_s);
-    let (rotation, gyro_bias, outliers) =
-        rotation_init(imu, input.scans, standstill.as_ref(), options)?;
-    let init_s = started.elapsed().as_secs_f64();
+    let raw = rotation_start(imu, input.scans, standstill.as_ref(), options)?;
+    let outliers = raw.outliers;
+    let (start, moving) = start_filter_for::<T>(input, options, standstill.as_ref(), raw)?;
     let FilterStart {
         mut ekf,
         rotation_init,
         init_problem,
-        ..
-    } = start_filter::<T>(
-        imu,
-        input.imu_noise,
-        (standstill.as_ref(), &[]),
-        (rotation, gyro_bias.as_ref()),
-        (&options.filter, None),
-    )?;
+        moving_start,
+        gyro_bias_init,
+    } = start;
+    let init_s = started.elapsed().as_secs_f64();
 
     let started = Instant::now();
     let mut feed = LidarFeed::new(input.scans, options, first_imu.stamp_ns, (0, false));
@@ -477,7 +474,44 @@ pub fn calibrate<T: Scalar>(
         calibration.report.filter.reasons.insert(0, problem);
         calibration.report.filter.converged = false;
     }
+    calibration.report.filter.gyro_bias_init = gyro_bias_init;
+    calibration.report.filter.moving_start = match moving {
+        Some(m) => m.describe(&moving_start),
+        None => describe_moving_start(&moving_start),
+    };
     Ok(calibration)
+}
+
+/// The filter and how it started: at a standstill (or without a hand-eye rotation) as the
+/// pose-IMU pipeline, else the moving start of [`moving`] (with what it found).
+fn start_filter_for<T: Scalar>(
+    input: &LidarImuInput<'_>,
+    options: &LidarImuOptions,
+    standstill: Option<&Standstill>,
+    raw: RawRotations,
+) -> Result<(FilterStart<T>, Option<moving::MovingStartReport>), PoseImuError> {
+    let imu = input.imu;
+    Ok(match (standstill, raw.rotation) {
+        (None, Ok(rotation)) => {
+            let (start, report) = moving::start::<T>(
+                (imu, input.imu_noise, input.scans),
+                options,
+                (rotation, raw.gyro_bias),
+                &raw.increments,
+            )?;
+            (start, Some(report))
+        }
+        (_, rotation) => {
+            let start = start_filter::<T>(
+                imu,
+                input.imu_noise,
+                (standstill, &[]),
+                (rotation, raw.gyro_bias.as_ref()),
+                (&options.filter, None),
+            )?;
+            (start, None)
+        }
+    })
 }
 
 /// Mean NIS/dof of the matched scans after `3 * anneal_updates` updates.
@@ -558,6 +592,29 @@ pub(crate) fn rotation_init(
     standstill: Option<&Standstill>,
     options: &LidarImuOptions,
 ) -> Result<RotationStart, PoseImuError> {
+    let r = rotation_start(imu, scans, standstill, options)?;
+    Ok((r.rotation, r.gyro_bias, r.outliers))
+}
+
+/// [`rotation_init`]'s result with the increments it kept.
+pub(crate) struct RawRotations {
+    /// The hand-eye rotation, or why not.
+    pub(crate) rotation: Result<RotationInit, msreg_estimator::HandEyeError<f64>>,
+    /// The gyro bias fitted to the motion (without a standstill).
+    pub(crate) gyro_bias: Option<GyroBiasEstimate>,
+    /// Pairs dropped as outliers.
+    pub(crate) outliers: usize,
+    /// The raw-scan NDT rotation increments kept, mid-sweep stamps (LiDAR clock).
+    pub(crate) increments: Vec<init::RotationIncrement>,
+}
+
+/// [`rotation_init`] with the increments it kept.
+fn rotation_start(
+    imu: &[ImuRecord],
+    scans: &dyn ScanSource,
+    standstill: Option<&Standstill>,
+    options: &LidarImuOptions,
+) -> Result<RawRotations, PoseImuError> {
     let first = imu.first().map_or(0, |r| r.stamp_ns);
     let until = first.saturating_add((options.init_duration_s * 1e9) as u64);
     let mut increments = Vec::new();
@@ -601,7 +658,12 @@ pub(crate) fn rotation_init(
     let pairs: Vec<_> = paired.iter().map(|(_, pair)| *pair).collect();
     let first_pass = init::hand_eye_from_pairs(pairs.iter().copied(), HAND_EYE_MIN_PAIRS);
     let Ok(first_solution) = first_pass else {
-        return Ok((first_pass, None, 0));
+        return Ok(RawRotations {
+            rotation: first_pass,
+            gyro_bias: None,
+            outliers: 0,
+            increments,
+        });
     };
     let r = first_solution.rotation;
     let residuals: Vec<f64> = pairs.iter().map(|(ri, rl)| (ri - r * rl).norm()).collect();
@@ -617,7 +679,12 @@ pub(crate) fn rotation_init(
         .collect();
     let outliers = pairs.len() - kept.len();
     let (rotation, gyro_bias) = hand_eye_and_gyro_bias(imu, &kept, standstill);
-    Ok((rotation, gyro_bias, outliers))
+    Ok(RawRotations {
+        rotation,
+        gyro_bias,
+        outliers,
+        increments: kept,
+    })
 }
 
 /// A scan read and waiting for the IMU to reach its reference time.

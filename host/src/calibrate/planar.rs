@@ -202,8 +202,8 @@ pub fn fit_yaw(
     })
 }
 
-/// Minimum of a unimodal `f` on `[lo, hi]`.
-fn golden_section(f: impl Fn(f64) -> f64, mut lo: f64, mut hi: f64) -> f64 {
+/// Minimum of a unimodal `f` on `[lo, hi]` (golden-section search, `REFINE_STEPS` steps).
+pub(crate) fn golden_section(f: impl Fn(f64) -> f64, mut lo: f64, mut hi: f64) -> f64 {
     let ratio = (5f64.sqrt() - 1.0) / 2.0;
     let (mut a, mut b) = (hi - ratio * (hi - lo), lo + ratio * (hi - lo));
     let (mut fa, mut fb) = (f(a), f(b));
