@@ -1,19 +1,22 @@
 //! The filters the link runs, one per protocol [`SensorSet`], behind one type: the session
-//! propagates, applies zero-velocity updates and reports estimates the same way for both,
-//! and only the measurement handlers look inside.
+//! propagates, applies zero-velocity updates and reports estimates the same way for all,
+//! and only the measurement handlers look inside. The configuration is applied as the host
+//! computed it (`ImuPrior::State`, the monitor's hold axis and health tuning): nothing of
+//! the prior is re-derived here.
 
 use msreg_estimator::camera::{equidistant, radtan, Camera, Distortion, Intrinsics, Projection};
 use msreg_estimator::chi2::Confidence;
-use msreg_estimator::health::HealthMonitor;
+use msreg_estimator::filter::MonitorEkf;
+use msreg_estimator::health::NisStatus;
 use msreg_estimator::na::{Quaternion, UnitQuaternion, Vector3};
 use msreg_estimator::{
-    CameraImuEkf, Error as FilterError, FilterConfig, ImuNoise, ImuSample, InitialState, Pose,
-    PoseImuEkf, UpdateReport,
+    CameraImuEkf, Error as FilterError, FilterConfig, ImuNoise, ImuSample, ImuState,
+    InitialState, Pose, PoseImuEkf, RelativePose, UpdateReport,
 };
 use msreg_protocol::{self as protocol, CameraDistortion, CameraProjection, CameraSetup, Config};
-use msreg_protocol::{Gate, SensorSet};
+use msreg_protocol::{Gate, ImuPrior, MonitorSetup, SensorPrior, SensorSet};
 
-/// The one sensor of both layouts (index of the extrinsic and time offset).
+/// The camera of the camera-IMU layout (index of its extrinsic and time offset).
 pub const SENSOR: usize = 0;
 /// The one static target frame of the camera-IMU layout.
 pub const TARGET: usize = 0;
@@ -29,13 +32,15 @@ pub struct CameraFilter {
 }
 
 /// The filter of the configured sensor set.
-// The layouts differ in size (34 against 28 states); without a heap there is no boxing.
+// The layouts differ in size (34, 28 and 53 states); without a heap there is no boxing.
 #[allow(clippy::large_enum_variant)]
 pub enum Filter {
     /// IMU + pose sensor (odometry increments).
     PoseImu(PoseImuEkf<f32>),
     /// IMU + camera observing a static target (corner reprojection).
     CameraImu(CameraFilter),
+    /// On-vehicle monitoring: IMU + two pose sensors (LiDAR odometry, camera VO).
+    Monitor(MonitorEkf<f32>),
 }
 
 /// The same expression on whichever [`msreg_estimator::Ekf`] the filter holds.
@@ -44,50 +49,71 @@ macro_rules! on_ekf {
         match $filter {
             Filter::PoseImu($ekf) => $body,
             Filter::CameraImu(CameraFilter { ekf: $ekf, .. }) => $body,
+            Filter::Monitor($ekf) => $body,
         }
     };
 }
 
 impl Filter {
+    /// Number of sensors of the layout (extrinsic and time offset each).
+    pub fn sensor_count(&self) -> usize {
+        match self {
+            Filter::PoseImu(_) | Filter::CameraImu(_) => 1,
+            Filter::Monitor(_) => 2,
+        }
+    }
+
+    /// True for the layouts that take odometry (anchors and relative poses).
+    pub fn takes_odometry(&self) -> bool {
+        match self {
+            Filter::PoseImu(_) | Filter::Monitor(_) => true,
+            Filter::CameraImu(_) => false,
+        }
+    }
+
     /// Filter time (IMU clock), ns.
     pub fn time_ns(&self) -> u64 {
         on_ekf!(self, f => f.time_ns())
     }
 
-    /// True when a measurement stamped `stamp_ns` (sensor clock) can be fused: its IMU time
-    /// `stamp + t_d` is at or before the newest IMU sample (the estimator's one rule).
-    pub fn is_due(&self, stamp_ns: u64) -> bool {
-        on_ekf!(self, f => f.is_due(SENSOR, stamp_ns))
+    /// True when a measurement of sensor `s` stamped `stamp_ns` (sensor clock) can be
+    /// fused: its IMU time `stamp + t_d` is at or before the newest IMU sample (the
+    /// estimator's one rule).
+    pub fn is_due(&self, s: usize, stamp_ns: u64) -> bool {
+        on_ekf!(self, f => f.is_due(s, stamp_ns))
     }
 
-    /// Time offset `t_d`, s.
-    pub fn time_offset(&self) -> f32 {
-        on_ekf!(self, f => f.time_offset(SENSOR))
+    /// IMU time `stamp + t_d` of a measurement of sensor `s` (current `t_d`), ns.
+    pub fn imu_time(&self, s: usize, stamp_ns: u64) -> Result<u64, FilterError> {
+        on_ekf!(self, f => f.imu_time(s, stamp_ns))
+    }
+
+    /// Time offset `t_d` of sensor `s`, s.
+    pub fn time_offset(&self, s: usize) -> f32 {
+        on_ekf!(self, f => f.time_offset(s))
     }
 
     /// Its 1-sigma, s.
-    pub fn time_offset_sigma(&self) -> f32 {
-        on_ekf!(self, f => f.time_offset_sigma(SENSOR))
+    pub fn time_offset_sigma(&self, s: usize) -> f32 {
+        on_ekf!(self, f => f.time_offset_sigma(s))
     }
 
-    /// `T_imu_sensor`.
-    pub fn extrinsic(&self) -> Pose<f32> {
-        on_ekf!(self, f => f.extrinsic(SENSOR))
+    /// `T_imu_sensor` of sensor `s`.
+    pub fn extrinsic(&self, s: usize) -> Pose<f32> {
+        on_ekf!(self, f => f.extrinsic(s))
     }
 
-    /// 1-sigma of the extrinsic's rotation (rad) and translation (m), per axis.
-    pub fn extrinsic_sigma(&self) -> (Vector3<f32>, Vector3<f32>) {
-        on_ekf!(self, f => f.extrinsic_sigma(SENSOR))
+    /// 1-sigma of sensor `s`'s extrinsic rotation (rad) and translation (m), per axis.
+    pub fn extrinsic_sigma(&self, s: usize) -> (Vector3<f32>, Vector3<f32>) {
+        on_ekf!(self, f => f.extrinsic_sigma(s))
     }
 
-    /// The health monitor.
-    pub fn health(&self) -> &HealthMonitor<f32, 1> {
-        on_ekf!(self, f => f.health())
-    }
-
-    /// The filter configuration.
-    pub fn config(&self) -> &FilterConfig<f32> {
-        on_ekf!(self, f => f.config())
+    /// The health monitor's windowed NIS per dof of sensor `s` and its verdict (`None`
+    /// for a sensor the layout does not have).
+    pub fn nis(&self, s: usize) -> Option<(f32, NisStatus)> {
+        on_ekf!(self, f => f.health().sensor(s).map(|h| {
+            (h.windowed_nis_per_dof(), h.nis_status(&f.config().health))
+        }))
     }
 
     /// Propagates with one IMU sample. Not inlined: the propagation's temporaries (~11 KB)
@@ -100,6 +126,31 @@ impl Filter {
     /// The IMU stream's period once two samples are in (a ZUPT needs it).
     pub fn imu_period_ns(&self) -> Option<u64> {
         on_ekf!(self, f => f.imu_period_ns())
+    }
+
+    /// Starts an odometry segment of sensor `s` (the layouts without odometry have no
+    /// such sensor: the session refuses their odometry on arrival).
+    #[inline(never)]
+    pub fn anchor(&mut self, s: usize, stamp_ns: u64) -> Result<(), FilterError> {
+        match self {
+            Filter::PoseImu(f) => f.anchor(s, stamp_ns),
+            Filter::Monitor(f) => f.anchor(s, stamp_ns),
+            Filter::CameraImu(_) => Err(FilterError::UnknownSensor),
+        }
+    }
+
+    /// One odometry increment of sensor `s` (its own frame, as [`Filter::propagate`]).
+    #[inline(never)]
+    pub fn update_relative_pose(
+        &mut self,
+        s: usize,
+        meas: &RelativePose<f32>,
+    ) -> Result<UpdateReport<f32>, FilterError> {
+        match self {
+            Filter::PoseImu(f) => f.update_relative_pose(s, meas),
+            Filter::Monitor(f) => f.update_relative_pose(s, meas),
+            Filter::CameraImu(_) => Err(FilterError::UnknownSensor),
+        }
     }
 
     /// Zero-velocity update with the latest sample (its own frame, as [`Filter::propagate`]).
@@ -156,8 +207,71 @@ pub fn camera(setup: &CameraSetup) -> Result<Camera<f32>, FilterError> {
     .map_err(|_| FilterError::InvalidConfig)
 }
 
-/// A filter from a configuration.
-pub fn new_filter(c: &Config) -> Result<Filter, FilterError> {
+/// The 1-sigma of a positive wire value, or the estimator's default for 0.
+fn sigma_or(value: f32, default: f32) -> f32 {
+    if value > 0.0 {
+        value
+    } else {
+        default
+    }
+}
+
+/// The IMU prior of a configuration: levelled on gravity at rest, or the host's state as is.
+fn imu_prior<const S: usize>(p: &ImuPrior) -> Result<InitialState<f32, S>, FilterError> {
+    match p {
+        ImuPrior::AtRest(r) => {
+            let mut init = InitialState::<f32, S>::at_rest(Vector3::from(r.accel_mean))
+                .ok_or(FilterError::InvalidConfig)?;
+            init.imu.gyro_bias = Vector3::from(r.gyro_bias);
+            init.sigma_orientation = sigma_or(r.sigma_orientation_rad, init.sigma_orientation);
+            init.sigma_velocity = sigma_or(r.sigma_velocity_m_s, init.sigma_velocity);
+            Ok(init)
+        }
+        ImuPrior::State(s) => {
+            // Any valid gravity reading: every field is overwritten below.
+            let mut init = InitialState::<f32, S>::at_rest(Vector3::new(0.0, 0.0, 9.81))
+                .ok_or(FilterError::InvalidConfig)?;
+            let [w, x, y, z] = s.rotation_wxyz;
+            let q = Quaternion::new(w, x, y, z);
+            let norm = q.norm();
+            if !norm.is_finite() || norm < 0.5 {
+                return Err(FilterError::InvalidConfig);
+            }
+            init.imu = ImuState {
+                rotation: UnitQuaternion::from_quaternion(q),
+                position: Vector3::from(s.position_m),
+                velocity: Vector3::from(s.velocity_m_s),
+                gyro_bias: Vector3::from(s.gyro_bias_rad_s),
+                accel_bias: Vector3::from(s.accel_bias_m_s2),
+            };
+            let [o, p, v, bg, ba] = s.sigmas;
+            init.sigma_orientation = o;
+            init.sigma_position = p;
+            init.sigma_velocity = v;
+            init.sigma_gyro_bias = bg;
+            init.sigma_accel_bias = ba;
+            Ok(init)
+        }
+    }
+}
+
+/// Sets sensor `s`'s prior from the wire.
+fn with_sensor<const S: usize>(
+    init: InitialState<f32, S>,
+    s: usize,
+    p: &SensorPrior,
+) -> Result<InitialState<f32, S>, FilterError> {
+    let extrinsic = pose(&p.extrinsic);
+    if !extrinsic.is_finite() {
+        return Err(FilterError::NonFinite);
+    }
+    Ok(init
+        .with_extrinsic(s, extrinsic, p.sigma_rotation_rad, p.sigma_translation_m)
+        .with_time_offset(s, p.time_offset_s, p.sigma_time_offset_s))
+}
+
+/// The filter tuning of a configuration (the health tuning of the monitor layout on top).
+fn filter_config(c: &Config) -> Result<FilterConfig<f32>, FilterError> {
     let n = &c.imu_noise;
     let mut fc = FilterConfig::new(ImuNoise {
         gyro_noise_density: n.gyro_noise_density,
@@ -169,40 +283,63 @@ pub fn new_filter(c: &Config) -> Result<Filter, FilterError> {
     if c.max_imu_gap_ns > 0 {
         fc.max_imu_gap_ns = u64::from(c.max_imu_gap_ns);
     }
-    let p = &c.imu_prior;
-    let mut init = InitialState::<f32, 1>::at_rest(Vector3::from(p.accel_mean))
-        .ok_or(FilterError::InvalidConfig)?;
-    init.imu.gyro_bias = Vector3::from(p.gyro_bias);
-    if p.sigma_orientation_rad > 0.0 {
-        init.sigma_orientation = p.sigma_orientation_rad;
-    }
-    if p.sigma_velocity_m_s > 0.0 {
-        init.sigma_velocity = p.sigma_velocity_m_s;
-    }
-    let extrinsic = pose(&c.extrinsic);
-    if !extrinsic.is_finite() {
-        return Err(FilterError::NonFinite);
-    }
-    let init = init
-        .with_extrinsic(
-            SENSOR,
-            extrinsic,
-            c.sigma_rotation_rad,
-            c.sigma_translation_m,
-        )
-        .with_time_offset(SENSOR, c.time_offset_s, c.sigma_time_offset_s);
     match &c.sensors {
-        SensorSet::PoseImu => Ok(Filter::PoseImu(PoseImuEkf::new(&fc, &init)?)),
+        SensorSet::PoseImu | SensorSet::CameraImu(_) => {}
+        SensorSet::Monitor(m) => {
+            let forgetting_ok = m.step_forgetting > 0.0 && m.step_forgetting <= 1.0;
+            // Infinite is allowed (every direction tested); NaN and <= 0 are not.
+            let factor = m.resolvable_step_factor;
+            if !forgetting_ok || factor.is_nan() || factor <= 0.0 {
+                return Err(FilterError::InvalidConfig);
+            }
+            fc.health.step_forgetting = m.step_forgetting;
+            fc.health.resolvable_step_factor = m.resolvable_step_factor;
+        }
+    }
+    Ok(fc)
+}
+
+/// The monitoring filter: both sensors' priors, the lever arm along the planar axis held.
+fn monitor_filter(
+    fc: &FilterConfig<f32>,
+    c: &Config,
+    m: &MonitorSetup,
+) -> Result<MonitorEkf<f32>, FilterError> {
+    let init = with_sensor(imu_prior::<2>(&c.imu_prior)?, 0, &c.sensor)?;
+    let init = with_sensor(init, 1, &m.pose1)?;
+    let mut ekf = MonitorEkf::new(fc, &init)?;
+    if let Some(axis) = m.hold_translation_axis {
+        for s in 0..2 {
+            ekf.hold_translation_axis(s, Some(Vector3::from(axis)))?;
+        }
+    }
+    Ok(ekf)
+}
+
+/// Replaces `slot` with the filter of a configuration; on an error `slot` is unchanged.
+/// Built straight into the slot's place (the monitoring filter is 14 KB: every by-value
+/// copy of it would be stack).
+#[inline(never)]
+pub fn configure(slot: &mut Option<Filter>, c: &Config) -> Result<(), FilterError> {
+    let fc = filter_config(c)?;
+    match &c.sensors {
+        SensorSet::PoseImu => {
+            let init = with_sensor(imu_prior::<1>(&c.imu_prior)?, 0, &c.sensor)?;
+            *slot = Some(Filter::PoseImu(PoseImuEkf::new(&fc, &init)?));
+        }
         SensorSet::CameraImu(setup) => {
             let sigma = setup.pixel_sigma;
             if !(sigma.is_finite() && sigma > 0.0) {
                 return Err(FilterError::InvalidConfig);
             }
-            Ok(Filter::CameraImu(CameraFilter {
+            let init = with_sensor(imu_prior::<1>(&c.imu_prior)?, 0, &c.sensor)?;
+            *slot = Some(Filter::CameraImu(CameraFilter {
                 camera: camera(setup)?,
                 ekf: CameraImuEkf::new(&fc, &init)?,
                 pixel_sigma: sigma,
-            }))
+            }));
         }
+        SensorSet::Monitor(m) => *slot = Some(Filter::Monitor(monitor_filter(&fc, c, m)?)),
     }
+    Ok(())
 }

@@ -2,7 +2,9 @@
 //! through any `embedded_io::Write`. Independent of the board.
 //!
 //! Sequencing follows the host pipelines (`host/src/calibrate/pose_imu.rs`,
-//! `camera_imu.rs`): pose messages, target poses and corner sets wait in bounded queues until
+//! `camera_imu.rs`, `monitor/replay.rs`): pose messages (one queue per pose sensor; of the
+//! due ones the earliest IMU time goes first), target poses and corner sets wait in bounded
+//! queues until
 //! the IMU stream reaches their IMU time `stamp + t_d` (with the current `t_d` estimate) and
 //! are applied just before the IMU sample that passes it; an increment without a matching
 //! anchor re-anchors at its end, as the host does; a target pose initialises the target
@@ -25,11 +27,13 @@ use msreg_protocol::{
     CORNER_SET_MAX, DEVICE_FRAME_MAX, HOST_FRAME_MAX,
 };
 
-pub use crate::filter::{new_filter, Filter};
+pub use crate::filter::{configure, Filter};
 use crate::filter::{pose, CameraFilter, SENSOR, TARGET};
 
-/// Pose messages that may wait for the IMU stream.
+/// Pose messages per sensor that may wait for the IMU stream.
 pub const PENDING_MAX: usize = 16;
+/// Pose sensors with a queue (the monitoring layout has two).
+pub const POSE_SENSORS: usize = 2;
 /// Camera messages (target pose, corner sets) that may wait for the IMU stream: each entry
 /// is a full corner set in RAM (~1 KB); the host sends them 60 ms ahead of the IMU batch at
 /// their stamp, so at 20 Hz at most three images and the target pose wait (docs/protocol.md).
@@ -48,6 +52,13 @@ impl Pending {
         match self {
             Pending::Anchor(a, _) => a.stamp_ns,
             Pending::Increment(r, _) => r.stamp_to_ns,
+        }
+    }
+
+    fn sensor(&self) -> u8 {
+        match self {
+            Pending::Anchor(a, _) => a.sensor,
+            Pending::Increment(r, _) => r.sensor,
         }
     }
 }
@@ -136,7 +147,8 @@ struct Counts {
 pub struct Session {
     filter: Option<Filter>,
     config: Option<Config>,
-    pending: Deque<Pending, PENDING_MAX>,
+    /// One queue per pose sensor: each is in stamp order, the sensors' due times interleave.
+    pending: [Deque<Pending, PENDING_MAX>; POSE_SENSORS],
     camera_pending: Deque<CameraPending, CAMERA_PENDING_MAX>,
     counts: Counts,
     last_seq: Option<u32>,
@@ -180,7 +192,7 @@ impl Session {
         Self {
             filter: None,
             config: None,
-            pending: Deque::new(),
+            pending: [Deque::new(), Deque::new()],
             camera_pending: Deque::new(),
             counts: Counts {
                 frames_ok: 0,
@@ -321,21 +333,21 @@ impl Session {
 
     #[inline(never)]
     fn on_config<W: embedded_io::Write>(&mut self, w: &mut W, seq: u32, c: &Config) -> AckStatus {
-        match new_filter(c) {
-            Ok(f) => {
-                self.filter = Some(f);
+        match configure(&mut self.filter, c) {
+            Ok(()) => {
                 self.config = Some(*c);
-                self.pending.clear();
+                self.pending.iter_mut().for_each(Deque::clear);
                 self.camera_pending.clear();
                 self.imu_index = 0;
                 self.last_estimate_ns = 0;
                 self.last_progress_ns = 0;
                 self.alarm = false;
                 defmt::info!(
-                    "configured: estimate every {=u32} ns, sigma prior {=f32} rad / {=f32} m",
+                    "configured: {=u32} sensor(s), estimate every {=u32} ns, sigma prior {=f32} rad / {=f32} m",
+                    self.filter.as_ref().map_or(0, Filter::sensor_count) as u32,
                     c.estimate_period_ns,
-                    c.sigma_rotation_rad,
-                    c.sigma_translation_m
+                    c.sensor.sigma_rotation_rad,
+                    c.sensor.sigma_translation_m
                 );
                 let errors = self.counts.errors;
                 self.counts = Counts {
@@ -370,14 +382,16 @@ impl Session {
     }
 
     fn on_pose<W: embedded_io::Write>(&mut self, w: &mut W, seq: u32, p: Pending) -> AckStatus {
-        let refused = match self.filter {
+        let s = usize::from(p.sensor());
+        let refused = match &self.filter {
             None => Some(ErrorKind::NotConfigured),
-            Some(Filter::CameraImu(_)) => Some(ErrorKind::WrongSensorSet),
-            Some(Filter::PoseImu(_)) => self
-                .pending
-                .push_back(p)
-                .err()
-                .map(|_| ErrorKind::QueueFull),
+            Some(f) if !f.takes_odometry() || s >= f.sensor_count() => {
+                Some(ErrorKind::WrongSensorSet)
+            }
+            Some(_) => match self.pending.get_mut(s) {
+                Some(queue) => queue.push_back(p).err().map(|_| ErrorKind::QueueFull),
+                None => Some(ErrorKind::WrongSensorSet),
+            },
         };
         self.acknowledge(w, refused, seq, p.stamp_ns())
     }
@@ -391,7 +405,7 @@ impl Session {
     ) -> AckStatus {
         let refused = match self.filter {
             None => Some(ErrorKind::NotConfigured),
-            Some(Filter::PoseImu(_)) => Some(ErrorKind::WrongSensorSet),
+            Some(Filter::PoseImu(_) | Filter::Monitor(_)) => Some(ErrorKind::WrongSensorSet),
             Some(Filter::CameraImu(_)) => match p.check() {
                 Err(kind) => Some(kind),
                 Ok(()) => self
@@ -455,7 +469,7 @@ impl Session {
             return;
         }
         self.last_progress_ns = now;
-        let (sr, st) = f.extrinsic_sigma();
+        let (sr, st) = f.extrinsic_sigma(SENSOR);
         defmt::info!(
             "t {=u64} ms: {=u32} IMU samples, {=u32} updates ({=u32} accepted), sigma {=f32} deg / {=f32} mm",
             now.saturating_sub(self.progress_origin_ns) / 1_000_000,
@@ -467,10 +481,27 @@ impl Session {
         );
     }
 
-    /// True when a measurement stamped `stamp_ns` (sensor clock) can be fused: the filter
-    /// holds an IMU sample at or after its IMU time (`Ekf::is_due`).
-    fn is_due(&self, stamp_ns: u64) -> bool {
-        self.filter.as_ref().is_some_and(|f| f.is_due(stamp_ns))
+    /// True when a measurement of sensor `s` stamped `stamp_ns` (sensor clock) can be
+    /// fused: the filter holds an IMU sample at or after its IMU time (`Ekf::is_due`).
+    fn is_due(&self, s: usize, stamp_ns: u64) -> bool {
+        self.filter.as_ref().is_some_and(|f| f.is_due(s, stamp_ns))
+    }
+
+    /// The pose sensor whose queue front is due with the earliest IMU time (ties: the lower
+    /// index), as `msreg monitor` orders the two sensors.
+    fn earliest_due_pose(&self) -> Option<usize> {
+        let f = self.filter.as_ref()?;
+        (0..POSE_SENSORS)
+            .filter_map(|s| {
+                let front = self.pending[s].front()?;
+                let stamp = front.stamp_ns();
+                if !f.is_due(s, stamp) {
+                    return None;
+                }
+                f.imu_time(s, stamp).ok().map(|t| (t, s))
+            })
+            .min()
+            .map(|(_, s)| s)
     }
 
     /// Applies every pending measurement that the newest IMU sample made due.
@@ -484,7 +515,7 @@ impl Session {
     #[inline(never)]
     fn apply_due_camera<W: embedded_io::Write>(&mut self, w: &mut W) {
         while let Some(front) = self.camera_pending.front() {
-            if !self.is_due(front.stamp_ns()) {
+            if !self.is_due(SENSOR, front.stamp_ns()) {
                 return;
             }
             let Some(front) = self.camera_pending.pop_front() else {
@@ -502,11 +533,10 @@ impl Session {
     }
 
     fn apply_due_poses<W: embedded_io::Write>(&mut self, w: &mut W) {
-        while let Some(front) = self.pending.front().copied() {
-            if !self.is_due(front.stamp_ns()) {
+        while let Some(s) = self.earliest_due_pose() {
+            let Some(front) = self.pending[s].pop_front() else {
                 return;
-            }
-            self.pending.pop_front();
+            };
             if self.imu_index == 0 {
                 self.fault(
                     w,
@@ -517,8 +547,8 @@ impl Session {
                 continue;
             }
             match front {
-                Pending::Anchor(a, seq) => self.anchor(w, a.stamp_ns, seq),
-                Pending::Increment(r, seq) => self.increment(w, &r, seq),
+                Pending::Anchor(a, seq) => self.anchor(w, s, a.stamp_ns, seq),
+                Pending::Increment(r, seq) => self.increment(w, s, &r, seq),
             }
         }
     }
@@ -581,28 +611,34 @@ impl Session {
     }
 
     #[inline(never)]
-    fn anchor<W: embedded_io::Write>(&mut self, w: &mut W, stamp_ns: u64, seq: u32) {
-        let Some(Filter::PoseImu(filter)) = self.filter.as_mut() else {
+    fn anchor<W: embedded_io::Write>(&mut self, w: &mut W, s: usize, stamp_ns: u64, seq: u32) {
+        let Some(filter) = self.filter.as_mut() else {
             return;
         };
-        match filter.anchor(SENSOR, stamp_ns) {
+        match filter.anchor(s, stamp_ns) {
             Ok(()) => self.counts.anchors += 1,
             Err(e) => self.fault(w, error_kind(&e), seq, stamp_ns),
         }
     }
 
     #[inline(never)]
-    fn increment<W: embedded_io::Write>(&mut self, w: &mut W, r: &RelativePose, seq: u32) {
-        let Some(Filter::PoseImu(filter)) = self.filter.as_mut() else {
+    fn increment<W: embedded_io::Write>(
+        &mut self,
+        w: &mut W,
+        s: usize,
+        r: &RelativePose,
+        seq: u32,
+    ) {
+        let Some(filter) = self.filter.as_mut() else {
             return;
         };
         let meas = relative_pose(r);
-        match filter.update_relative_pose(SENSOR, &meas) {
+        match filter.update_relative_pose(s, &meas) {
             Ok(report) => self.on_report(w, &report, seq),
             Err(e @ (FilterError::NoAnchor | FilterError::OlderThanWindow)) => {
                 // The chain broke (a lost or refused pose): start a new segment here.
                 self.fault(w, error_kind(&e), seq, r.stamp_to_ns);
-                self.anchor(w, r.stamp_to_ns, seq);
+                self.anchor(w, s, r.stamp_to_ns, seq);
             }
             Err(e) => self.fault(w, error_kind(&e), seq, r.stamp_to_ns),
         }
@@ -662,7 +698,7 @@ impl Session {
             Self::tx(&mut self.tx_seq, w).send(&DeviceMsg::HealthAlarm(alarm(event)));
         }
         if self.config.is_some_and(|c| c.estimate_period_ns == 0) {
-            self.send_estimate(w, self.current_seq);
+            self.send_estimate(w, self.current_seq, report.sensor.unwrap_or(SENSOR));
         }
     }
 
@@ -670,24 +706,27 @@ impl Session {
         let (Some(c), Some(f)) = (self.config, self.filter.as_ref()) else {
             return;
         };
-        let now = f.time_ns();
+        let (now, sensors) = (f.time_ns(), f.sensor_count());
         if c.estimate_period_ns > 0
             && now
                 >= self
                     .last_estimate_ns
                     .saturating_add(u64::from(c.estimate_period_ns))
         {
-            self.send_estimate(w, seq);
+            for s in 0..sensors {
+                self.send_estimate(w, seq, s);
+            }
         }
     }
 
+    /// The estimate of sensor `s`.
     #[inline(never)]
-    fn send_estimate<W: embedded_io::Write>(&mut self, w: &mut W, seq: u32) {
+    fn send_estimate<W: embedded_io::Write>(&mut self, w: &mut W, seq: u32, s: usize) {
         let Some(f) = self.filter.as_ref() else {
             return;
         };
         self.last_estimate_ns = f.time_ns();
-        let e = estimate(f, &self.counts, self.alarm, seq);
+        let e = estimate(f, &self.counts, self.alarm, seq, s);
         Self::tx(&mut self.tx_seq, w).send(&DeviceMsg::Estimate(e));
     }
 
@@ -771,12 +810,14 @@ fn diagnostic(r: &UpdateReport<f32>) -> UpdateDiagnostic {
         nis: r.nis,
         threshold: r.threshold,
         accepted: r.accepted,
+        sensor: r.sensor.map(|s| s as u8),
     }
 }
 
 fn alarm(e: &HealthEvent<f32>) -> HealthAlarm {
     match *e {
         HealthEvent::RotationStep {
+            sensor,
             stamp_ns,
             statistic,
             step,
@@ -786,8 +827,10 @@ fn alarm(e: &HealthEvent<f32>) -> HealthAlarm {
             kind: AlarmKind::RotationStep,
             statistic,
             step: step.into(),
+            sensor: sensor as u8,
         },
         HealthEvent::TranslationStep {
+            sensor,
             stamp_ns,
             statistic,
             step,
@@ -797,30 +840,29 @@ fn alarm(e: &HealthEvent<f32>) -> HealthAlarm {
             kind: AlarmKind::TranslationStep,
             statistic,
             step: step.into(),
+            sensor: sensor as u8,
         },
     }
 }
 
-fn estimate(f: &Filter, c: &Counts, alarm: bool, seq: u32) -> Estimate {
-    let (sr, st) = f.extrinsic_sigma();
-    let health = f.health();
-    let sensor = health.sensor(SENSOR);
-    let (nis_per_dof, nis_state) = sensor.map_or((0.0, NisState::Filling), |s| {
-        let state = match s.nis_status(&f.config().health) {
+fn estimate(f: &Filter, c: &Counts, alarm: bool, seq: u32, s: usize) -> Estimate {
+    let (sr, st) = f.extrinsic_sigma(s);
+    let (nis_per_dof, nis_state) = f.nis(s).map_or((0.0, NisState::Filling), |(nis, status)| {
+        let state = match status {
             NisStatus::Filling => NisState::Filling,
             NisStatus::Consistent => NisState::Consistent,
             NisStatus::High => NisState::High,
             NisStatus::Low => NisState::Low,
         };
-        (s.windowed_nis_per_dof(), state)
+        (nis, state)
     });
     Estimate {
         stamp_ns: f.time_ns(),
-        extrinsic: wire_pose(&f.extrinsic()),
+        extrinsic: wire_pose(&f.extrinsic(s)),
         sigma_rotation_rad: sr.into(),
         sigma_translation_m: st.into(),
-        time_offset_s: f.time_offset(),
-        sigma_time_offset_s: f.time_offset_sigma(),
+        time_offset_s: f.time_offset(s),
+        sigma_time_offset_s: f.time_offset_sigma(s),
         nis_per_dof,
         nis_state,
         health: if alarm {
@@ -832,5 +874,6 @@ fn estimate(f: &Filter, c: &Counts, alarm: bool, seq: u32) -> Estimate {
         updates_accepted: c.accepted,
         updates_rejected: c.rejected,
         last_seq: seq,
+        sensor: s as u8,
     }
 }

@@ -6,6 +6,7 @@
 //! `tools/firmware.sh build`).
 
 mod common;
+mod monitor;
 
 use std::time::Duration;
 
@@ -359,7 +360,10 @@ fn camera_messages_out_of_order_or_invalid_are_typed_faults() {
         .expect("config sent");
     // odometry is the wrong sensor set, a NaN pixel or an empty set are refused on arrival
     client
-        .send(&HostMsg::Anchor(Anchor { stamp_ns: t0 }))
+        .send(&HostMsg::Anchor(Anchor {
+            stamp_ns: t0,
+            sensor: 0,
+        }))
         .expect("send");
     client.send(&corner_set(t0, 42, f32::NAN)).expect("send");
     client.send(&corner_set(t0, 0, 300.0)).expect("send");

@@ -2,6 +2,8 @@
 //!
 //! - [`stream`] turns a dataset into the message sequence the firmware needs (the same
 //!   initialisation and pose sequencing as `calibrate::pose_imu`);
+//! - [`monitor_stream`] does it for a drive and the device's monitoring layout (the prior
+//!   and pose sequencing of `msreg monitor`);
 //! - [`port`] opens the serial device and decodes what arrives on a reader thread;
 //! - [`client`] sends with flow control (a window of unacknowledged bytes), collects the
 //!   device's messages and records the session;
@@ -13,6 +15,7 @@
 pub mod cli;
 pub mod client;
 pub mod defmt;
+pub mod monitor_stream;
 pub mod port;
 pub mod record;
 pub mod stream;

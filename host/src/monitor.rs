@@ -25,7 +25,10 @@ use serde::Serialize;
 use crate::calibrate::observability::DofObservability;
 use crate::dataset::{ExtrinsicEstimate, ImuNoiseYaml, ImuRecord, PoseRecord, PoseSensorYaml};
 
-pub use replay::{monitor, MonitorOptions};
+pub use replay::{
+    monitor, monitor_prior, pose_steps, MonitorOptions, PoseStep, ZERO_VELOCITY_EVERY,
+};
+pub use start::FilterPrior;
 
 /// Sensor names, by filter index.
 pub const SENSOR_NAMES: [&str; 2] = ["pose0", "pose1"];
@@ -151,6 +154,8 @@ pub struct MonitorReport {
     pub warnings: Vec<Alarm>,
     /// `pose0`, `pose1`.
     pub sensors: Vec<SensorReport>,
+    /// Zero-velocity updates (of no sensor) the filter refused, with the reason.
+    pub zero_velocity_skipped: Vec<String>,
 }
 
 impl MonitorReport {

@@ -10,8 +10,8 @@
 //! ```
 //! use msreg_protocol::{frame, HostMsg, Anchor, HOST_FRAME_MAX};
 //! let mut out = [0u8; HOST_FRAME_MAX];
-//! let n = frame::encode(7, &HostMsg::Anchor(Anchor { stamp_ns: 1 }), &mut out).unwrap();
-//! assert_eq!(&out[..n], &[0x06, 0x07, 0x03, 0x01, 0x7e, 0x0c, 0x00]);
+//! let n = frame::encode(7, &HostMsg::Anchor(Anchor { stamp_ns: 1, sensor: 0 }), &mut out).unwrap();
+//! assert_eq!(&out[..n], &[0x04, 0x07, 0x03, 0x01, 0x03, 0x8c, 0xbf, 0x00]);
 //! let packet = frame::decode::<HostMsg>(&mut out[..n - 1]).unwrap();
 //! assert_eq!(packet.seq, 7);
 //! ```
@@ -32,7 +32,7 @@ pub use message::*;
 use postcard::experimental::max_size::MaxSize;
 
 /// Protocol version carried by [`Hello`]; bumped on any change of the wire format.
-pub const VERSION: u16 = 2;
+pub const VERSION: u16 = 3;
 
 /// Largest encoded frame from the host, delimiter included.
 pub const HOST_FRAME_MAX: usize = frame::frame_max(Packet::<HostMsg>::POSTCARD_MAX_SIZE);

@@ -119,6 +119,39 @@ pub enum SensorSet {
     /// IMU + one camera (extrinsic, time offset) and a static target seen in its images;
     /// the extrinsic of [`Config`] is `T_imu_cam`.
     CameraImu(CameraSetup),
+    /// On-vehicle monitoring (`msreg monitor`): IMU + two pose sensors, `pose0` (e.g. LiDAR
+    /// odometry; the prior of [`Config::sensor`]) and `pose1` (e.g. camera VO; the prior in
+    /// the setup), each with extrinsic and time offset, in one filter (`MonitorEkf`).
+    Monitor(MonitorSetup),
+}
+
+/// Prior of one sensor's calibration: initial `T_imu_sensor` and time offset with 1-sigmas.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq)]
+pub struct SensorPrior {
+    /// Initial `T_imu_sensor`.
+    pub extrinsic: Pose,
+    /// Its rotation 1-sigma per axis, rad.
+    pub sigma_rotation_rad: f32,
+    /// Its translation 1-sigma per axis, m.
+    pub sigma_translation_m: f32,
+    /// Initial time offset `t_d`, s.
+    pub time_offset_s: f32,
+    /// Its 1-sigma, s (0 keeps it fixed).
+    pub sigma_time_offset_s: f32,
+}
+
+/// The monitoring layout's second sensor, lever-arm hold and health-monitor tuning.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq)]
+pub struct MonitorSetup {
+    /// Prior of `pose1` (sensor 1).
+    pub pose1: SensorPrior,
+    /// Planar motion: the lever arm of both sensors along this IMU-frame axis is held at its
+    /// prior (`Ekf::hold_translation_axis`); `None`: nothing held.
+    pub hold_translation_axis: Option<[f32; 3]>,
+    /// Forgetting factor of the step detectors per update (`HealthConfig::step_forgetting`).
+    pub step_forgetting: f32,
+    /// `HealthConfig::resolvable_step_factor` (may be infinite: every direction tested).
+    pub resolvable_step_factor: f32,
 }
 
 /// Projection of a camera onto its normalised plane (Kalibr `camera_model`).
@@ -159,9 +192,19 @@ pub struct CameraSetup {
     pub pixel_sigma: f32,
 }
 
-/// IMU prior at the first sample (from the host's standstill detection).
+/// IMU prior at the first sample.
 #[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq)]
-pub struct ImuPrior {
+pub enum ImuPrior {
+    /// At rest (the host's standstill detection): the device levels the IMU on gravity.
+    AtRest(RestPrior),
+    /// The whole IMU state with its sigmas, as the host's start computed it (e.g. the
+    /// monitor's dynamic alignment on a moving vehicle): nothing is re-derived on the device.
+    State(ImuStart),
+}
+
+/// IMU at rest: gravity's direction and the gyro bias.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq)]
+pub struct RestPrior {
     /// Mean specific force at rest, m/s^2 (gives gravity's direction).
     pub accel_mean: [f32; 3],
     /// Gyro bias, rad/s.
@@ -170,6 +213,24 @@ pub struct ImuPrior {
     pub sigma_orientation_rad: f32,
     /// 1-sigma of the velocity, m/s (0: the estimator's default).
     pub sigma_velocity_m_s: f32,
+}
+
+/// An IMU state (`T_G_I`, velocity, biases) and its per-axis 1-sigmas.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq)]
+pub struct ImuStart {
+    /// `q_G_I`, Hamilton `[w, x, y, z]`.
+    pub rotation_wxyz: [f32; 4],
+    /// `p_G_I`, m.
+    pub position_m: [f32; 3],
+    /// `v_G_I`, m/s.
+    pub velocity_m_s: [f32; 3],
+    /// Gyro bias, rad/s.
+    pub gyro_bias_rad_s: [f32; 3],
+    /// Accelerometer bias, m/s^2.
+    pub accel_bias_m_s2: [f32; 3],
+    /// 1-sigmas: orientation (rad), position (m), velocity (m/s), gyro bias (rad/s),
+    /// accelerometer bias (m/s^2); each positive.
+    pub sigmas: [f32; 5],
 }
 
 /// Filter configuration; (re)starts the filter.
@@ -185,16 +246,8 @@ pub struct Config {
     pub max_imu_gap_ns: u32,
     /// IMU prior.
     pub imu_prior: ImuPrior,
-    /// Initial `T_imu_sensor`.
-    pub extrinsic: Pose,
-    /// Its rotation 1-sigma, rad.
-    pub sigma_rotation_rad: f32,
-    /// Its translation 1-sigma, m.
-    pub sigma_translation_m: f32,
-    /// Initial time offset `t_d`, s.
-    pub time_offset_s: f32,
-    /// Its 1-sigma, s (0 keeps it fixed).
-    pub sigma_time_offset_s: f32,
+    /// Prior of sensor 0 (the pose sensor, the camera, or the monitor's `pose0`).
+    pub sensor: SensorPrior,
     /// Zero-velocity updates while IMU stamps are <= this (0: none), ns.
     pub zero_velocity_until_ns: u64,
     /// One zero-velocity update every this many IMU samples.
@@ -228,6 +281,8 @@ pub struct ImuBatch {
 pub struct Anchor {
     /// Sensor stamp, ns.
     pub stamp_ns: u64,
+    /// Pose sensor (0; 0 or 1 in the monitoring layout).
+    pub sensor: u8,
 }
 
 /// Odometry increment `T_Sfrom_Sto` with a diagonal covariance.
@@ -243,6 +298,8 @@ pub struct RelativePose {
     pub sigma_rotation_rad: [f32; 3],
     /// 1-sigma of the translation, m, per axis.
     pub sigma_translation_m: [f32; 3],
+    /// Pose sensor (0; 0 or 1 in the monitoring layout).
+    pub sensor: u8,
 }
 
 /// The target's pose in the camera in one image (the host's PnP), from which the device sets
@@ -350,6 +407,8 @@ pub struct Estimate {
     pub updates_rejected: u32,
     /// Sequence number of the last host frame applied before this estimate.
     pub last_seq: u32,
+    /// The sensor whose extrinsic, time offset and NIS these are.
+    pub sensor: u8,
 }
 
 /// Measurement model of an update.
@@ -380,6 +439,8 @@ pub struct UpdateDiagnostic {
     pub threshold: f32,
     /// Passed the gate.
     pub accepted: bool,
+    /// The sensor measured; `None` for an update of no sensor (zero velocity).
+    pub sensor: Option<u8>,
 }
 
 /// Which step the health monitor detected.
@@ -402,6 +463,8 @@ pub struct HealthAlarm {
     pub statistic: f32,
     /// Estimated step, rad or m.
     pub step: [f32; 3],
+    /// The sensor whose extrinsic changed.
+    pub sensor: u8,
 }
 
 /// Every fault the device counts. The discriminant is the index into [`Status::errors`].
@@ -453,7 +516,9 @@ pub enum ErrorKind {
     TargetNotInitialized,
     /// A corner falls behind the camera or outside the model's domain at the estimate.
     NotProjectable,
-    /// Measurement of a sensor the configured [`SensorSet`] does not have.
+    /// Measurement of a sensor the configured [`SensorSet`] does not have (a camera
+    /// message to a pose filter, odometry to a camera filter, a sensor index beyond the
+    /// layout's).
     WrongSensorSet,
 }
 

@@ -62,8 +62,9 @@ fn relative_pose() -> impl Strategy<Value = HostMsg> {
         any::<u64>(),
         any::<u64>(),
         [f32_any(), f32_any(), f32_any(), f32_any()],
+        any::<u8>(),
     )
-        .prop_map(|(a, b, q)| {
+        .prop_map(|(a, b, q, sensor)| {
             HostMsg::RelativePose(RelativePose {
                 stamp_from_ns: a,
                 stamp_to_ns: b,
@@ -73,6 +74,7 @@ fn relative_pose() -> impl Strategy<Value = HostMsg> {
                 },
                 sigma_rotation_rad: [q[0]; 3],
                 sigma_translation_m: [q[3]; 3],
+                sensor,
             })
         })
 }
@@ -119,7 +121,8 @@ fn host_msg() -> impl Strategy<Value = HostMsg> {
         relative_pose(),
         corner_set(),
         target_pose(),
-        any::<u64>().prop_map(|stamp_ns| HostMsg::Anchor(Anchor { stamp_ns })),
+        (any::<u64>(), any::<u8>())
+            .prop_map(|(stamp_ns, sensor)| HostMsg::Anchor(Anchor { stamp_ns, sensor })),
         Just(HostMsg::GetStatus),
     ]
 }

@@ -4,9 +4,10 @@
 use msreg_protocol::{
     cobs, crc, frame, Ack, AckStatus, Anchor, Bounded, CameraDistortion, CameraProjection,
     CameraSetup, Config, Corner, CornerSet, Deframer, DeviceMsg, ErrorKind, ErrorReport,
-    FrameError, Gate, Hello, HostMsg, ImuBatch, ImuNoise, ImuPrior, ImuSample, Packet, Pose,
-    Pushed, SensorSet, TargetPose, UpdateDiagnostic, UpdateKind, CORNER_SET_MAX, DEVICE_FRAME_MAX,
-    HOST_FRAME_MAX, IMU_BATCH_MAX,
+    FrameError, Gate, Hello, HostMsg, ImuBatch, ImuNoise, ImuPrior, ImuSample, ImuStart,
+    MonitorSetup, Packet, Pose, Pushed, RelativePose, RestPrior, SensorPrior, SensorSet,
+    TargetPose, UpdateDiagnostic, UpdateKind, CORNER_SET_MAX, DEVICE_FRAME_MAX, HOST_FRAME_MAX,
+    IMU_BATCH_MAX,
 };
 
 fn host_frame(seq: u32, msg: &HostMsg) -> Vec<u8> {
@@ -36,12 +37,25 @@ fn crc16_matches_the_ccitt_false_check_value() {
 
 #[test]
 fn anchor_frame_has_exact_bytes() {
-    // seq 7, variant 3 (Anchor), stamp 1, CRC 0x0c7e little-endian, COBS code 6, delimiter.
-    let bytes = host_frame(7, &HostMsg::Anchor(Anchor { stamp_ns: 1 }));
-    assert_eq!(bytes, [0x06, 0x07, 0x03, 0x01, 0x7e, 0x0c, 0x00]);
+    // seq 7, variant 3 (Anchor), stamp 1, sensor 0 (a zero: COBS code 4 ends the first
+    // block), CRC 0xbf8c little-endian in a block of code 3, delimiter.
+    let bytes = host_frame(
+        7,
+        &HostMsg::Anchor(Anchor {
+            stamp_ns: 1,
+            sensor: 0,
+        }),
+    );
+    assert_eq!(bytes, [0x04, 0x07, 0x03, 0x01, 0x03, 0x8c, 0xbf, 0x00]);
     let packet = decode_host(&bytes).expect("decodes");
     assert_eq!(packet.seq, 7);
-    assert_eq!(packet.msg, HostMsg::Anchor(Anchor { stamp_ns: 1 }));
+    assert_eq!(
+        packet.msg,
+        HostMsg::Anchor(Anchor {
+            stamp_ns: 1,
+            sensor: 0,
+        })
+    );
 }
 
 #[test]
@@ -114,14 +128,26 @@ fn device_frames_have_exact_bytes() {
 
 #[test]
 fn a_flipped_bit_is_a_crc_error() {
-    let mut bytes = host_frame(7, &HostMsg::Anchor(Anchor { stamp_ns: 1 }));
+    let mut bytes = host_frame(
+        7,
+        &HostMsg::Anchor(Anchor {
+            stamp_ns: 1,
+            sensor: 0,
+        }),
+    );
     bytes[3] ^= 0x10;
     assert_eq!(decode_host(&bytes), Err(FrameError::Crc));
 }
 
 #[test]
 fn a_truncated_frame_is_a_framing_error() {
-    let bytes = host_frame(7, &HostMsg::Anchor(Anchor { stamp_ns: 1 }));
+    let bytes = host_frame(
+        7,
+        &HostMsg::Anchor(Anchor {
+            stamp_ns: 1,
+            sensor: 0,
+        }),
+    );
     let mut cut = bytes[..3].to_vec();
     assert_eq!(frame::decode::<HostMsg>(&mut cut), Err(FrameError::Framing));
 }
@@ -291,17 +317,13 @@ fn camera_imu_config_has_exact_bytes() {
         },
         gate: Gate::P999,
         max_imu_gap_ns: 0,
-        imu_prior: ImuPrior {
+        imu_prior: ImuPrior::AtRest(RestPrior {
             accel_mean: [0.0; 3],
             gyro_bias: [0.0; 3],
             sigma_orientation_rad: 0.0,
             sigma_velocity_m_s: 0.0,
-        },
-        extrinsic: Pose::default(),
-        sigma_rotation_rad: 0.0,
-        sigma_translation_m: 0.0,
-        time_offset_s: 0.0,
-        sigma_time_offset_s: 0.0,
+        }),
+        sensor: zero_prior(),
         zero_velocity_until_ns: 0,
         zero_velocity_every: 0,
         estimate_period_ns: 0,
@@ -317,7 +339,7 @@ fn camera_imu_config_has_exact_bytes() {
     body.extend([0xf0, 0x05, 0xe0, 0x03]);
     body.extend(le(&[0.125]));
     body.extend(le(&[0.0; 4]));
-    body.extend([0x04, 0x00]);
+    body.extend([0x04, 0x00, 0x00]);
     body.extend(le(&[0.0; 8]));
     body.extend(le(&[0.0; 7]));
     body.extend(le(&[0.0; 4]));
@@ -342,9 +364,12 @@ fn reprojection_diagnostic_and_new_faults_have_exact_bytes() {
         nis: 0.0,
         threshold: 0.0,
         accepted: true,
+        sensor: Some(0),
     });
-    // seq 4, variant 3, stamp 1, kind 2, dof 84 = 0x54, two zero f32, true.
-    let expected_body = [0x04, 0x03, 0x01, 0x02, 0x54, 0, 0, 0, 0, 0, 0, 0, 0, 0x01];
+    // seq 4, variant 3, stamp 1, kind 2, dof 84 = 0x54, two zero f32, true, Some(0).
+    let expected_body = [
+        0x04, 0x03, 0x01, 0x02, 0x54, 0, 0, 0, 0, 0, 0, 0, 0, 0x01, 0x01, 0x00,
+    ];
     assert_eq!(body_of(&device_frame(4, &diag)), expected_body);
     for (kind, index) in [
         (ErrorKind::TargetNotInitialized, 21u8),
@@ -372,3 +397,114 @@ const _: () = assert!(HOST_FRAME_MAX >= 2 + 10 + 1 + IMU_BATCH_MAX * 29);
 const _: () = assert!(HOST_FRAME_MAX >= 2 + 10 + 1 + CORNER_SET_MAX * 20);
 const _: () = assert!(HOST_FRAME_MAX <= 1024);
 const _: () = assert!(DEVICE_FRAME_MAX <= 256);
+
+fn zero_prior() -> SensorPrior {
+    SensorPrior {
+        extrinsic: Pose::default(),
+        sigma_rotation_rad: 0.0,
+        sigma_translation_m: 0.0,
+        time_offset_s: 0.0,
+        sigma_time_offset_s: 0.0,
+    }
+}
+
+#[test]
+fn monitor_config_has_exact_bytes() {
+    let msg = HostMsg::Config(Config {
+        sensors: SensorSet::Monitor(MonitorSetup {
+            pose1: SensorPrior {
+                sigma_rotation_rad: 0.5,
+                ..zero_prior()
+            },
+            hold_translation_axis: Some([0.0, 0.0, 1.0]),
+            step_forgetting: 0.25,
+            resolvable_step_factor: f32::INFINITY,
+        }),
+        imu_noise: ImuNoise {
+            gyro_noise_density: 0.0,
+            accel_noise_density: 0.0,
+            gyro_random_walk: 0.0,
+            accel_random_walk: 0.0,
+        },
+        gate: Gate::P99,
+        max_imu_gap_ns: 0,
+        imu_prior: ImuPrior::State(ImuStart {
+            rotation_wxyz: [1.0, 0.0, 0.0, 0.0],
+            position_m: [0.0; 3],
+            velocity_m_s: [2.0, 0.0, 0.0],
+            gyro_bias_rad_s: [0.0; 3],
+            accel_bias_m_s2: [0.0; 3],
+            sigmas: [0.5; 5],
+        }),
+        sensor: zero_prior(),
+        zero_velocity_until_ns: 0,
+        zero_velocity_every: 0,
+        estimate_period_ns: 0,
+    });
+    let bytes = host_frame(1, &msg);
+    // seq 1, variant 1 (Config), sensors variant 2 (Monitor): pose1's prior (pose, 4 f32),
+    // Some (1) + axis, forgetting, factor; noise, gate P99 = 2, gap 0, imu prior variant 1
+    // (State) + 4 + 4 x 3 + 5 f32, sensor 0's prior, zero-velocity until 0, every 0, period 0.
+    let mut body = vec![0x01, 0x01, 0x02];
+    body.extend(le(&[0.0; 7]));
+    body.extend(le(&[0.5, 0.0, 0.0, 0.0]));
+    body.push(0x01);
+    body.extend(le(&[0.0, 0.0, 1.0, 0.25, f32::INFINITY]));
+    body.extend(le(&[0.0; 4]));
+    body.extend([0x02, 0x00, 0x01]);
+    body.extend(le(&[1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0]));
+    body.extend(le(&[0.0; 6]));
+    body.extend(le(&[0.5; 5]));
+    body.extend(le(&[0.0; 11]));
+    body.extend([0x00, 0x00, 0x00]);
+    assert_eq!(body_of(&bytes), body);
+    assert_eq!(decode_host(&bytes).expect("decodes").msg, msg);
+}
+
+#[test]
+fn odometry_and_alarms_carry_their_sensor() {
+    let anchor = HostMsg::Anchor(Anchor {
+        stamp_ns: 1,
+        sensor: 1,
+    });
+    assert_eq!(body_of(&host_frame(7, &anchor)), [0x07, 0x03, 0x01, 0x01]);
+    let increment = HostMsg::RelativePose(RelativePose {
+        stamp_from_ns: 1,
+        stamp_to_ns: 2,
+        delta: Pose::default(),
+        sigma_rotation_rad: [0.0; 3],
+        sigma_translation_m: [0.0; 3],
+        sensor: 1,
+    });
+    // seq 8, variant 4, stamps, 7 + 6 f32, sensor 1.
+    let mut body = vec![0x08, 0x04, 0x01, 0x02];
+    body.extend(le(&[0.0; 13]));
+    body.push(0x01);
+    assert_eq!(body_of(&host_frame(8, &increment)), body);
+    let alarm = DeviceMsg::HealthAlarm(msreg_protocol::HealthAlarm {
+        stamp_ns: 3,
+        kind: msreg_protocol::AlarmKind::RotationStep,
+        statistic: 0.0,
+        step: [0.0; 3],
+        sensor: 1,
+    });
+    // seq 9, variant 4, stamp 3, kind 0, 4 f32, sensor 1.
+    let mut body = vec![0x09, 0x04, 0x03, 0x00];
+    body.extend(le(&[0.0; 4]));
+    body.push(0x01);
+    assert_eq!(body_of(&device_frame(9, &alarm)), body);
+    let zupt = DeviceMsg::UpdateDiagnostic(UpdateDiagnostic {
+        stamp_ns: 1,
+        kind: UpdateKind::ZeroVelocity,
+        dof: 3,
+        nis: 0.0,
+        threshold: 0.0,
+        accepted: true,
+        sensor: None,
+    });
+    // A zero-velocity update belongs to no sensor: None = 0.
+    assert_eq!(
+        body_of(&device_frame(4, &zupt)),
+        [0x04, 0x03, 0x01, 0x01, 0x03, 0, 0, 0, 0, 0, 0, 0, 0, 0x01, 0x00]
+    );
+}

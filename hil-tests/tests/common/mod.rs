@@ -416,6 +416,7 @@ fn nan_pose() -> HostMsg {
         },
         sigma_rotation_rad: [0.01; 3],
         sigma_translation_m: [0.01; 3],
+        sensor: 0,
     })
 }
 
@@ -423,7 +424,7 @@ fn nan_pose() -> HostMsg {
 pub fn camera_config() -> msreg_protocol::Config {
     use msreg_protocol::{
         CameraDistortion, CameraProjection, CameraSetup, Config, Gate, ImuNoise, ImuPrior,
-        SensorSet,
+        RestPrior, SensorPrior, SensorSet,
     };
     Config {
         sensors: SensorSet::CameraImu(CameraSetup {
@@ -441,20 +442,22 @@ pub fn camera_config() -> msreg_protocol::Config {
         },
         gate: Gate::P999,
         max_imu_gap_ns: 50_000_000,
-        imu_prior: ImuPrior {
+        imu_prior: ImuPrior::AtRest(RestPrior {
             accel_mean: [0.0, 0.0, 9.81],
             gyro_bias: [0.0; 3],
             sigma_orientation_rad: 0.0,
             sigma_velocity_m_s: 0.0,
+        }),
+        sensor: SensorPrior {
+            extrinsic: Pose {
+                rotation_wxyz: [1.0, 0.0, 0.0, 0.0],
+                translation_m: [0.0; 3],
+            },
+            sigma_rotation_rad: 0.01,
+            sigma_translation_m: 0.01,
+            time_offset_s: 0.0,
+            sigma_time_offset_s: 0.005,
         },
-        extrinsic: Pose {
-            rotation_wxyz: [1.0, 0.0, 0.0, 0.0],
-            translation_m: [0.0; 3],
-        },
-        sigma_rotation_rad: 0.01,
-        sigma_translation_m: 0.01,
-        time_offset_s: 0.0,
-        sigma_time_offset_s: 0.005,
         zero_velocity_until_ns: 0,
         zero_velocity_every: 20,
         estimate_period_ns: 0,

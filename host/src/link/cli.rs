@@ -8,6 +8,7 @@ use msreg_protocol::{DeviceMsg, ErrorKind, HealthState, HostMsg, Status};
 
 use super::client::{Client, ClientOptions, Collected};
 use super::defmt;
+use super::monitor_stream::build_monitor_stream;
 use super::record::{self, Line};
 use super::stream::{build_camera_stream, build_stream, ReplayStream, StreamOptions};
 use super::view::{rpy_deg, LiveView, Mode};
@@ -16,16 +17,21 @@ use crate::calibrate::camera_imu::cli::detect_corner_frames;
 use crate::calibrate::camera_imu::{CameraImuInput, CameraImuOptions};
 use crate::calibrate::pose_imu::PoseImuInput;
 use crate::dataset::Dataset;
+use crate::monitor::cli::DriveFiles;
+use crate::monitor::MonitorOptions;
 use crate::vision::frames::CameraDataset;
 
 /// `msreg link ...`.
 #[derive(Debug, Subcommand)]
 pub enum LinkCommand {
-    /// Stream a dataset to the firmware and record its answers: IMU + odometry increments
-    /// (pose0/), or IMU + target corners (cam0/ and target.yaml, no pose0/): the corners are
-    /// detected and MoCal runs here, the device runs RepErrCal.
+    /// Stream a dataset to the firmware and record its answers: a drive (pose0/ and pose1/,
+    /// calibration.yaml) to the device's health monitor, started as `msreg monitor` starts;
+    /// IMU + odometry increments (pose0/ only); or IMU + target corners (cam0/ and
+    /// target.yaml, no pose0/): the corners are detected and MoCal runs here, the device runs
+    /// RepErrCal.
     Replay {
-        /// Dataset directory (imu0/ with pose0/, or imu0/ with cam0/ and target.yaml).
+        /// Dataset directory (imu0/ with pose0/ and pose1/, imu0/ with pose0/, or imu0/ with
+        /// cam0/ and target.yaml).
         dataset: PathBuf,
         /// Serial device (e.g. the /dev/pts/N QEMU prints).
         #[arg(long)]
@@ -180,8 +186,17 @@ pub struct ReplayOutcome {
     pub start_ns: u64,
 }
 
-/// The replay of a dataset: odometry when it has `pose0/`, else target corners of `cam0/`.
+/// The replay of a dataset: a drive (`pose0/` and `pose1/`) to the monitoring layout, as
+/// `msreg monitor` runs it; odometry when it has `pose0/` only; else target corners of `cam0/`.
 pub fn dataset_stream(dataset: &Path, options: &StreamOptions) -> Result<ReplayStream, LinkError> {
+    if dataset.join("pose1").is_dir() {
+        let files =
+            DriveFiles::read(dataset, None).map_err(|e| LinkError::Dataset(format!("{e:#}")))?;
+        let input = files
+            .input()
+            .map_err(|e| LinkError::Dataset(format!("{e:#}")))?;
+        return build_monitor_stream(&input, &MonitorOptions::default(), options);
+    }
     let data = Dataset::open(dataset).map_err(|e| LinkError::Dataset(e.to_string()))?;
     let missing = |e: crate::dataset::DatasetError| LinkError::Dataset(e.to_string());
     let imu = data.require_imu().map_err(missing)?;
@@ -301,14 +316,35 @@ fn monitor(port: &str, duration: Option<f64>, record: &Path) -> anyhow::Result<(
 
 /// A few lines a person can read at a glance: estimate, sigmas, NIS, health, faults.
 pub fn live_view(c: &Collected) -> String {
-    let mut out = String::new();
-    let Some((t, e)) = c.estimates.last() else {
-        return format!(
+    match c.estimates.last() {
+        Some((t, e)) => estimate_line(c, *t, e),
+        None => format!(
             "t {:>7.2} s | waiting for estimates | errors {}",
             c.errors.last().map_or(0.0, |x| x.0),
             c.errors.len()
-        );
-    };
+        ),
+    }
+}
+
+/// The last estimate of every sensor that sent one, a line each (one sensor: as
+/// [`live_view`]).
+pub fn final_estimates(c: &Collected) -> String {
+    let mut sensors: Vec<u8> = c.estimates.iter().map(|(_, e)| e.sensor).collect();
+    sensors.sort_unstable();
+    sensors.dedup();
+    if sensors.len() < 2 {
+        return live_view(c);
+    }
+    sensors
+        .iter()
+        .filter_map(|s| c.estimates.iter().rev().find(|(_, e)| e.sensor == *s))
+        .map(|(t, e)| format!("pose{}: {}", e.sensor, estimate_line(c, *t, e)))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+fn estimate_line(c: &Collected, t: f64, e: &msreg_protocol::Estimate) -> String {
+    let mut out = String::new();
     let r = rpy_deg(e);
     let sr = e.sigma_rotation_rad.map(|s| f64::from(s).to_degrees());
     let health = match e.health {
@@ -341,7 +377,7 @@ fn percentile(v: &[f64], q: f64) -> f64 {
 /// Multi-line summary of a session.
 pub fn summary(c: &Collected, status: Option<&Status>) -> String {
     let mut out = String::new();
-    out.push_str(&format!("{}\n", live_view(c)));
+    out.push_str(&format!("{}\n", final_estimates(c)));
     out.push_str(&format!(
         "device: {} estimates, {} update diagnostics, {} alarms, {} error reports; acks ok/dup/rejected {}/{}/{}, ack timeouts {}, bad frames {}\n",
         c.estimates.len(), c.diagnostics.len(), c.alarms.len(), c.errors.len(),
@@ -349,8 +385,8 @@ pub fn summary(c: &Collected, status: Option<&Status>) -> String {
     ));
     for (t, a) in &c.alarms {
         out.push_str(&format!(
-            "alarm at host t {t:.2} s: {:?} at stamp {} ns, statistic {:.1}\n",
-            a.kind, a.stamp_ns, a.statistic
+            "alarm at host t {t:.2} s: {:?} of sensor {} at stamp {} ns, statistic {:.1}\n",
+            a.kind, a.sensor, a.stamp_ns, a.statistic
         ));
     }
     if let Some(s) = status {

@@ -22,8 +22,8 @@ use msreg_estimator::camera::{Camera, Distortion, Projection};
 use msreg_estimator::Scalar;
 use msreg_protocol::{
     Anchor, Bounded, CameraDistortion, CameraProjection, CameraSetup, Config, Corner, CornerSet,
-    Gate, HostMsg, ImuBatch, ImuNoise, ImuPrior, ImuSample, Pose, RelativePose, SensorSet,
-    TargetPose, CORNER_SET_MAX, IMU_BATCH_MAX,
+    Gate, HostMsg, ImuBatch, ImuNoise, ImuPrior, ImuSample, Pose, RelativePose, RestPrior,
+    SensorPrior, SensorSet, TargetPose, CORNER_SET_MAX, IMU_BATCH_MAX,
 };
 use nalgebra::{Isometry3, Vector3};
 
@@ -78,10 +78,30 @@ pub struct ReplayStream {
     pub skipped_poses: usize,
 }
 
-fn f32x3(v: &Vector3<f64>) -> [f32; 3] {
+impl ReplayStream {
+    /// `config`, then the IMU in batches of `batch` with `measurements` (stamp order) each
+    /// sent `lead_ns` ahead of the IMU samples at its stamp.
+    pub(super) fn interleaved(
+        config: Config,
+        imu: &[ImuRecord],
+        measurements: &[(u64, HostMsg)],
+        (lead_ns, batch): (u64, usize),
+        skipped_poses: usize,
+    ) -> Self {
+        Self {
+            config,
+            messages: interleave(imu, measurements, lead_ns, batch),
+            start_ns: imu.first().map_or(0, |r| r.stamp_ns),
+            skipped_poses,
+        }
+    }
+}
+
+pub(super) fn f32x3(v: &Vector3<f64>) -> [f32; 3] {
     [v.x as f32, v.y as f32, v.z as f32]
 }
 
+/// A pose as the protocol carries it.
 fn wire_pose(iso: &Isometry3<f64>) -> Pose {
     let q = iso.rotation.quaternion();
     Pose {
@@ -120,12 +140,16 @@ pub fn config(input: &PoseImuInput<'_>, options: &StreamOptions) -> Result<Confi
                  about at least two axes"
             ))
         })?;
+    let base = imu_config(imu, input.imu_noise, options);
     Ok(Config {
-        extrinsic: wire_pose(&Isometry3::from_parts(
-            Default::default(),
-            rotation.rotation,
-        )),
-        ..imu_config(imu, input.imu_noise, options)
+        sensor: SensorPrior {
+            extrinsic: wire_pose(&Isometry3::from_parts(
+                Default::default(),
+                rotation.rotation,
+            )),
+            ..base.sensor
+        },
+        ..base
     })
 }
 
@@ -159,23 +183,25 @@ fn imu_config(imu: &[ImuRecord], imu_noise: &ImuNoiseYaml, options: &StreamOptio
         },
         gate: Gate::P999,
         max_imu_gap_ns: 50_000_000,
-        imu_prior: ImuPrior {
+        imu_prior: ImuPrior::AtRest(RestPrior {
             accel_mean: f32x3(&accel_mean),
             gyro_bias: f32x3(&gyro_bias),
             sigma_orientation_rad,
             sigma_velocity_m_s,
-        },
-        extrinsic: Pose {
-            rotation_wxyz: [1.0, 0.0, 0.0, 0.0],
-            translation_m: [0.0; 3],
-        },
-        sigma_rotation_rad: p.rotation_sigma_rad as f32,
-        sigma_translation_m: p.translation_sigma_m as f32,
-        time_offset_s: 0.0,
-        sigma_time_offset_s: if p.estimate_time_offset {
-            p.time_offset_sigma_s as f32
-        } else {
-            0.0
+        }),
+        sensor: SensorPrior {
+            extrinsic: Pose {
+                rotation_wxyz: [1.0, 0.0, 0.0, 0.0],
+                translation_m: [0.0; 3],
+            },
+            sigma_rotation_rad: p.rotation_sigma_rad as f32,
+            sigma_translation_m: p.translation_sigma_m as f32,
+            time_offset_s: 0.0,
+            sigma_time_offset_s: if p.estimate_time_offset {
+                p.time_offset_sigma_s as f32
+            } else {
+                0.0
+            },
         },
         zero_velocity_until_ns: standstill.map_or(0, |s| s.until_ns),
         zero_velocity_every: 20,
@@ -208,6 +234,7 @@ pub fn build_stream(
         let msg = match previous.filter(|p| pose.stamp_ns - p.stamp_ns <= max_interval_ns) {
             None => HostMsg::Anchor(Anchor {
                 stamp_ns: pose.stamp_ns,
+                sensor: 0,
             }),
             Some(prev) => {
                 let periods = ((pose.stamp_ns - prev.stamp_ns) as f64 / period_ns as f64)
@@ -221,23 +248,20 @@ pub fn build_stream(
                     delta: wire_pose(&delta),
                     sigma_rotation_rad: [(sigma_r * scale) as f32; 3],
                     sigma_translation_m: [(sigma_t * scale) as f32; 3],
+                    sensor: 0,
                 })
             }
         };
         previous = Some(pose);
         measurements.push((pose.stamp_ns, msg));
     }
-    Ok(ReplayStream {
+    Ok(ReplayStream::interleaved(
         config,
-        messages: interleave(
-            input.imu,
-            &measurements,
-            options.pose_lead_ns,
-            options.batch,
-        ),
-        start_ns,
-        skipped_poses: first,
-    })
+        input.imu,
+        &measurements,
+        (options.pose_lead_ns, options.batch),
+        first,
+    ))
 }
 
 /// IMU batches of at most `batch` samples with the measurements (stamp order) between them:
@@ -319,11 +343,13 @@ pub fn camera_config(
     };
     Config {
         sensors: SensorSet::CameraImu(camera_setup(input.camera, start.pixel_sigma)),
-        extrinsic: wire_pose(&start.motion.t_imu_sensor),
-        sigma_rotation_rad: prior.rotation_sigma_rad as f32,
-        sigma_translation_m: prior.translation_sigma_m as f32,
-        time_offset_s: time_offset_s as f32,
-        sigma_time_offset_s: sigma_time_offset_s as f32,
+        sensor: SensorPrior {
+            extrinsic: wire_pose(&start.motion.t_imu_sensor),
+            sigma_rotation_rad: prior.rotation_sigma_rad as f32,
+            sigma_translation_m: prior.translation_sigma_m as f32,
+            time_offset_s: time_offset_s as f32,
+            sigma_time_offset_s: sigma_time_offset_s as f32,
+        },
         ..imu_config(input.imu, input.imu_noise, options)
     }
 }
@@ -364,7 +390,7 @@ pub fn build_camera_stream(
         .map_err(|crate::calibrate::pose_imu::PoseImuError::BadInput(m)| LinkError::Dataset(m))?;
     let config = camera_config(input, &start, options);
     let start_ns = first_imu.stamp_ns;
-    let td_ns = (f64::from(config.time_offset_s) * 1e9) as i128;
+    let td_ns = (f64::from(config.sensor.time_offset_s) * 1e9) as i128;
     let mut measurements = Vec::with_capacity(input.frames.len() + 1);
     let mut skipped = 0;
     for frame in input.frames {
@@ -396,17 +422,13 @@ pub fn build_camera_stream(
         }
         measurements.extend(corner_sets(frame).into_iter().map(|m| (frame.stamp_ns, m)));
     }
-    Ok(ReplayStream {
+    Ok(ReplayStream::interleaved(
         config,
-        messages: interleave(
-            input.imu,
-            &measurements,
-            options.camera_lead_ns,
-            options.batch,
-        ),
-        start_ns,
-        skipped_poses: skipped,
-    })
+        input.imu,
+        &measurements,
+        (options.camera_lead_ns, options.batch),
+        skipped,
+    ))
 }
 
 #[cfg(test)]

@@ -260,7 +260,9 @@ pub fn dashboard(
         BOLD,
         &format!(
             "{:<24}{:>12}{:>12}",
-            "extrinsic T_imu_sensor", "estimate", "1 sigma"
+            format!("extrinsic T_imu_sensor{}", e.sensor),
+            "estimate",
+            "1 sigma"
         ),
     ));
     let r = rpy_deg(e);
@@ -301,7 +303,8 @@ pub fn dashboard(
                 color,
                 YELLOW,
                 &format!(
-                    "last alarm   {kind} at t+{:.2} s (statistic {:.1}), host t {t:.1} s",
+                    "last alarm   {kind} of sensor {} at t+{:.2} s (statistic {:.1}), host t {t:.1} s",
+                    a.sensor,
                     since(a.stamp_ns, origin),
                     a.statistic
                 ),
@@ -360,6 +363,7 @@ mod tests {
             updates_accepted: 120,
             updates_rejected: 3,
             last_seq: 9,
+            sensor: 0,
         }
     }
 
@@ -385,6 +389,7 @@ mod tests {
                     kind: AlarmKind::RotationStep,
                     statistic: 45.0,
                     step: [0.0; 3],
+                    sensor: 1,
                 },
             ));
         }
@@ -403,7 +408,10 @@ mod tests {
         let text = rows.join("\n");
         assert!(text.contains("ALARM"), "{text}");
         // Stamps from the first estimate's (12.5 s).
-        assert!(text.contains("rotation step at t+1.50 s"), "{text}");
+        assert!(
+            text.contains("rotation step of sensor 1 at t+1.50 s"),
+            "{text}"
+        );
         assert!(text.contains("crc 3"), "{text}");
         assert!(text.contains("42 msg/s"), "{text}");
         assert!(text.contains("120 accepted, 3 rejected"), "{text}");

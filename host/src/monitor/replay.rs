@@ -5,10 +5,10 @@ use msreg_estimator::filter::MonitorEkf;
 use msreg_estimator::health::NisStatus;
 use msreg_estimator::update::relative_pose::RelativePose;
 use msreg_estimator::update::UpdateReport;
-use msreg_estimator::{FilterConfig, HealthEvent};
+use msreg_estimator::{Error as FilterError, FilterConfig, HealthEvent};
 use nalgebra::Matrix3;
 
-use super::start::{self, ExtrinsicSigmas, Start};
+use super::start::{self, ExtrinsicSigmas, FilterPrior, Start};
 use super::{
     Alarm, ExcitationPoint, MonitorError, MonitorInput, MonitorReport, NisPoint, SensorReport,
     SENSOR_NAMES,
@@ -56,14 +56,91 @@ impl Default for MonitorOptions {
 const PLANAR_REASON: &str = "motion is planar (rotation about one axis)";
 /// Re-anchor instead of fusing across an odometry gap longer than this many periods.
 const MAX_GAP_PERIODS: f64 = 10.0;
+/// One zero-velocity update every this many IMU samples while at rest.
+pub const ZERO_VELOCITY_EVERY: u16 = 20;
+
+/// One pose of a sensor as the filter takes it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[allow(
+    clippy::large_enum_variant,
+    reason = "held in one Vec per sensor; boxing each increment would cost more than it saves"
+)]
+pub enum PoseStep {
+    /// Starts an odometry segment at this sensor stamp, ns.
+    Anchor(u64),
+    /// The increment from the previous pose, sigmas scaled by the periods it spans.
+    Increment(RelativePose<f64>),
+}
+
+impl PoseStep {
+    /// Sensor stamp at which the step is due, ns.
+    pub fn stamp_ns(&self) -> u64 {
+        match self {
+            PoseStep::Anchor(t) => *t,
+            PoseStep::Increment(m) => m.stamp_to_ns,
+        }
+    }
+}
+
+/// The steps of sensor `s`'s odometry, the one rule of the host replay and of the device's
+/// stream (`msreg link replay`): poses whose IMU time (prior `t_d` of `ekf`) falls before
+/// the first IMU sample `t0_ns` are dropped; the first pose after, and every pose after a gap
+/// of more than [`MAX_GAP_PERIODS`] nominal periods, anchors; every other pose is the
+/// increment from the one before. Also returns a note per gap.
+pub fn pose_steps(
+    ekf: &MonitorEkf<f64>,
+    s: usize,
+    input: &MonitorInput,
+    t0_ns: u64,
+) -> (Vec<PoseStep>, Vec<String>) {
+    let poses = input.poses[s];
+    let period_ns = nominal_period_ns(poses) as f64;
+    let sigma = (
+        input.pose_noise[s].rotation_noise_rad,
+        input.pose_noise[s].translation_noise_m,
+    );
+    let first = poses
+        .iter()
+        .position(|p| ekf.imu_time(s, p.stamp_ns).map_or(true, |t| t >= t0_ns))
+        .unwrap_or(poses.len());
+    let mut steps = Vec::with_capacity(poses.len() - first);
+    let mut notes = Vec::new();
+    let mut previous: Option<&PoseRecord> = None;
+    for rec in &poses[first..] {
+        let periods = previous.map(|p| {
+            ((rec.stamp_ns.saturating_sub(p.stamp_ns)) as f64 / period_ns)
+                .round()
+                .max(1.0)
+        });
+        steps.push(match (previous, periods) {
+            (Some(prev), Some(k)) if k <= MAX_GAP_PERIODS => {
+                let delta = convert::pose::<f64>(&(prev.isometry().inverse() * rec.isometry()));
+                PoseStep::Increment(RelativePose::with_sigmas(
+                    prev.stamp_ns,
+                    rec.stamp_ns,
+                    delta,
+                    sigma.0 * k.sqrt(),
+                    sigma.1 * k.sqrt(),
+                ))
+            }
+            (_, k) => {
+                if let Some(k) = k {
+                    notes.push(format!("{} ns: gap of {k} periods", rec.stamp_ns));
+                }
+                PoseStep::Anchor(rec.stamp_ns)
+            }
+        });
+        previous = Some(rec);
+    }
+    (steps, notes)
+}
 
 /// Per-sensor replay state.
-struct Feed<'a> {
-    poses: &'a [PoseRecord],
+struct Feed {
+    steps: Vec<PoseStep>,
     next: usize,
-    previous: Option<PoseRecord>,
-    period_ns: f64,
-    sigma: (f64, f64),
+    /// The filter holds this sensor's segment start (the last anchor or fused increment).
+    anchored: bool,
     skipped: Vec<String>,
 }
 
@@ -74,75 +151,64 @@ struct Fused {
     report: UpdateReport<f64>,
 }
 
-fn feeds<'a>(input: &MonitorInput<'a>) -> [Feed<'a>; 2] {
-    core::array::from_fn(|s| Feed {
-        poses: input.poses[s],
-        next: 0,
-        previous: None,
-        period_ns: nominal_period_ns(input.poses[s]) as f64,
-        sigma: (
-            input.pose_noise[s].rotation_noise_rad,
-            input.pose_noise[s].translation_noise_m,
-        ),
-        skipped: Vec::new(),
+fn feeds(ekf: &MonitorEkf<f64>, input: &MonitorInput, t0_ns: u64) -> [Feed; 2] {
+    core::array::from_fn(|s| {
+        let (steps, skipped) = pose_steps(ekf, s, input, t0_ns);
+        Feed {
+            steps,
+            next: 0,
+            anchored: false,
+            skipped,
+        }
     })
 }
 
-/// Fuses pose `feed.next` of sensor `s` (anchor, relative pose, or re-anchor after a gap or
-/// an error); returns the update when there was one.
+/// Applies step `feed.next` of sensor `s`; returns the update when there was one. As on the
+/// device (`firmware/src/session.rs`): an increment the filter cannot chain (no anchor, or
+/// older than its window) re-anchors at its end; one refused otherwise is skipped and the
+/// next pose anchors.
 fn fuse_next(ekf: &mut MonitorEkf<f64>, s: usize, feed: &mut Feed) -> Option<UpdateReport<f64>> {
-    let rec = feed.poses[feed.next];
+    let step = feed.steps[feed.next];
     feed.next += 1;
-    let reanchor = |ekf: &mut MonitorEkf<f64>, feed: &mut Feed, why: Option<String>| {
-        if let Some(why) = why {
-            feed.skipped.push(format!("{} ns: {why}", rec.stamp_ns));
-        }
-        match ekf.anchor(s, rec.stamp_ns) {
-            Ok(()) => feed.previous = Some(rec),
-            Err(e) => feed
-                .skipped
-                .push(format!("{} ns: anchor: {e:?}", rec.stamp_ns)),
+    let stamp = step.stamp_ns();
+    let anchor = |ekf: &mut MonitorEkf<f64>, feed: &mut Feed| match ekf.anchor(s, stamp) {
+        Ok(()) => feed.anchored = true,
+        Err(e) => {
+            feed.anchored = false;
+            feed.skipped.push(format!("{stamp} ns: anchor: {e:?}"));
         }
     };
-    let Some(prev) = feed.previous else {
-        reanchor(ekf, feed, None);
-        return None;
+    let meas = match step {
+        PoseStep::Increment(m) if feed.anchored => m,
+        PoseStep::Increment(_) | PoseStep::Anchor(_) => {
+            anchor(ekf, feed);
+            return None;
+        }
     };
-    let periods = ((rec.stamp_ns - prev.stamp_ns) as f64 / feed.period_ns)
-        .round()
-        .max(1.0);
-    if periods > MAX_GAP_PERIODS {
-        reanchor(ekf, feed, Some(format!("gap of {periods} periods")));
-        return None;
-    }
-    let delta = convert::pose::<f64>(&(prev.isometry().inverse() * rec.isometry()));
-    let k = periods.sqrt();
-    let meas = RelativePose::with_sigmas(
-        prev.stamp_ns,
-        rec.stamp_ns,
-        delta,
-        feed.sigma.0 * k,
-        feed.sigma.1 * k,
-    );
     match ekf.update_relative_pose(s, &meas) {
-        Ok(report) => {
-            feed.previous = Some(rec);
-            Some(report)
+        Ok(report) => Some(report),
+        Err(e @ (FilterError::NoAnchor | FilterError::OlderThanWindow)) => {
+            feed.skipped
+                .push(format!("{stamp} ns: relative pose: {e:?}"));
+            anchor(ekf, feed);
+            None
         }
         Err(e) => {
-            reanchor(ekf, feed, Some(format!("relative pose: {e:?}")));
+            feed.skipped
+                .push(format!("{stamp} ns: relative pose: {e:?}"));
+            feed.anchored = false;
             None
         }
     }
 }
 
-/// The due pose (of either sensor) with the earliest IMU time.
+/// The due step (of either sensor) with the earliest IMU time.
 fn earliest_due(ekf: &MonitorEkf<f64>, feeds: &[Feed; 2]) -> Option<usize> {
     (0..2)
         .filter_map(|s| {
-            let rec = feeds[s].poses.get(feeds[s].next)?;
-            ekf.is_due(s, rec.stamp_ns)
-                .then(|| ekf.imu_time(s, rec.stamp_ns).ok())
+            let stamp = feeds[s].steps.get(feeds[s].next)?.stamp_ns();
+            ekf.is_due(s, stamp)
+                .then(|| ekf.imu_time(s, stamp).ok())
                 .flatten()
                 .map(|t| (t, s))
         })
@@ -154,20 +220,12 @@ fn earliest_due(ekf: &MonitorEkf<f64>, feeds: &[Feed; 2]) -> Option<usize> {
 fn run(
     ekf: &mut MonitorEkf<f64>,
     input: &MonitorInput,
-    start: &Start,
+    prior: &FilterPrior,
     on_update: &mut dyn FnMut(&MonitorEkf<f64>, &Fused),
-) -> Result<[Vec<String>; 2], MonitorError> {
-    let mut feeds = feeds(input);
+) -> Result<Skipped, MonitorError> {
+    let mut zero_velocity = Vec::new();
     let t0 = input.imu[0].stamp_ns;
-    // Poses before the IMU record cannot be fused.
-    for (s, feed) in feeds.iter_mut().enumerate() {
-        while let Some(rec) = feed.poses.get(feed.next) {
-            match ekf.imu_time(s, rec.stamp_ns) {
-                Ok(t) if t < t0 => feed.next += 1,
-                _ => break,
-            }
-        }
-    }
+    let mut feeds = feeds(ekf, input, t0);
     for (i, rec) in input.imu.iter().enumerate() {
         ekf.propagate(&convert::imu_sample::<f64>(rec))
             .map_err(|e| {
@@ -177,15 +235,18 @@ fn run(
                     i + 1
                 ))
             })?;
-        let at_rest = start
-            .standstill
-            .as_ref()
-            .is_some_and(|s| rec.stamp_ns <= s.until_ns);
-        if at_rest && i % 20 == 0 && ekf.imu_period_ns().is_some() {
-            let _ = ekf.update_zero_velocity();
+        let at_rest = prior
+            .zero_velocity_until_ns
+            .is_some_and(|until| rec.stamp_ns <= until);
+        if at_rest && i % usize::from(ZERO_VELOCITY_EVERY) == 0 && ekf.imu_period_ns().is_some() {
+            // A refused zero-velocity update leaves the filter as it was; it belongs to no
+            // sensor, so it is booked on neither.
+            if let Err(e) = ekf.update_zero_velocity() {
+                zero_velocity.push(format!("{} ns: zero velocity: {e:?}", rec.stamp_ns));
+            }
         }
         while let Some(s) = earliest_due(ekf, &feeds) {
-            let stamp = feeds[s].poses[feeds[s].next].stamp_ns;
+            let stamp = feeds[s].steps[feeds[s].next].stamp_ns();
             let t_s = ekf
                 .imu_time(s, stamp)
                 .map_or(0.0, |t| t.saturating_sub(t0) as f64 * 1e-9);
@@ -201,7 +262,16 @@ fn run(
             }
         }
     }
-    Ok(feeds.map(|f| f.skipped))
+    Ok(Skipped {
+        sensors: feeds.map(|f| f.skipped),
+        zero_velocity,
+    })
+}
+
+/// What a replay could not use, with the reasons.
+struct Skipped {
+    sensors: [Vec<String>; 2],
+    zero_velocity: Vec<String>,
 }
 
 /// An alarm from a health event.
@@ -271,11 +341,12 @@ impl MonitorRun {
     }
 }
 
-/// Replays the health monitor over `input` (see the module docs).
-pub fn monitor(
+/// The start and the monitor run's filter prior (the calibration of record with its
+/// sigmas): what `msreg monitor` runs and `msreg link replay` sends the device.
+pub fn monitor_prior(
     input: &MonitorInput,
     options: &MonitorOptions,
-) -> Result<MonitorReport, MonitorError> {
+) -> Result<(Start, FilterPrior), MonitorError> {
     validate(input)?;
     let start = start::start(input)?;
     let mut config = FilterConfig::new(convert::imu_noise::<f64>(input.imu_noise));
@@ -295,15 +366,28 @@ pub fn monitor(
             .max(options.min_prior_sigma_translation),
         time_offset: options.prior_sigma_time_offset,
     });
-    let mut ekf = start.filter(input, &config, &sigmas)?;
+    let prior = start.prior(input, &config, &sigmas);
+    Ok((start, prior))
+}
+
+/// Replays the health monitor over `input` (see the module docs).
+pub fn monitor(
+    input: &MonitorInput,
+    options: &MonitorOptions,
+) -> Result<MonitorReport, MonitorError> {
+    let (start, prior) = monitor_prior(input, options)?;
+    let mut ekf = prior.filter()?;
     let mut m = MonitorRun {
         alarms: Vec::new(),
         warnings: Vec::new(),
         nis: [Vec::new(), Vec::new()],
         high: [false; 2],
     };
-    let skipped = run(&mut ekf, input, &start, &mut |e, f| m.record(e, f))?;
-    let (excitation, observability) = observability_run(input, &start, &config, options)?;
+    let Skipped {
+        sensors: skipped,
+        zero_velocity,
+    } = run(&mut ekf, input, &prior, &mut |e, f| m.record(e, f))?;
+    let (excitation, observability) = observability_run(input, &start, &prior, options)?;
     let t0 = input.imu[0].stamp_ns;
     let duration_s = input
         .imu
@@ -357,6 +441,7 @@ pub fn monitor(
         alarms: m.alarms,
         warnings: m.warnings,
         sensors,
+        zero_velocity_skipped: zero_velocity,
     })
 }
 
@@ -370,16 +455,17 @@ type Observability = (
 fn observability_run(
     input: &MonitorInput,
     start: &Start,
-    config: &FilterConfig<f64>,
+    monitor_prior: &FilterPrior,
     options: &MonitorOptions,
 ) -> Result<Observability, MonitorError> {
-    let mut config = *config;
+    let mut config = monitor_prior.config;
     // Never armed: sigmas are never negative.
     config.health.arm_sigma_rotation = -1.0;
     config.health.arm_sigma_translation = -1.0;
-    let mut ekf = start.filter(input, &config, &[options.observability_prior; 2])?;
+    let prior = start.prior(input, &config, &[options.observability_prior; 2]);
+    let mut ekf = prior.filter()?;
     let mut excitation: [Vec<ExcitationPoint>; 2] = [Vec::new(), Vec::new()];
-    run(&mut ekf, input, start, &mut |e, f| {
+    run(&mut ekf, input, &prior, &mut |e, f| {
         excitation[f.sensor].push(ExcitationPoint {
             t_s: f.t_s,
             excitation: e.excitation(f.sensor),

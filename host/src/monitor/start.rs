@@ -135,15 +135,45 @@ fn moving(
     Ok((state, words))
 }
 
+/// Everything the monitor's filter starts from: the one source of the host's f64 filter
+/// (`msreg monitor`) and of the device's configuration (`msreg link replay`, which sends
+/// these values as they are).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FilterPrior {
+    /// Filter and health-monitor tuning.
+    pub config: FilterConfig<f64>,
+    /// The IMU state and both sensors' priors, with sigmas.
+    pub init: InitialState<f64, 2>,
+    /// Planar motion: the lever arm of both sensors along this IMU-frame axis is held.
+    pub hold_axis: Option<Vector3<f64>>,
+    /// Zero-velocity updates while IMU stamps are at or before this (a standstill start).
+    pub zero_velocity_until_ns: Option<u64>,
+}
+
+impl FilterPrior {
+    /// The filter at this prior.
+    pub fn filter(&self) -> Result<MonitorEkf<f64>, MonitorError> {
+        let mut ekf = MonitorEkf::<f64>::new(&self.config, &self.init)
+            .map_err(|e| MonitorError::BadInput(format!("imu0/imu.yaml or prior: {e}")))?;
+        if let Some(axis) = self.hold_axis {
+            for s in 0..2 {
+                ekf.hold_translation_axis(s, Some(axis))
+                    .map_err(|e| MonitorError::NoStart(format!("planar axis: {e}")))?;
+            }
+        }
+        Ok(ekf)
+    }
+}
+
 impl Start {
-    /// A filter at this start with the calibration of record and the given sigmas, the
+    /// The prior at this start with the calibration of record and the given sigmas, the
     /// lever arm along the planar axis held for both sensors.
-    pub fn filter(
+    pub fn prior(
         &self,
         input: &MonitorInput,
         config: &FilterConfig<f64>,
         sigmas: &[ExtrinsicSigmas; 2],
-    ) -> Result<MonitorEkf<f64>, MonitorError> {
+    ) -> FilterPrior {
         let mut state = self.imu;
         for (s, sigma) in sigmas.iter().enumerate() {
             let prior = &input.prior[s];
@@ -156,14 +186,11 @@ impl Start {
                 )
                 .with_time_offset(s, prior.timeshift_s, sigma.time_offset);
         }
-        let mut ekf = MonitorEkf::<f64>::new(config, &state)
-            .map_err(|e| MonitorError::BadInput(format!("imu0/imu.yaml or prior: {e}")))?;
-        if let Some(p) = &self.planar {
-            for s in 0..2 {
-                ekf.hold_translation_axis(s, Some(p.axis_imu))
-                    .map_err(|e| MonitorError::NoStart(format!("planar axis: {e}")))?;
-            }
+        FilterPrior {
+            config: *config,
+            init: state,
+            hold_axis: self.planar.map(|p| p.axis_imu),
+            zero_velocity_until_ns: self.standstill.as_ref().map(|s| s.until_ns),
         }
-        Ok(ekf)
     }
 }
