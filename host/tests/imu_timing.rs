@@ -365,7 +365,9 @@ fn acceptance(pipeline: Pipeline, seeds: std::ops::Range<u64>, start: Start) {
     let seeds: Vec<u64> = seeds.collect();
     let mut failures = Vec::new();
     let rates: Vec<f64> = std::env::var("MSREG_RATES").map_or(vec![400.0, 200.0], |v| {
-        v.split(',').map(|r| r.parse().unwrap()).collect()
+        v.split(',')
+            .map(|r| r.parse().expect("MSREG_RATES: comma-separated Hz"))
+            .collect()
     });
     for rate in rates {
         let outcomes = run_from(pipeline, rate, &seeds, 60.0, start);
