@@ -75,7 +75,8 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         to_slot: usize,
         meas: &relative_pose::RelativePose<T>,
     ) -> Result<UpdateReport<T>, Error> {
-        let columns = ColumnsUndo::save(self, Some(to_slot));
+        let mut columns = ColumnsUndo::new();
+        columns.save(self, Some(to_slot));
         self.clone_imu_pose(s, to_slot, meas.stamp_to_ns);
         let report = self.fuse_relative_pose(s, from_slot, to_slot, meas);
         if report.is_err() {

@@ -110,7 +110,8 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         camera: &Camera<T>,
         meas: &CornerSet<'_, T>,
     ) -> Result<Outcome<T>, Error> {
-        let columns = ColumnsUndo::save(self, None);
+        let mut columns = ColumnsUndo::new();
+        columns.save(self, None);
         let outcome = self.gate_and_fuse_image(s, f, camera, meas);
         if !outcome.as_ref().is_ok_and(|o| o.accepted) {
             columns.restore(self);

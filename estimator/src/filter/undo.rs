@@ -54,12 +54,17 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         self.pending_transition = small.pending_transition;
     }
 
-    /// Writes saved columns `idx..idx + W` of the (symmetric) covariance and their rows.
+    /// Writes saved columns `idx..idx + W` of the (symmetric) covariance and their rows,
+    /// element by element (a transposed `N x W` copy would cost that much stack on the
+    /// error path).
     fn restore_columns<const W: usize>(&mut self, idx: usize, cols: &SMatrix<T, N, W>) {
-        self.cov.fixed_view_mut::<N, W>(0, idx).copy_from(cols);
-        self.cov
-            .fixed_view_mut::<W, N>(idx, 0)
-            .copy_from(&cols.transpose());
+        for k in 0..W {
+            for r in 0..N {
+                let x = cols[(r, k)];
+                self.cov[(r, idx + k)] = x;
+                self.cov[(idx + k, r)] = x;
+            }
+        }
     }
 }
 
@@ -125,28 +130,39 @@ impl<T: Scalar, const S: usize, const C: usize, const F: usize> StepUndo<T, S, C
 }
 
 /// Undo of what follows a propagation and may fail after it: bringing `P_IX` up to date (the
-/// IMU columns) and, for a clone into `slot`, that slot's columns. `O(N)`.
+/// IMU columns) and, for a clone into `slot`, that slot's columns. `O(N)`. Filled in place
+/// ([`ColumnsUndo::save`] into a [`ColumnsUndo::new`]): built by value and moved, the
+/// `N x 21` record was held twice in the update's frame on the M4F.
 pub(super) struct ColumnsUndo<T: Scalar, const N: usize> {
     imu_columns: SMatrix<T, N, 15>,
-    slot: Option<(usize, SMatrix<T, N, 6>)>,
+    slot_columns: SMatrix<T, N, 6>,
+    slot: Option<usize>,
 }
 
 impl<T: Scalar, const N: usize> ColumnsUndo<T, N> {
+    /// An empty record (restores nothing until [`ColumnsUndo::save`]).
+    pub(super) fn new() -> Self {
+        Self {
+            imu_columns: SMatrix::zeros(),
+            slot_columns: SMatrix::zeros(),
+            slot: None,
+        }
+    }
+
     /// Saves the IMU columns and, with `Some(slot)`, those of that clone slot.
     pub(super) fn save<const S: usize, const C: usize, const F: usize>(
+        &mut self,
         ekf: &Ekf<T, S, C, N, F>,
         slot: Option<usize>,
-    ) -> Self {
-        Self {
-            imu_columns: ekf
-                .cov
-                .fixed_view::<N, 15>(0, imu::ORIENTATION.idx)
-                .clone_owned(),
-            slot: slot.map(|slot| {
-                let c = Layout::<S, C>::clone_orientation(slot).idx;
-                (slot, ekf.cov.fixed_view::<N, 6>(0, c).clone_owned())
-            }),
+    ) {
+        self.imu_columns
+            .copy_from(&ekf.cov.fixed_view::<N, 15>(0, imu::ORIENTATION.idx));
+        if let Some(slot) = slot {
+            let c = Layout::<S, C>::clone_orientation(slot).idx;
+            self.slot_columns
+                .copy_from(&ekf.cov.fixed_view::<N, 6>(0, c));
         }
+        self.slot = slot;
     }
 
     /// Writes the saved columns back (the small state is the [`StepUndo`]'s).
@@ -155,9 +171,9 @@ impl<T: Scalar, const N: usize> ColumnsUndo<T, N> {
         ekf: &mut Ekf<T, S, C, N, F>,
     ) {
         ekf.restore_columns(imu::ORIENTATION.idx, &self.imu_columns);
-        if let Some((slot, columns)) = &self.slot {
-            let c = Layout::<S, C>::clone_orientation(*slot).idx;
-            ekf.restore_columns(c, columns);
+        if let Some(slot) = self.slot {
+            let c = Layout::<S, C>::clone_orientation(slot).idx;
+            ekf.restore_columns(c, &self.slot_columns);
         }
     }
 }
