@@ -266,9 +266,6 @@ fn run(command: Command) -> Result<(), Failure> {
         Command::Simulate {
             scenario: Scenario::PriorMap(args),
         } => Ok(msreg_host::sim::prior_map_cli::simulate(&args)?),
-        Command::Calibrate {
-            task: Task::PriorMap(args),
-        } => exit_code_of(msreg_host::mi::prior_map::cli::calibrate(&args)?),
         Command::Monitor(args) => match msreg_host::monitor::cli::run(&args)? {
             msreg_host::monitor::cli::MonitorOutcome::Ran => Ok(()),
             msreg_host::monitor::cli::MonitorOutcome::Failed(why) => {
@@ -297,6 +294,7 @@ fn calibrate(bag: &convert_cmd::BagFlags, mut task: Task) -> Result<(), Failure>
         Task::LidarCamera(args) => exit_code_of(msreg_host::lidar_camera::cli::calibrate(&args)?),
         Task::CameraImu(args) => exit_code_of(msreg_host::calibrate::camera_imu::cli::run(&args)?),
         Task::Joint(args) => exit_code_of(msreg_host::calibrate::joint::cli::run(&args)?),
+        Task::PriorMap(args) => exit_code_of(msreg_host::mi::prior_map::cli::calibrate(&args)?),
         Task::Infra(args) => match msreg_host::infra::cli::calibrate(&args)? {
             true => Ok(()),
             false => Err(Failure::NotConverged(
@@ -316,6 +314,7 @@ impl Task {
             Task::CameraImu(args) => &mut args.dataset,
             Task::Joint(args) => &mut args.dataset,
             Task::Infra(args) => &mut args.dataset,
+            Task::PriorMap(args) => &mut args.dataset,
         }
     }
 }
