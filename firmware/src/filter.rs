@@ -10,8 +10,8 @@ use msreg_estimator::filter::MonitorEkf;
 use msreg_estimator::health::NisStatus;
 use msreg_estimator::na::{Quaternion, UnitQuaternion, Vector3};
 use msreg_estimator::{
-    CameraImuEkf, Error as FilterError, FilterConfig, ImuNoise, ImuSample, ImuState,
-    InitialState, Pose, PoseImuEkf, RelativePose, UpdateReport,
+    CameraImuEkf, Error as FilterError, FilterConfig, ImuNoise, ImuSample, ImuState, InitialState,
+    Pose, PoseImuEkf, RelativePose, UpdateReport,
 };
 use msreg_protocol::{self as protocol, CameraDistortion, CameraProjection, CameraSetup, Config};
 use msreg_protocol::{Gate, ImuPrior, MonitorSetup, SensorPrior, SensorSet};
