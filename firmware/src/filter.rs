@@ -10,8 +10,8 @@ use msreg_estimator::filter::MonitorEkf;
 use msreg_estimator::health::NisStatus;
 use msreg_estimator::na::{Quaternion, UnitQuaternion, Vector3};
 use msreg_estimator::{
-    CameraImuEkf, Error as FilterError, FilterConfig, ImuNoise, ImuSample, ImuState, InitialState,
-    Pose, PoseImuEkf, RelativePose, UpdateReport,
+    CameraImuEkf, Ekf, Error as FilterError, FilterConfig, ImuNoise, ImuSample, ImuState,
+    InitialState, Pose, PoseImuEkf, RelativePose, UpdateReport,
 };
 use msreg_protocol::{self as protocol, CameraDistortion, CameraProjection, CameraSetup, Config};
 use msreg_protocol::{Gate, ImuPrior, MonitorSetup, SensorPrior, SensorSet};
@@ -120,7 +120,7 @@ impl Filter {
     /// must not sit in the caller's frame under the updates it calls next.
     #[inline(never)]
     pub fn propagate(&mut self, sample: &ImuSample<f32>) -> Result<(), FilterError> {
-        on_ekf!(self, f => f.propagate(sample))
+        on_ekf!(self, f => out_of_line::propagate(f, sample))
     }
 
     /// The IMU stream's period once two samples are in (a ZUPT needs it).
@@ -147,8 +147,8 @@ impl Filter {
         meas: &RelativePose<f32>,
     ) -> Result<UpdateReport<f32>, FilterError> {
         match self {
-            Filter::PoseImu(f) => f.update_relative_pose(s, meas),
-            Filter::Monitor(f) => f.update_relative_pose(s, meas),
+            Filter::PoseImu(f) => out_of_line::relative_pose(f, s, meas),
+            Filter::Monitor(f) => out_of_line::relative_pose(f, s, meas),
             Filter::CameraImu(_) => Err(FilterError::UnknownSensor),
         }
     }
@@ -156,7 +156,38 @@ impl Filter {
     /// Zero-velocity update with the latest sample (its own frame, as [`Filter::propagate`]).
     #[inline(never)]
     pub fn update_zero_velocity(&mut self) -> Result<UpdateReport<f32>, FilterError> {
-        on_ekf!(self, f => f.update_zero_velocity())
+        on_ekf!(self, f => out_of_line::zero_velocity(f))
+    }
+}
+
+/// One function per layout and call, never inlined: a wrapper that matched over the layouts
+/// with the calls inlined got a frame holding every layout's temporaries at once (23.7 KB
+/// for the zero-velocity update with three layouts).
+mod out_of_line {
+    use super::{Ekf, FilterError, ImuSample, RelativePose, UpdateReport};
+
+    #[inline(never)]
+    pub(super) fn propagate<const S: usize, const C: usize, const N: usize, const F: usize>(
+        f: &mut Ekf<f32, S, C, N, F>,
+        sample: &ImuSample<f32>,
+    ) -> Result<(), FilterError> {
+        f.propagate(sample)
+    }
+
+    #[inline(never)]
+    pub(super) fn relative_pose<const S: usize, const C: usize, const N: usize, const F: usize>(
+        f: &mut Ekf<f32, S, C, N, F>,
+        s: usize,
+        meas: &RelativePose<f32>,
+    ) -> Result<UpdateReport<f32>, FilterError> {
+        f.update_relative_pose(s, meas)
+    }
+
+    #[inline(never)]
+    pub(super) fn zero_velocity<const S: usize, const C: usize, const N: usize, const F: usize>(
+        f: &mut Ekf<f32, S, C, N, F>,
+    ) -> Result<UpdateReport<f32>, FilterError> {
+        f.update_zero_velocity()
     }
 }
 
@@ -299,47 +330,121 @@ fn filter_config(c: &Config) -> Result<FilterConfig<f32>, FilterError> {
     Ok(fc)
 }
 
-/// The monitoring filter: both sensors' priors, the lever arm along the planar axis held.
-fn monitor_filter(
+/// `Ekf::new` for a prior already checked, as the `Option<Filter>` the session keeps: the
+/// caller assigns the result to its slot, so LLVM builds it there (one 14 KB temporary for
+/// the monitoring filter instead of three); `None` only if the check missed something.
+#[inline(never)]
+fn build<const S: usize, const C: usize, const N: usize, const F: usize>(
+    fc: &FilterConfig<f32>,
+    init: &InitialState<f32, S>,
+    variant: fn(Ekf<f32, S, C, N, F>) -> Filter,
+) -> Option<Filter> {
+    Ekf::new(fc, init).ok().map(variant)
+}
+
+/// What `Ekf::new` would refuse, checked before the slot is touched.
+fn check_prior<const S: usize>(
+    fc: &FilterConfig<f32>,
+    init: &InitialState<f32, S>,
+) -> Result<(), FilterError> {
+    if init.is_valid() && fc.imu_noise.is_valid() {
+        Ok(())
+    } else {
+        Err(FilterError::InvalidConfig)
+    }
+}
+
+/// The planar hold axis of a monitor setup, checked as `Ekf::hold_translation_axis` checks
+/// it (before anything is replaced).
+fn hold_axis(m: &MonitorSetup) -> Result<Option<Vector3<f32>>, FilterError> {
+    let Some(axis) = m.hold_translation_axis.map(Vector3::from) else {
+        return Ok(None);
+    };
+    let norm = axis.norm();
+    if !norm.is_finite() {
+        return Err(FilterError::NonFinite);
+    }
+    if norm <= 0.0 {
+        return Err(FilterError::InvalidConfig);
+    }
+    Ok(Some(axis))
+}
+
+/// The monitoring filter into `slot`: both sensors' priors, the lever arm along the planar
+/// axis held. One layout per function, so that only the configured one's temporaries are
+/// on the stack.
+#[inline(never)]
+fn place_monitor(
+    slot: &mut Option<Filter>,
     fc: &FilterConfig<f32>,
     c: &Config,
     m: &MonitorSetup,
-) -> Result<MonitorEkf<f32>, FilterError> {
+) -> Result<(), FilterError> {
     let init = with_sensor(imu_prior::<2>(&c.imu_prior)?, 0, &c.sensor)?;
     let init = with_sensor(init, 1, &m.pose1)?;
-    let mut ekf = MonitorEkf::new(fc, &init)?;
-    if let Some(axis) = m.hold_translation_axis {
-        for s in 0..2 {
-            ekf.hold_translation_axis(s, Some(Vector3::from(axis)))?;
+    let axis = hold_axis(m)?;
+    check_prior(fc, &init)?;
+    *slot = build(fc, &init, Filter::Monitor);
+    match (slot.as_mut(), axis) {
+        (Some(Filter::Monitor(ekf)), Some(axis)) => {
+            for s in 0..2 {
+                ekf.hold_translation_axis(s, Some(axis))?;
+            }
+            Ok(())
+        }
+        (Some(_), None) => Ok(()),
+        (Some(Filter::PoseImu(_) | Filter::CameraImu(_)), Some(_)) | (None, _) => {
+            Err(FilterError::InvalidConfig)
         }
     }
-    Ok(ekf)
 }
 
-/// Replaces `slot` with the filter of a configuration; on an error `slot` is unchanged.
-/// Built straight into the slot's place (the monitoring filter is 14 KB: every by-value
-/// copy of it would be stack).
+/// The pose-IMU filter into `slot`.
+#[inline(never)]
+fn place_pose_imu(
+    slot: &mut Option<Filter>,
+    fc: &FilterConfig<f32>,
+    c: &Config,
+) -> Result<(), FilterError> {
+    let init = with_sensor(imu_prior::<1>(&c.imu_prior)?, 0, &c.sensor)?;
+    check_prior(fc, &init)?;
+    *slot = build(fc, &init, Filter::PoseImu);
+    slot.as_ref().map(|_| ()).ok_or(FilterError::InvalidConfig)
+}
+
+/// The camera-IMU filter with its camera into `slot`.
+#[inline(never)]
+fn place_camera_imu(
+    slot: &mut Option<Filter>,
+    fc: &FilterConfig<f32>,
+    c: &Config,
+    setup: &CameraSetup,
+) -> Result<(), FilterError> {
+    let sigma = setup.pixel_sigma;
+    if !(sigma.is_finite() && sigma > 0.0) {
+        return Err(FilterError::InvalidConfig);
+    }
+    let init = with_sensor(imu_prior::<1>(&c.imu_prior)?, 0, &c.sensor)?;
+    let camera = camera(setup)?;
+    check_prior(fc, &init)?;
+    *slot = Some(Filter::CameraImu(CameraFilter {
+        camera,
+        ekf: Ekf::new(fc, &init)?,
+        pixel_sigma: sigma,
+    }));
+    Ok(())
+}
+
+/// Replaces `slot` with the filter of a configuration. Everything the filter could refuse
+/// is checked first, so an invalid configuration leaves `slot` as it was. Each layout is
+/// built in its own function (the monitoring filter is 14 KB, and each by-value copy of it
+/// is stack).
 #[inline(never)]
 pub fn configure(slot: &mut Option<Filter>, c: &Config) -> Result<(), FilterError> {
     let fc = filter_config(c)?;
     match &c.sensors {
-        SensorSet::PoseImu => {
-            let init = with_sensor(imu_prior::<1>(&c.imu_prior)?, 0, &c.sensor)?;
-            *slot = Some(Filter::PoseImu(PoseImuEkf::new(&fc, &init)?));
-        }
-        SensorSet::CameraImu(setup) => {
-            let sigma = setup.pixel_sigma;
-            if !(sigma.is_finite() && sigma > 0.0) {
-                return Err(FilterError::InvalidConfig);
-            }
-            let init = with_sensor(imu_prior::<1>(&c.imu_prior)?, 0, &c.sensor)?;
-            *slot = Some(Filter::CameraImu(CameraFilter {
-                camera: camera(setup)?,
-                ekf: CameraImuEkf::new(&fc, &init)?,
-                pixel_sigma: sigma,
-            }));
-        }
-        SensorSet::Monitor(m) => *slot = Some(Filter::Monitor(monitor_filter(&fc, c, m)?)),
+        SensorSet::PoseImu => place_pose_imu(slot, &fc, c),
+        SensorSet::CameraImu(setup) => place_camera_imu(slot, &fc, c, setup),
+        SensorSet::Monitor(m) => place_monitor(slot, &fc, c, m),
     }
-    Ok(())
 }

@@ -135,7 +135,8 @@ struct Counts {
     accepted: u32,
     rejected: u32,
     zero_velocity: u32,
-    alarms: u16,
+    /// Alarms per sensor.
+    alarms: [u16; POSE_SENSORS],
     errors: [u32; ErrorKind::COUNT],
 }
 
@@ -158,7 +159,8 @@ pub struct Session {
     last_progress_ns: u64,
     /// Filter time of the first sample after the configuration (progress lines count from it).
     progress_origin_ns: u64,
-    alarm: bool,
+    /// Per sensor: an alarm was raised since the configuration.
+    alarm: [bool; POSE_SENSORS],
     /// Sequence number of the frame being applied (estimates carry it, for latency).
     current_seq: u32,
 }
@@ -202,7 +204,7 @@ impl Session {
                 accepted: 0,
                 rejected: 0,
                 zero_velocity: 0,
-                alarms: 0,
+                alarms: [0; POSE_SENSORS],
                 errors: [0; ErrorKind::COUNT],
             },
             last_seq: None,
@@ -211,7 +213,7 @@ impl Session {
             last_estimate_ns: 0,
             last_progress_ns: 0,
             progress_origin_ns: 0,
-            alarm: false,
+            alarm: [false; POSE_SENSORS],
             current_seq: 0,
         }
     }
@@ -341,7 +343,7 @@ impl Session {
                 self.imu_index = 0;
                 self.last_estimate_ns = 0;
                 self.last_progress_ns = 0;
-                self.alarm = false;
+                self.alarm = [false; POSE_SENSORS];
                 defmt::info!(
                     "configured: {=u32} sensor(s), estimate every {=u32} ns, sigma prior {=f32} rad / {=f32} m",
                     self.filter.as_ref().map_or(0, Filter::sensor_count) as u32,
@@ -683,19 +685,23 @@ impl Session {
         }
         Self::tx(&mut self.tx_seq, w).send(&DeviceMsg::UpdateDiagnostic(diagnostic(report)));
         if let Some(event) = &report.event {
-            self.alarm = true;
-            self.counts.alarms = self.counts.alarms.saturating_add(1);
             let a = alarm(event);
+            let s = usize::from(a.sensor);
+            if let (Some(flag), Some(count)) = (self.alarm.get_mut(s), self.counts.alarms.get_mut(s)) {
+                *flag = true;
+                *count = count.saturating_add(1);
+            }
             defmt::warn!(
-                "health alarm {=str} at {=u64} ns: statistic {=f32}",
+                "health alarm {=str} of sensor {=u8} at {=u64} ns: statistic {=f32}",
                 match a.kind {
                     AlarmKind::RotationStep => "rotation step",
                     AlarmKind::TranslationStep => "translation step",
                 },
+                a.sensor,
                 a.stamp_ns,
                 a.statistic
             );
-            Self::tx(&mut self.tx_seq, w).send(&DeviceMsg::HealthAlarm(alarm(event)));
+            Self::tx(&mut self.tx_seq, w).send(&DeviceMsg::HealthAlarm(a));
         }
         if self.config.is_some_and(|c| c.estimate_period_ns == 0) {
             self.send_estimate(w, self.current_seq, report.sensor.unwrap_or(SENSOR));
@@ -726,7 +732,8 @@ impl Session {
             return;
         };
         self.last_estimate_ns = f.time_ns();
-        let e = estimate(f, &self.counts, self.alarm, seq, s);
+        let alarm = self.alarm.get(s).copied().unwrap_or(false);
+        let e = estimate(f, &self.counts, alarm, seq, s);
         Self::tx(&mut self.tx_seq, w).send(&DeviceMsg::Estimate(e));
     }
 
@@ -870,7 +877,7 @@ fn estimate(f: &Filter, c: &Counts, alarm: bool, seq: u32, s: usize) -> Estimate
         } else {
             HealthState::Nominal
         },
-        alarms: c.alarms,
+        alarms: c.alarms.get(s).copied().unwrap_or(0),
         updates_accepted: c.accepted,
         updates_rejected: c.rejected,
         last_seq: seq,

@@ -13,7 +13,7 @@ use msreg_host::link::cli::{replay, summary, ReplayOptions, ReplayOutcome};
 use msreg_host::monitor::cli::DriveFiles;
 use msreg_host::monitor::{monitor, MonitorOptions, MonitorReport};
 use msreg_host::sim::{simulate_drive, DriveSimConfig, KnockTarget};
-use msreg_protocol::{AlarmKind, Estimate, UpdateKind};
+use msreg_protocol::{AlarmKind, Estimate, HealthState, UpdateKind};
 
 use crate::common::{boot, isometry, ram_after_session, RAM_TARGET_BYTES};
 
@@ -187,8 +187,22 @@ fn drive_camera_knock_is_flagged_on_the_camera_by_the_device_within_five_seconds
         (KNOCK_AT_S..=KNOCK_AT_S + MAX_LATENCY_S).contains(&t),
         "first alarm at {t:.2} s, knock at {KNOCK_AT_S} s"
     );
-    // and never the LiDAR (pose0)
+    // and never the LiDAR (pose0): its estimates stay nominal, the camera's report the alarm
     assert!(alarms.iter().all(|a| a.1 == 1), "{alarms:?}");
+    assert_eq!(last_of(&run, 0).health, HealthState::Nominal);
+    assert_eq!(last_of(&run, 1).health, HealthState::Alarm);
+    // at the update where the host's f64 monitor raised it (camera updates are 50 ms apart;
+    // the times differ only by the final against the then-current t_d)
+    let first_host = run
+        .host
+        .alarms
+        .first()
+        .expect("the host flags the knock too");
+    assert_eq!(first_host.sensor, "pose1");
+    assert!(
+        (first_host.t_s - t).abs() < 0.01,
+        "host {first_host:?}, device {t:.3} s"
+    );
     // and it logged the alarm and stayed within 64 KiB of RAM
     let logged = run
         .qemu
