@@ -68,12 +68,8 @@ fn copy(to: &Path) -> PathBuf {
     dst
 }
 
-#[test]
-fn calibrate_writes_result_overlays_and_report() {
-    let ds = &dataset().1;
-    let tmp = tempfile::tempdir().expect("tempdir");
-    let out = tmp.path().join("result.yaml");
-    let report = tmp.path().join("report.json");
+/// `msreg calibrate prior-map ds -o out --report report` exits 0; the report.
+fn calibrate_ok(ds: &Path, out: &Path, report: &Path) -> serde_json::Value {
     let o = msreg(&[
         "calibrate",
         "prior-map",
@@ -84,6 +80,16 @@ fn calibrate_writes_result_overlays_and_report() {
         &report.to_string_lossy(),
     ]);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    serde_json::from_str(&fs::read_to_string(report).expect("report")).expect("json")
+}
+
+#[test]
+fn calibrate_writes_result_overlays_and_report() {
+    let ds = &dataset().1;
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let out = tmp.path().join("result.yaml");
+    let report = tmp.path().join("report.json");
+    let json = calibrate_ok(ds, &out, &report);
     let estimate = read_t_world_cam(&out).expect("result");
     let truth = read_t_world_cam(&ds.join("groundtruth/extrinsics.yaml")).expect("truth");
     assert!((estimate.translation.vector - truth.translation.vector).norm() < 0.1);
@@ -99,8 +105,6 @@ fn calibrate_writes_result_overlays_and_report() {
     }
     assert!(tmp.path().join("result.png").is_file());
     assert!(tmp.path().join("result_initial.png").is_file());
-    let json: serde_json::Value =
-        serde_json::from_str(&fs::read_to_string(&report).expect("report")).expect("json");
     assert_eq!(json["init"]["source"], "automatic");
     assert!(
         json["survey_median_px"].as_f64().expect("median") < 3.0,
@@ -184,4 +188,39 @@ fn bad_input_exits_2_naming_file_and_line() {
 
     fs::remove_file(ds.join("prior.yaml")).expect("rm");
     assert_bad_input(&ds, "prior.yaml");
+}
+
+#[test]
+fn user_correspondences_replace_automatic_matching() {
+    // No satellite image; eight clicked points (taken from the survey) in prior.yaml.
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let ds = copy(tmp.path());
+    fs::remove_file(ds.join("map/satellite.png")).expect("rm");
+    let survey = fs::read_to_string(ds.join("survey.csv")).expect("survey");
+    let mut prior = String::from("correspondences:\n");
+    for line in survey
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .step_by(3)
+        .take(8)
+    {
+        let v: Vec<&str> = line.split(',').collect();
+        prior.push_str(&format!(
+            "  - {{uv: [{}, {}], xyz: [{}, {}, {}]}}\n",
+            v[3], v[4], v[0], v[1], v[2]
+        ));
+    }
+    fs::write(ds.join("prior.yaml"), prior).expect("write");
+    let out = tmp.path().join("r.yaml");
+    let report = tmp.path().join("r.json");
+    let json = calibrate_ok(&ds, &out, &report);
+    assert_eq!(json["init"]["source"], "user_correspondences");
+    assert_eq!(json["init"]["inliers"], 8);
+    assert!(
+        json["init"]["rms_px"].as_f64().expect("rms") < 1e-3,
+        "{json}"
+    );
+    let estimate = read_t_world_cam(&out).expect("result");
+    let truth = read_t_world_cam(&ds.join("groundtruth/extrinsics.yaml")).expect("truth");
+    assert!((estimate.translation.vector - truth.translation.vector).norm() < 0.1);
 }
