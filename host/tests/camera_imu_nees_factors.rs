@@ -13,7 +13,9 @@
 //!   IMU sample and no reading is interpolated at an image instant.
 //!
 //! `cargo test --release -p msreg --test camera_imu_nees_factors -- --ignored --nocapture`
-//! (`MSREG_RATES=200,1000` picks rates).
+//! (`MSREG_RATES=200,1000` picks rates, `MSREG_VARIANTS=6,7` variants by index besides the
+//! nominal one). Further variants split the IMU noise: gyro white noise, accelerometer white
+//! noise, bias walks alone, and the nominal noise with every image on an IMU sample.
 
 #[path = "support/common.rs"]
 mod common;
@@ -34,7 +36,8 @@ const PIXEL_SIGMA: f64 = 0.1;
 #[derive(Clone, Copy, Debug)]
 struct Variant {
     label: &'static str,
-    imu_noise: bool,
+    /// Which IMU noise is simulated: gyro white noise, accelerometer white noise, bias walks.
+    imu_noise: [bool; 3],
     corner_noise: bool,
     offset: bool,
     /// The pipeline's default corner weighting (per-image noise from the PnP residuals,
@@ -42,48 +45,79 @@ struct Variant {
     per_image: bool,
 }
 
-const VARIANTS: [Variant; 6] = [
+const ALL: [bool; 3] = [true; 3];
+const NONE: [bool; 3] = [false; 3];
+
+const VARIANTS: [Variant; 10] = [
     Variant {
         label: "nominal",
-        imu_noise: true,
+        imu_noise: ALL,
         corner_noise: true,
         offset: true,
         per_image: false,
     },
     Variant {
         label: "imu exact",
-        imu_noise: false,
+        imu_noise: NONE,
         corner_noise: true,
         offset: true,
         per_image: false,
     },
     Variant {
         label: "deterministic",
-        imu_noise: false,
+        imu_noise: NONE,
         corner_noise: false,
         offset: true,
         per_image: false,
     },
     Variant {
         label: "deterministic, images on samples",
-        imu_noise: false,
+        imu_noise: NONE,
         corner_noise: false,
         offset: false,
         per_image: false,
     },
     Variant {
         label: "nominal, per-image corner noise",
-        imu_noise: true,
+        imu_noise: ALL,
         corner_noise: true,
         offset: true,
         per_image: true,
     },
     Variant {
         label: "imu exact, per-image corner noise",
-        imu_noise: false,
+        imu_noise: NONE,
         corner_noise: true,
         offset: true,
         per_image: true,
+    },
+    Variant {
+        label: "gyro white noise only",
+        imu_noise: [true, false, false],
+        corner_noise: true,
+        offset: true,
+        per_image: false,
+    },
+    Variant {
+        label: "accelerometer white noise only",
+        imu_noise: [false, true, false],
+        corner_noise: true,
+        offset: true,
+        per_image: false,
+    },
+    Variant {
+        label: "bias walks only",
+        imu_noise: [false, false, true],
+        corner_noise: true,
+        offset: true,
+        per_image: false,
+    },
+    Variant {
+        label: "nominal, images on samples",
+        imu_noise: ALL,
+        corner_noise: true,
+        offset: false,
+        per_image: false,
     },
 ];
 
@@ -105,9 +139,14 @@ fn run(seed: u64, rate_hz: f64, v: Variant) -> Run {
     };
     config.imu.rate_hz = rate_hz;
     let nominal_noise = simulate_camera_imu(&config).expect("valid").imu_noise;
-    if !v.imu_noise {
+    let [gyro, accel, walks] = v.imu_noise;
+    if !gyro {
         config.imu.gyroscope_noise_density = 0.0;
+    }
+    if !accel {
         config.imu.accelerometer_noise_density = 0.0;
+    }
+    if !walks {
         config.imu.gyroscope_random_walk = 0.0;
         config.imu.accelerometer_random_walk = 0.0;
     }
@@ -138,6 +177,16 @@ fn run(seed: u64, rate_hz: f64, v: Variant) -> Run {
     }
 }
 
+/// Whether variant `i` runs: all by default, else the nominal one and the indices listed in
+/// `MSREG_VARIANTS` (comma-separated, 0-based into [`VARIANTS`]).
+fn chosen(i: usize) -> bool {
+    std::env::var("MSREG_VARIANTS").map_or(true, |v| {
+        i == 0
+            || v.split(',')
+                .any(|x| x.trim().parse::<usize>().expect("MSREG_VARIANTS: indices") == i)
+    })
+}
+
 fn nees(e: &Vector6<f64>, cov: &Matrix6<f64>) -> f64 {
     cov.try_inverse()
         .map_or(f64::NAN, |info| e.dot(&(info * e)))
@@ -156,19 +205,24 @@ fn nees_by_factor() {
     });
     let (lo, hi) = chi_square_band(6.0 * seeds.len() as f64);
     for rate in rates {
-        let runs: Vec<Vec<Run>> = par_map(&seeds, |seed| {
-            VARIANTS.iter().map(|v| run(seed, rate, *v)).collect()
+        let runs: Vec<Vec<Option<Run>>> = par_map(&seeds, |seed| {
+            VARIANTS
+                .iter()
+                .enumerate()
+                .map(|(i, v)| chosen(i).then(|| run(seed, rate, *v)))
+                .collect()
         });
         println!("{rate} Hz, seeds 3000-3009 (NEES band of the sum {lo:.1}-{hi:.1}):");
-        for (i, v) in VARIANTS.iter().enumerate() {
+        for (i, v) in VARIANTS.iter().enumerate().filter(|(i, _)| chosen(*i)) {
             let mut total = 0.0;
             let mut rot = 0.0;
             let mut trans = 0.0;
             let mut z2 = 0.0;
             let mut per_seed = Vec::new();
             for seed_runs in &runs {
-                let r = &seed_runs[i];
-                let judge = if v.per_image { r } else { &seed_runs[0] };
+                let r = seed_runs[i].as_ref().expect("chosen variant ran");
+                let nominal = seed_runs[0].as_ref().expect("the nominal run always runs");
+                let judge = if v.per_image { r } else { nominal };
                 let cov = &judge.covariance;
                 let n = nees(&r.error, cov);
                 total += n;
