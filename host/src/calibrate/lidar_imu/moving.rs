@@ -24,9 +24,13 @@
 //!    remains is the translation's distortion, the same in consecutive scans as long as the
 //!    velocity is (the increment then refers exactly to the reference stamps). The poses'
 //!    orientations are the gyro's (rotated by the hand-eye rotation), so the chain carries
-//!    no NDT rotation drift; the translations are NDT's.
-//! 3. **Alignment** (`pose_imu::moving_start` on that odometry at the offset of step 1),
-//!    and the filter starts from it with its time offset at step 1's estimate.
+//!    no NDT rotation drift; the translations are NDT's. The deskewed increments have exact
+//!    stamps (the last firings), so step 1 is repeated on them and the odometry rebuilt at
+//!    the new offset until it settles (the raw increments' offset is off by several ms:
+//!    where in the sweep a raw match refers to depends on the scene).
+//! 3. **Alignment** (`pose_imu::moving_start` on that odometry at that offset), and the
+//!    filter starts from it with its time offset at the estimate (and the prior's sigma:
+//!    the estimate's own sigma is optimistic, docs/lidar_imu.md "Moving start").
 
 use msreg_estimator::Scalar;
 use msreg_estimator::{FilterConfig, PoseImuEkf};
