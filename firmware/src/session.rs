@@ -687,7 +687,9 @@ impl Session {
         if let Some(event) = &report.event {
             let a = alarm(event);
             let s = usize::from(a.sensor);
-            if let (Some(flag), Some(count)) = (self.alarm.get_mut(s), self.counts.alarms.get_mut(s)) {
+            if let (Some(flag), Some(count)) =
+                (self.alarm.get_mut(s), self.counts.alarms.get_mut(s))
+            {
                 *flag = true;
                 *count = count.saturating_add(1);
             }
