@@ -216,13 +216,13 @@ budget_table() {
       row("msreg `PoseImuEkf<f32>` (opt-level " opt "): IMU propagation", mean["propagate"], 400, states)
       row("msreg: relative-pose update (6-dof, Joseph form)", mean["update"], 10, states)
       row("msreg: zero-velocity update (9-dof, at rest only)", mean["zero_velocity"], 0, states)
-      row("msreg `CameraImuEkf<f32>`: reprojection update (42 corners, 84 rows compressed to one 19-row update)", mean["reprojection"], 20, 28)
+      row("msreg `CameraImuEkf<f32>`: reprojection update (42 corners fused one by one, 84-dof)", mean["reprojection"], 20, 28)
       printf "| **msreg: 400 Hz IMU + 10 Hz relative poses, total** | %d | %.1f M / s | | | **%.1f-%.1f %%** |\n",
         states, rate / 1e6, rate * lo / hz * 100, rate * hi / hz * 100
       js = states_joint
       row("msreg `JointEkf<f32>` (joint layout): IMU propagation", mean["joint_propagate"], 400, js)
       row("msreg joint: LiDAR relative-pose update (6-dof)", mean["joint_update"], 10, js)
-      row("msreg joint: camera image, 42 corners (84 rows compressed to 19)", mean["joint_image"], 20, js)
+      row("msreg joint: camera image, 42 corners (84-dof)", mean["joint_image"], 20, js)
       row("msreg joint: LiDAR board plane (3-dof)", mean["joint_plane"], 10, js)
       core = 400 * mean["joint_propagate"] + 10 * mean["joint_update"] + 20 * mean["joint_image"]
       printf "| **msreg joint: 400 Hz IMU + 10 Hz LiDAR relative pose + 20 Hz camera (42 corners)** | %d | %.1f M / s | | | **%.1f-%.1f %%** (target < 50 %% at CPI 1.5) |\n",

@@ -367,9 +367,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         Ok(self.step_to(t_ns)?.0.state)
     }
 
-    /// The propagation step from the filter time to `t_ns` and the reading at `t_ns`. Out of
-    /// line: the step's temporaries are popped before the covariance product.
-    #[inline(never)]
+    /// The propagation step from the filter time to `t_ns` and the reading at `t_ns`.
     fn step_to(&self, t_ns: u64) -> Result<(propagate::ImuStep<T>, ImuSample<T>), Error> {
         let now = self.imu_now.ok_or(Error::NotInitialized)?;
         if t_ns < self.time_ns {
@@ -406,8 +404,12 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
             return Ok(());
         }
         let (step, end) = self.step_to(t_ns)?;
-        let new_ii = Self::propagated_imu_block(&self.cov, &step.transition, &step.noise);
-        let pending = propagate::transition_compose(&step.transition, &self.pending_transition);
+        let phi = step.transition;
+        let p_ii = self.cov.fixed_view::<15, 15>(0, 0).clone_owned();
+        let phi_p = propagate::transition_mul(&phi, &p_ii);
+        let new_ii = propagate::transition_mul(&phi, &phi_p.transpose()).transpose() + step.noise;
+        let new_ii = (new_ii + new_ii.transpose()) * T::lit(0.5);
+        let pending = propagate::transition_compose(&phi, &self.pending_transition);
         let finite = step.state.is_finite()
             && new_ii.iter().all(|x| x.is_finite())
             && pending.iter().all(|x| x.is_finite());
@@ -420,37 +422,6 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         self.imu_now = Some(end);
         self.time_ns = t_ns;
         Ok(())
-    }
-
-    /// `Phi P_II Phi^T + Q`, symmetrised (`P_II` the covariance's IMU block): with
-    /// `X = Phi (Phi P_II)^T` and `A = X^T + Q`, `(A + A^T) / 2` formed in `X`'s storage, the
-    /// same sums in the same order as with transposed copies (bit-identical). Out of line, so
-    /// that its 15 x 15 temporaries are popped before an update that follows a propagation.
-    #[inline(never)]
-    fn propagated_imu_block(
-        cov: &SMatrix<T, N, N>,
-        phi: &SMatrix<T, 15, 15>,
-        noise: &SMatrix<T, 15, 15>,
-    ) -> SMatrix<T, 15, 15> {
-        let mut phi_p = {
-            let p_ii = cov.fixed_view::<15, 15>(0, 0).clone_owned();
-            propagate::transition_mul(phi, &p_ii)
-        };
-        phi_p.transpose_mut();
-        let mut out = propagate::transition_mul(phi, &phi_p);
-        let (o, q) = (out.as_mut_slice(), noise.as_slice());
-        let half = T::lit(0.5);
-        // Column-major: element (i, j) at 15 j + i.
-        for j in 0..15 {
-            o[16 * j] += q[16 * j];
-            for i in 0..j {
-                let (ij, ji) = (15 * j + i, 15 * i + j);
-                let v = ((o[ji] + q[ij]) + (o[ij] + q[ji])) * half;
-                o[ij] = v;
-                o[ji] = v;
-            }
-        }
-        out
     }
 }
 
