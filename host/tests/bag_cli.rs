@@ -1,7 +1,7 @@
 //! `msreg convert` on the command line: exit codes, and a converted real bag read by
 //! `msreg calibrate pose-imu`.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 type TestResult = Result<(), Box<dyn std::error::Error>>;
@@ -35,14 +35,22 @@ fn converting_a_missing_or_foreign_file_exits_2_naming_it() -> TestResult {
     Ok(())
 }
 
-#[test]
-fn real_bag_converts_and_pose_imu_reads_it() -> TestResult {
+/// The real Jackal bag, or `None` with a visible skip notice where `../shared/data` is absent.
+fn real_bag() -> Option<PathBuf> {
     let bag = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../shared/data/real/robot_localization-test2.bag");
-    if !bag.is_file() {
-        eprintln!("SKIP: {} is absent (needs ../shared/data)", bag.display());
-        return Ok(());
+    if bag.is_file() {
+        return Some(bag);
     }
+    eprintln!("SKIP: {} is absent (needs ../shared/data)", bag.display());
+    None
+}
+
+#[test]
+fn real_bag_converts_and_pose_imu_reads_it() -> TestResult {
+    let Some(bag) = real_bag() else {
+        return Ok(());
+    };
     let dir = tempfile::tempdir()?;
     let data = dir.path().join("rl2");
     let out = msreg()
@@ -91,12 +99,9 @@ fn real_bag_converts_and_pose_imu_reads_it() -> TestResult {
 /// the planar motion's unobservable height named, the skid-steer odometry refused (exit 1).
 #[test]
 fn real_bag_calibrates_directly() -> TestResult {
-    let bag = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data/real/robot_localization-test2.bag");
-    if !bag.is_file() {
-        eprintln!("SKIP: {} is absent (needs ../shared/data)", bag.display());
+    let Some(bag) = real_bag() else {
         return Ok(());
-    }
+    };
     let dir = tempfile::tempdir()?;
     let out = msreg()
         .args(["calibrate", "pose-imu"])
