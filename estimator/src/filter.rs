@@ -289,10 +289,9 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
 
     /// Feeds one IMU sample (an instantaneous reading at its stamp). The filter keeps it as its
     /// look-ahead and propagates to the previous sample's stamp, over the signal between the
-    /// two readings (their straight line bent through the sample before, [`ImuInterval`]):
-    /// after sample `k + 1` the filter stands at `t_k` and any measurement with an IMU time
-    /// up to `t_k+1` can be fused ([`Ekf::is_due`]). The first sample only sets the filter
-    /// time.
+    /// two readings (their straight line bent through the sample before, [`ImuInterval`]): after sample `k + 1` the filter stands at `t_k` and any
+    /// measurement with an IMU time up to `t_k+1` can be fused ([`Ekf::is_due`]). The first
+    /// sample only sets the filter time.
     pub fn propagate(&mut self, sample: &ImuSample<T>) -> Result<(), Error> {
         sample.validate()?;
         let Some(now) = self.imu_now else {

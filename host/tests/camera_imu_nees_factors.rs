@@ -13,9 +13,7 @@
 //!   IMU sample and no reading is interpolated at an image instant.
 //!
 //! `cargo test --release -p msreg --test camera_imu_nees_factors -- --ignored --nocapture`
-//! (`MSREG_RATES=200,1000` picks rates, `MSREG_VARIANTS=6,7` variants by index besides the
-//! nominal one). Further variants split the IMU noise: gyro white noise, accelerometer white
-//! noise, bias walks alone, and the nominal noise with every image on an IMU sample.
+//! (`MSREG_RATES=200,1000` picks rates).
 
 #[path = "support/common.rs"]
 mod common;
@@ -36,8 +34,7 @@ const PIXEL_SIGMA: f64 = 0.1;
 #[derive(Clone, Copy, Debug)]
 struct Variant {
     label: &'static str,
-    /// Which IMU noise is simulated: gyro white noise, accelerometer white noise, bias walks.
-    imu_noise: [bool; 3],
+    imu_noise: bool,
     corner_noise: bool,
     offset: bool,
     /// The pipeline's default corner weighting (per-image noise from the PnP residuals,
@@ -45,79 +42,48 @@ struct Variant {
     per_image: bool,
 }
 
-const ALL: [bool; 3] = [true; 3];
-const NONE: [bool; 3] = [false; 3];
-
-const VARIANTS: [Variant; 10] = [
+const VARIANTS: [Variant; 6] = [
     Variant {
         label: "nominal",
-        imu_noise: ALL,
+        imu_noise: true,
         corner_noise: true,
         offset: true,
         per_image: false,
     },
     Variant {
         label: "imu exact",
-        imu_noise: NONE,
+        imu_noise: false,
         corner_noise: true,
         offset: true,
         per_image: false,
     },
     Variant {
         label: "deterministic",
-        imu_noise: NONE,
+        imu_noise: false,
         corner_noise: false,
         offset: true,
         per_image: false,
     },
     Variant {
         label: "deterministic, images on samples",
-        imu_noise: NONE,
+        imu_noise: false,
         corner_noise: false,
         offset: false,
         per_image: false,
     },
     Variant {
         label: "nominal, per-image corner noise",
-        imu_noise: ALL,
+        imu_noise: true,
         corner_noise: true,
         offset: true,
         per_image: true,
     },
     Variant {
         label: "imu exact, per-image corner noise",
-        imu_noise: NONE,
+        imu_noise: false,
         corner_noise: true,
         offset: true,
         per_image: true,
-    },
-    Variant {
-        label: "gyro white noise only",
-        imu_noise: [true, false, false],
-        corner_noise: true,
-        offset: true,
-        per_image: false,
-    },
-    Variant {
-        label: "accelerometer white noise only",
-        imu_noise: [false, true, false],
-        corner_noise: true,
-        offset: true,
-        per_image: false,
-    },
-    Variant {
-        label: "bias walks only",
-        imu_noise: [false, false, true],
-        corner_noise: true,
-        offset: true,
-        per_image: false,
-    },
-    Variant {
-        label: "nominal, images on samples",
-        imu_noise: ALL,
-        corner_noise: true,
-        offset: false,
-        per_image: false,
     },
 ];
 
@@ -139,14 +105,9 @@ fn run(seed: u64, rate_hz: f64, v: Variant) -> Run {
     };
     config.imu.rate_hz = rate_hz;
     let nominal_noise = simulate_camera_imu(&config).expect("valid").imu_noise;
-    let [gyro, accel, walks] = v.imu_noise;
-    if !gyro {
+    if !v.imu_noise {
         config.imu.gyroscope_noise_density = 0.0;
-    }
-    if !accel {
         config.imu.accelerometer_noise_density = 0.0;
-    }
-    if !walks {
         config.imu.gyroscope_random_walk = 0.0;
         config.imu.accelerometer_random_walk = 0.0;
     }
@@ -177,16 +138,6 @@ fn run(seed: u64, rate_hz: f64, v: Variant) -> Run {
     }
 }
 
-/// Whether variant `i` runs: all by default, else the nominal one and the indices listed in
-/// `MSREG_VARIANTS` (comma-separated, 0-based into [`VARIANTS`]).
-fn chosen(i: usize) -> bool {
-    std::env::var("MSREG_VARIANTS").map_or(true, |v| {
-        i == 0
-            || v.split(',')
-                .any(|x| x.trim().parse::<usize>().expect("MSREG_VARIANTS: indices") == i)
-    })
-}
-
 fn nees(e: &Vector6<f64>, cov: &Matrix6<f64>) -> f64 {
     cov.try_inverse()
         .map_or(f64::NAN, |info| e.dot(&(info * e)))
@@ -205,24 +156,19 @@ fn nees_by_factor() {
     });
     let (lo, hi) = chi_square_band(6.0 * seeds.len() as f64);
     for rate in rates {
-        let runs: Vec<Vec<Option<Run>>> = par_map(&seeds, |seed| {
-            VARIANTS
-                .iter()
-                .enumerate()
-                .map(|(i, v)| chosen(i).then(|| run(seed, rate, *v)))
-                .collect()
+        let runs: Vec<Vec<Run>> = par_map(&seeds, |seed| {
+            VARIANTS.iter().map(|v| run(seed, rate, *v)).collect()
         });
         println!("{rate} Hz, seeds 3000-3009 (NEES band of the sum {lo:.1}-{hi:.1}):");
-        for (i, v) in VARIANTS.iter().enumerate().filter(|(i, _)| chosen(*i)) {
+        for (i, v) in VARIANTS.iter().enumerate() {
             let mut total = 0.0;
             let mut rot = 0.0;
             let mut trans = 0.0;
             let mut z2 = 0.0;
             let mut per_seed = Vec::new();
             for seed_runs in &runs {
-                let r = seed_runs[i].as_ref().expect("chosen variant ran");
-                let nominal = seed_runs[0].as_ref().expect("the nominal run always runs");
-                let judge = if v.per_image { r } else { nominal };
+                let r = &seed_runs[i];
+                let judge = if v.per_image { r } else { &seed_runs[0] };
                 let cov = &judge.covariance;
                 let n = nees(&r.error, cov);
                 total += n;
