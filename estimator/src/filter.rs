@@ -420,6 +420,9 @@ mod frame_relative;
 mod frame_relative_tests;
 mod frames;
 mod fuse;
+mod gauge;
+#[cfg(test)]
+mod gauge_tests;
 mod holds;
 #[cfg(test)]
 mod joint_tests;

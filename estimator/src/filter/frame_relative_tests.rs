@@ -12,16 +12,16 @@ use nalgebra::{SMatrix, SVector, UnitQuaternion, Vector3};
 
 const T0: u64 = 1_700_000_000_000_000_000;
 /// The image stamp (sensor clock), between two IMU samples.
-const STAMP: u64 = T0 + 240_000_000 + 1_234_567;
+pub(super) const STAMP: u64 = T0 + 240_000_000 + 1_234_567;
 
-fn extrinsic<T: Scalar>() -> Pose<T> {
+pub(super) fn extrinsic<T: Scalar>() -> Pose<T> {
     Pose::new(
         UnitQuaternion::from_euler_angles(T::lit(-1.5), T::lit(0.03), T::lit(-1.6)),
         Vector3::new(T::lit(0.06), T::lit(-0.02), T::lit(0.01)),
     )
 }
 
-fn target_in_sensor<T: Scalar>() -> Pose<T> {
+pub(super) fn target_in_sensor<T: Scalar>() -> Pose<T> {
     Pose::new(
         UnitQuaternion::from_euler_angles(T::lit(0.2), T::lit(-0.3), T::lit(0.1)),
         Vector3::new(T::lit(-0.12), T::lit(-0.1), T::lit(0.8)),
@@ -29,14 +29,14 @@ fn target_in_sensor<T: Scalar>() -> Pose<T> {
 }
 
 /// A PnP-like covariance: correlated rotation and translation.
-fn measurement_cov<T: Scalar>() -> SMatrix<T, 6, 6> {
+pub(super) fn measurement_cov<T: Scalar>() -> SMatrix<T, 6, 6> {
     let a = SMatrix::<f64, 6, 6>::from_fn(|r, c| ((r * 5 + c * 3) % 7) as f64 * 1e-3);
     let m = a * a.transpose() + SMatrix::<f64, 6, 6>::identity() * 1e-5;
     m.map(T::lit)
 }
 
 /// A spinning, accelerating camera-IMU filter standing at `T0 + 240 ms`, reach to 260 ms.
-fn camera_filter<T: Scalar>(time_offset: f64) -> CameraImuEkf<T> {
+pub(super) fn camera_filter<T: Scalar>(time_offset: f64) -> CameraImuEkf<T> {
     let mut init = InitialState::<T, 1>::at_rest(Vector3::new(T::zero(), T::zero(), T::lit(9.81)))
         .expect("gravity")
         .with_extrinsic(0, extrinsic(), T::lit(0.02), T::lit(0.02))

@@ -54,7 +54,7 @@ fn camera<T: Scalar>() -> Camera<T> {
 /// The spinning, accelerating IMU of the filter tests as a joint filter, with the board
 /// 1.2 m in front of the camera at the scan's IMU time (placed from the pose 4 ms after
 /// the stamp whatever the LiDAR's `time_offset`, so that offsets see the same board).
-fn joint_filter<T: Scalar>(lidar_time_offset: T) -> JointEkf<T> {
+pub(super) fn joint_filter<T: Scalar>(lidar_time_offset: T) -> JointEkf<T> {
     let mut init = InitialState::<T, 2>::at_rest(Vector3::new(T::zero(), T::zero(), T::lit(9.81)))
         .expect("gravity")
         .with_extrinsic(LIDAR, lidar_mount(), T::lit(0.02), T::lit(0.03))

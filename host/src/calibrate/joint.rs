@@ -148,7 +148,8 @@ pub fn calibrate<T: Scalar>(
             first_imu.stamp_ns,
             (LIDAR, true),
         ),
-        corners: CornerFeed::new(&camera_input, &options.camera, &start, camera_prior, CAMERA),
+        corners: CornerFeed::new(&camera_input, &options.camera, &start, camera_prior, CAMERA)
+            .with_gauge_at_target(),
         planes: plane::PlaneFeed::new(board, options.plane),
         overlay: OverlayCapture::halfway(imu),
     };
