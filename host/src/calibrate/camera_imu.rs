@@ -741,7 +741,7 @@ impl<'a, T: Scalar> CornerFeed<'a, T> {
     /// Once the target is placed, it fixes the gauge ([`Ekf::fix_gauge`]): G's origin and yaw
     /// become the target's, as Kalibr takes the target as its world frame, so the filter
     /// cannot gain spurious information along the four directions no measurement sees. The
-    /// joint pipeline uses it (10 seeds: camera NEES 160.8 -> 91.6, LiDAR 121.5 -> 69.9;
+    /// joint pipeline uses it (10 seeds: camera NEES 145.7 -> 91.6, LiDAR 91.1 -> 69.9;
     /// docs/joint.md). The camera-IMU pipeline does not: its NEES cells barely moved, and
     /// the device's f32 filter then drifted 0.85 sigma from the host's in the HIL test.
     pub(crate) fn with_gauge_at_target(mut self) -> Self {
