@@ -1,8 +1,8 @@
 //! Benchmark of the MI engine (issue 15): the 4-DoF (x, y, z, yaw) coarse-to-fine grid plus
 //! the 6-DoF refinement over 100k map points, a downward equidistant fisheye 8 m above a
 //! textured ground (`msreg_host::mi::synthetic`). Prints a markdown table and writes the
-//! same problem to `<dir>` (default /tmp/mi_bench) for the NumPy anchor
-//! `tools/mi_grid_numpy.py`.
+//! problem to `<dir>` (default /tmp/mi_bench). The NumPy anchor `tools/mi_grid_numpy.py`
+//! now reads the prior-map problem of `--example prior_map_bench` instead.
 //!
 //! `cargo run --release -p msreg --example mi_bench [-- <dir>]`
 

@@ -8,6 +8,7 @@ use std::process::{Command, Output};
 use std::sync::OnceLock;
 
 use msreg_host::mi::prior_map::cli::read_t_world_cam;
+use msreg_host::mi::prior_map::init::camera_yaw;
 
 fn msreg(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_msreg"))
@@ -110,6 +111,13 @@ fn calibrate_writes_result_overlays_and_report() {
         json["survey_median_px"].as_f64().expect("median") < 3.0,
         "{json}"
     );
+    // The MI slices through the optimum: six DoFs, each peaking at the estimate.
+    let slices = json["mi_slices"].as_array().expect("mi_slices");
+    assert_eq!(slices.len(), 6, "{json}");
+    for s in slices {
+        assert_eq!(s["peak_offset"].as_f64(), Some(0.0), "{s}");
+        assert_eq!(s["mi"].as_array().map(Vec::len), Some(13), "{s}");
+    }
 }
 
 #[test]
@@ -223,4 +231,41 @@ fn user_correspondences_replace_automatic_matching() {
     let estimate = read_t_world_cam(&out).expect("result");
     let truth = read_t_world_cam(&ds.join("groundtruth/extrinsics.yaml")).expect("truth");
     assert!((estimate.translation.vector - truth.translation.vector).norm() < 0.1);
+}
+
+/// The yaw of `prior.yaml`: a matched pose 90 deg off it is refused (exit 1, saying so);
+/// one 4 deg off it (inside 3 sigma of 5 deg) is accepted.
+#[test]
+fn yaw_prior_refuses_an_inconsistent_match() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let ds = copy(tmp.path());
+    let truth = read_t_world_cam(&ds.join("groundtruth/extrinsics.yaml")).expect("truth");
+    let yaw = camera_yaw(&truth).to_degrees();
+    let prior = fs::read_to_string(ds.join("prior.yaml")).expect("prior");
+    let out = tmp.path().join("r.yaml");
+    let run = |offset_deg: f64| {
+        fs::write(
+            ds.join("prior.yaml"),
+            format!(
+                "{prior}\nyaw_deg: {}\nsigma_yaw_deg: 5.0\n",
+                yaw + offset_deg
+            ),
+        )
+        .expect("write");
+        msreg(&[
+            "calibrate",
+            "prior-map",
+            &ds.to_string_lossy(),
+            "-o",
+            &out.to_string_lossy(),
+        ])
+    };
+    let o = run(90.0);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains("from the prior's"), "{}", stderr(&o));
+    assert!(fs::read_to_string(&out)
+        .expect("result")
+        .contains("status: failed"));
+    let o = run(4.0);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
 }

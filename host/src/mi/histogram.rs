@@ -105,19 +105,25 @@ impl BSplineHistogram {
         (self.bins - 3) as f64
     }
 
-    /// The bins a value in [0, 1] spreads into.
+    /// The bins a value in [0, 1] spreads into: the cubic B-spline at `1 + t`, `t`,
+    /// `t - 1` and `t - 2` (`t` the fractional bin coordinate) in closed form.
     #[inline]
     pub fn spread(&self, x: f32) -> Spread {
         let c = 1.0 + f64::from(x.clamp(0.0, 1.0)) * self.scale();
         let first = c.floor() as isize - 1;
-        let mut w = [0.0; 4];
-        let mut dw = [0.0; 4];
-        for k in 0..4 {
-            let (v, d) = bspline3(c - (first + k as isize) as f64);
-            w[k] = v;
-            dw[k] = d;
+        let t = c - c.floor();
+        let u = 1.0 - t;
+        let (t2, u2) = (t * t, u * u);
+        Spread {
+            first,
+            w: [
+                u2 * u / 6.0,
+                2.0 / 3.0 - t2 + 0.5 * t2 * t,
+                2.0 / 3.0 - u2 + 0.5 * u2 * u,
+                t2 * t / 6.0,
+            ],
+            dw: [-0.5 * u2, -2.0 * t + 1.5 * t2, 2.0 * u - 1.5 * u2, 0.5 * t2],
         }
-        Spread { first, w, dw }
     }
 
     /// Adds one `(point, image)` sample.

@@ -49,8 +49,20 @@ impl PoseParam {
         p_src: &Vector3<f64>,
         p_cam: &Vector3<f64>,
     ) -> Matrix3x6<f64> {
-        let mut j = Matrix3x6::zeros();
         let r = x.rotation.to_rotation_matrix().into_inner();
+        self.point_jacobian_with(&r, p_src, p_cam)
+    }
+
+    /// [`Self::point_jacobian`] with the state's rotation matrix `r` given (hoisted out of
+    /// per-point loops).
+    #[inline]
+    pub fn point_jacobian_with(
+        self,
+        r: &Matrix3<f64>,
+        p_src: &Vector3<f64>,
+        p_cam: &Vector3<f64>,
+    ) -> Matrix3x6<f64> {
+        let mut j = Matrix3x6::zeros();
         match self {
             PoseParam::CamFromSource => {
                 j.fixed_view_mut::<3, 3>(0, 0)
@@ -316,22 +328,39 @@ impl MiScene {
     }
 
     /// Smoothed MI at state `x` and its analytic gradient w.r.t. `delta` (the visible set
-    /// held fixed, so the point marginal is constant).
+    /// held fixed, so the point marginal is constant). Each point is projected once: its
+    /// values and `d image / d delta` are kept for the gradient pass.
     pub fn evaluate(&self, param: PoseParam, x: &Isometry3<f64>) -> Evaluated {
         let t = param.t_cam_src(x);
-        let hist = self.histogram(&t);
-        let weights = hist.gradient_weights();
-        let sum = (0..self.points.len())
+        let r = x.rotation.to_rotation_matrix().into_inner();
+        let samples: Vec<(f32, f32, Vector6<f64>)> = (0..self.points.len())
             .into_par_iter()
             .with_min_len(CHUNK)
             .filter_map(|i| {
                 let (p, pc) = self.project(&t, i)?;
                 let (b, du, dv) = self.image.sample(p.pixel.x, p.pixel.y)?;
-                let s = hist.sample_derivative(&weights, self.values[i], b);
-                let j = p.jacobian * param.point_jacobian(x, &self.points[i], &pc);
-                let di = j.row(0) * du + j.row(1) * dv;
-                Some(di.transpose() * s)
+                let j = p.jacobian * param.point_jacobian_with(&r, &self.points[i], &pc);
+                Some((
+                    self.values[i],
+                    b,
+                    (j.row(0) * du + j.row(1) * dv).transpose(),
+                ))
             })
+            .collect();
+        let empty = || BSplineHistogram::new(self.bins);
+        let hist = samples
+            .par_iter()
+            .with_min_len(CHUNK)
+            .fold(empty, |mut h, &(a, b, _)| {
+                h.add(a, b);
+                h
+            })
+            .reduce(empty, |a, b| a.merge(&b));
+        let weights = hist.gradient_weights();
+        let sum = samples
+            .par_iter()
+            .with_min_len(CHUNK)
+            .map(|(a, b, di)| di * hist.sample_derivative(&weights, *a, *b))
             .reduce(Vector6::zeros, |a, b| a + b);
         let n = hist.total.max(1.0);
         Evaluated {

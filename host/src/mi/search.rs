@@ -51,6 +51,32 @@ pub fn grid_search<F>(
 where
     F: Fn(&[f64]) -> Isometry3<f64> + Sync,
 {
+    grid_search_by(axes, levels, |c| {
+        let t = pose(c);
+        match score {
+            GridScore::Smoothed => scene.histogram_serial(&t).score().mi,
+            GridScore::Hard => scene.hard_serial(&t),
+        }
+    })
+}
+
+/// The lattice of [`grid_search`] with any score of the parameter vector (higher is
+/// better), evaluated in parallel over the candidates of a level.
+pub fn grid_search_by<F>(axes: &[GridAxis], levels: usize, score: F) -> GridResult
+where
+    F: Fn(&[f64]) -> f64 + Sync,
+{
+    grid_search_batch(axes, levels, |candidates| {
+        candidates.par_iter().map(|c| score(c)).collect()
+    })
+}
+
+/// The lattice of [`grid_search`] with a score of all candidates of a level at once
+/// (one value per candidate, higher is better; the scorer chooses how to parallelise).
+pub fn grid_search_batch<F>(axes: &[GridAxis], levels: usize, score_all: F) -> GridResult
+where
+    F: Fn(&[Vec<f64>]) -> Vec<f64>,
+{
     let mut centre = vec![0.0; axes.len()];
     let mut spacing: Vec<f64> = axes
         .iter()
@@ -61,22 +87,12 @@ where
     for _ in 0..levels.max(1) {
         let candidates = lattice(&centre, &spacing, axes);
         evaluations += candidates.len();
-        let (mi, best) = candidates
-            .par_iter()
-            .map(|c| {
-                let t = pose(c);
-                let mi = match score {
-                    GridScore::Smoothed => scene.histogram_serial(&t).score().mi,
-                    GridScore::Hard => scene.hard_serial(&t),
-                };
-                (mi, c)
-            })
-            .reduce_with(|a, b| if b.0 > a.0 { b } else { a })
-            .map(|(m, c)| (m, c.clone()))
-            .unwrap_or((f64::NEG_INFINITY, centre.clone()));
-        if mi > best_mi {
-            best_mi = mi;
-            centre = best;
+        let scores = score_all(&candidates);
+        let best = (0..candidates.len().min(scores.len()))
+            .max_by(|&a, &b| scores[a].total_cmp(&scores[b]).then(b.cmp(&a)));
+        if let Some(i) = best.filter(|&i| scores[i] > best_mi) {
+            best_mi = scores[i];
+            centre = candidates[i].clone();
         }
         for (s, a) in spacing.iter_mut().zip(axes) {
             *s /= a.steps.max(2) as f64;

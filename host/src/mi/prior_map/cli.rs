@@ -79,6 +79,8 @@ struct Report {
     t_world_cam_initial: [[f64; 4]; 4],
     t_world_cam: [[f64; 4]; 4],
     truth_errors: Option<TruthErrors>,
+    /// MI along each DoF through the optimum, with the refinement's parabola.
+    mi_slices: Vec<super::slices::MiSlice>,
     seconds: f64,
 }
 
@@ -203,6 +205,7 @@ fn make_report(
         t_world_cam_initial: rows(&reg.init.t_world_cam),
         t_world_cam: rows(&r.x),
         truth_errors: truth_errors(&args.dataset, &r.x),
+        mi_slices: reg.slices.clone(),
         seconds,
     }
 }

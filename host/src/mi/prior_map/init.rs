@@ -113,6 +113,54 @@ pub enum InitError {
     /// PnP on the user correspondences failed.
     #[error("PnP on the prior.yaml correspondences failed: {0}")]
     Pnp(PnpError),
+    /// Automatic matching found a pose whose yaw contradicts the prior's.
+    #[error(
+        "automatic matching failed: its pose has yaw {found_deg:.1} deg, {off_deg:.1} deg from \
+         the prior's {prior_deg:.1} +- {sigma_deg:.1} deg (more than 3 sigma); give at least 4 \
+         correspondences {{uv, xyz}} in prior.yaml"
+    )]
+    YawInconsistent {
+        /// Yaw of the matched pose (deg).
+        found_deg: f64,
+        /// Its difference to the prior (deg, wrapped to +-180).
+        off_deg: f64,
+        /// `prior.yaml` `yaw_deg`.
+        prior_deg: f64,
+        /// `prior.yaml` `sigma_yaw_deg` (default [`DEFAULT_SIGMA_YAW_DEG`]).
+        sigma_deg: f64,
+    },
+}
+
+/// `sigma_yaw_deg` when `prior.yaml` gives `yaw_deg` without it.
+pub const DEFAULT_SIGMA_YAW_DEG: f64 = 10.0;
+
+/// Heading of the camera's x axis in W (rad, from east towards north), the `yaw_deg` of
+/// `prior.yaml`.
+pub fn camera_yaw(t_world_cam: &Isometry3<f64>) -> f64 {
+    let x = t_world_cam.rotation * Vector3::x();
+    x.y.atan2(x.x)
+}
+
+/// `Ok` when `prior.yaml` has no yaw or `t_world_cam`'s yaw is within 3 sigma of it.
+pub fn check_yaw_prior(
+    input: &PriorMapInput,
+    t_world_cam: &Isometry3<f64>,
+) -> Result<(), InitError> {
+    let Some(prior_deg) = input.prior.yaw_deg else {
+        return Ok(());
+    };
+    let sigma_deg = input.prior.sigma_yaw_deg.unwrap_or(DEFAULT_SIGMA_YAW_DEG);
+    let found_deg = camera_yaw(t_world_cam).to_degrees();
+    let off_deg = (found_deg - prior_deg + 540.0).rem_euclid(360.0) - 180.0;
+    if off_deg.abs() <= 3.0 * sigma_deg {
+        return Ok(());
+    }
+    Err(InitError::YawInconsistent {
+        found_deg,
+        off_deg,
+        prior_deg,
+        sigma_deg,
+    })
 }
 
 /// `T_world_cam` and RMS (px) from world points and their pixels (any 3-D layout with a
@@ -429,11 +477,18 @@ pub fn automatic(
     let sigma = input.prior.sigma_position_m.unwrap_or([5.0, 5.0, 3.0]);
     let sigma_xy = sigma[0].max(sigma[1]);
     let mut best = (0, 0);
+    let mut yaw_error = None;
     for &scale in &options.height_scales {
         match attempt(input, satellite, &prior, sigma_xy, scale, options) {
-            Ok(init) => return Ok(init),
+            Ok(init) => match check_yaw_prior(input, &init.t_world_cam) {
+                Ok(()) => return Ok(init),
+                Err(e) => yaw_error = Some(e),
+            },
             Err(counts) => best = best.max((counts.1, counts.0)),
         }
+    }
+    if let Some(e) = yaw_error {
+        return Err(e);
     }
     Err(InitError::MatchingFailed {
         matches: best.1,
