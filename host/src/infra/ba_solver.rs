@@ -430,9 +430,9 @@ fn gather(
     let base = st.w_ptr[group.start];
     for (member, j) in group.enumerate() {
         let vi = damped_inverse(&lin.v[j], lambda);
-        for e in st.w_ptr[j]..st.w_ptr[j + 1] {
-            let block = st.w_block[e];
-            let z = w[e] * vi;
+        let r = st.w_ptr[j]..st.w_ptr[j + 1];
+        for (e, (we, &block)) in r.clone().zip(w[r.clone()].iter().zip(&st.w_block[r])) {
+            let z = we * vi;
             let za = z * lin.gp[j];
             for k in 0..6 {
                 rhs[6 * block + k] += za[k];
@@ -656,9 +656,9 @@ fn step(
         .into_par_iter()
         .map(|j| {
             let mut acc = lin.gp[j];
-            for e in st.w_ptr[j]..st.w_ptr[j + 1] {
-                let a = 6 * st.w_block[e];
-                acc += w[e].transpose() * Vector6::from_column_slice(&d[a..a + 6]);
+            let r = st.w_ptr[j]..st.w_ptr[j + 1];
+            for (we, &a) in w[r.clone()].iter().zip(&st.w_block[r]) {
+                acc += we.transpose() * Vector6::from_column_slice(&d[6 * a..6 * a + 6]);
             }
             -(damped_inverse(&lin.v[j], lambda) * acc)
         })
