@@ -130,10 +130,11 @@ fn solve(problem: &str, out: &str) -> Result<()> {
     let t2 = Instant::now();
     std::fs::write(out, write_state(&sol.state))?;
     println!(
-        "msreg read {:.2} s solve {:.2} s iterations {} initial cost {:.6} final cost {:.6}",
+        "msreg read {:.2} s solve {:.2} s iterations {} (rejected {}) initial cost {:.6} final cost {:.6}",
         (t1 - t0).as_secs_f64(),
         (t2 - t1).as_secs_f64(),
         sol.iterations,
+        sol.rejected,
         sol.initial_cost,
         sol.final_cost
     );

@@ -1,9 +1,11 @@
 //! Levenberg-Marquardt for the bundle adjustment of [`super::ba`], scaled to thousands of
 //! keyframes and millions of keypoints:
-//! - the points are eliminated by the Schur complement, point by point, in parallel
-//!   (one partial reduced system per thread); the per-keypoint Jacobians are recomputed
-//!   from the state when needed instead of stored (3.7 M keypoints x 6 x 3 would be
-//!   0.5 GB);
+//! - each iteration projects every keypoint once: its Jacobians and Cauchy weight go
+//!   straight into the point's `V`, `g_p` and its `W = J_kf^T J_point` blocks (one per
+//!   keyframe that sees the point, 144 bytes each, 0.54 GB at 3.7 M keypoints), which are
+//!   cached for the Schur complement and the back-substitution;
+//! - the points are eliminated by the Schur complement, a group of points at a time, in
+//!   parallel (one partial reduced system per thread);
 //! - the reduced system (6 per keyframe `k >= 1`, camera and `T_F_M`) keeps a fixed
 //!   block-sparse pattern ([`super::blocksym`]) and is factored by faer's sparse
 //!   (supernodal) Cholesky, symbolic analysis once;
@@ -13,7 +15,7 @@
 //! Marquardt scaled; the step is accepted when the robust cost decreases.
 
 use faer::linalg::solvers::Solve;
-use nalgebra::{Matrix3, Matrix6, Matrix6x3, SMatrix, SVector, Vector3};
+use nalgebra::{Matrix3, Matrix6, Matrix6x3, SMatrix, SVector, Vector3, Vector6};
 use rayon::prelude::*;
 use std::ops::Range;
 
@@ -33,6 +35,9 @@ pub struct BaSolution {
     pub final_cost: f64,
     /// Accepted + rejected iterations.
     pub iterations: usize,
+    /// Rejected iterations (the cost did not decrease or the system was not positive
+    /// definite).
+    pub rejected: usize,
     /// Variance factor (robust cost, i.e. whitened chi-square, per degree of freedom)
     /// applied to the covariances.
     pub variance_factor: f64,
@@ -73,6 +78,11 @@ struct Structure {
     by_point: Vec<Vec<usize>>,
     order: Vec<usize>,
     chunks: Vec<Range<usize>>,
+    /// The `W` entries of point `j` (processing order), one per keyframe `>= 1` that sees
+    /// it (its keypoints in that keyframe summed, which is exact): `w_ptr[j]..w_ptr[j + 1]`.
+    w_ptr: Vec<usize>,
+    /// Reduced-system block of each `W` entry.
+    w_block: Vec<usize>,
 }
 
 fn structure(p: &BaProblem<'_>, start: &BaState) -> Option<Structure> {
@@ -115,12 +125,24 @@ fn structure(p: &BaProblem<'_>, start: &BaState) -> Option<Structure> {
         b.mark(lay.cam(o.a), lay.cam(o.b));
     }
     let chunks = split(&by_point, rayon::current_num_threads().max(1));
+    let (mut w_ptr, mut w_block) = (vec![0], Vec::new());
+    for list in &by_point {
+        let first = w_block.len();
+        for a in list.iter().filter_map(|&o| lay.kf(p.vo[o].kf)) {
+            if w_block.len() == first || w_block.last() != Some(&a) {
+                w_block.push(a);
+            }
+        }
+        w_ptr.push(w_block.len());
+    }
     Some(Structure {
         lay,
         pat: b.finish()?,
         by_point,
         order,
         chunks,
+        w_ptr,
+        w_block,
     })
 }
 
@@ -178,53 +200,95 @@ fn add_dense<const N: usize>(
     }
 }
 
-/// Per-thread sums of the keypoint terms of a range of points.
-struct VoPart {
+/// Per-thread sums of the keypoint terms of a range of points (the per-point `V`, `g_p`
+/// and `W` go straight into their slices of the linearisation).
+struct VoSums {
     diag: Vec<Matrix6<f64>>,
     g: Vec<f64>,
-    v: Vec<Matrix3<f64>>,
-    gp: Vec<Vector3<f64>>,
     cost: f64,
     count: usize,
 }
 
-fn vo_part(p: &BaProblem<'_>, s: &BaState, st: &Structure, r: Range<usize>) -> Option<VoPart> {
+/// The per-point outputs of one range of points: `V`, `g_p` and the `W` entries.
+struct VoOut<'a> {
+    v: &'a mut [Matrix3<f64>],
+    gp: &'a mut [Vector3<f64>],
+    w: &'a mut [Matrix6x3<f64>],
+}
+
+/// Linearises the keypoints of the points `r`, each projected once: `V`, `g_p` and the
+/// `W` entries into `out`, the keyframe diagonal blocks and gradient into the sums.
+fn vo_part(
+    p: &BaProblem<'_>,
+    s: &BaState,
+    st: &Structure,
+    r: Range<usize>,
+    out: VoOut<'_>,
+) -> Option<VoSums> {
     let nk = st.lay.kfs;
-    let mut part = VoPart {
+    let mut sums = VoSums {
         diag: vec![Matrix6::zeros(); nk],
         g: vec![0.0; 6 * nk],
-        v: Vec::with_capacity(r.len()),
-        gp: Vec::with_capacity(r.len()),
         cost: 0.0,
         count: 0,
     };
-    for j in r {
+    let base = st.w_ptr[r.start];
+    out.w.fill(Matrix6x3::zeros());
+    for (local, j) in r.enumerate() {
         let (mut v, mut gp) = (Matrix3::zeros(), Vector3::zeros());
+        let mut e = st.w_ptr[j];
         for &o in &st.by_point[j] {
             let (res, jp, jx, rho) = vo_term(p, s, &p.vo[o])?;
-            part.cost += rho;
-            part.count += 2;
+            sums.cost += rho;
+            sums.count += 2;
             v += jx.transpose() * jx;
             gp += jx.transpose() * res;
             if let Some(a) = st.lay.kf(p.vo[o].kf) {
-                part.diag[a] += jp.transpose() * jp;
+                if st.w_block[e] != a {
+                    e += 1;
+                }
+                out.w[e - base] += jp.transpose() * jx;
+                sums.diag[a] += jp.transpose() * jp;
                 let ga = jp.transpose() * res;
                 for k in 0..6 {
-                    part.g[6 * a + k] += ga[k];
+                    sums.g[6 * a + k] += ga[k];
                 }
             }
         }
-        part.v.push(v);
-        part.gp.push(gp);
+        out.v[local] = v;
+        out.gp[local] = gp;
     }
-    Some(part)
+    Some(sums)
 }
 
-fn linearise_vo(p: &BaProblem<'_>, s: &BaState, st: &Structure, lin: &mut Lin) -> bool {
-    let parts: Vec<Option<VoPart>> = st
-        .chunks
-        .par_iter()
-        .map(|r| vo_part(p, s, st, r.clone()))
+/// The keypoint terms, in parallel over the point ranges of `st.chunks`; `w` receives
+/// every `W` entry (cached for the Schur complement and the back-substitution).
+fn linearise_vo(
+    p: &BaProblem<'_>,
+    s: &BaState,
+    st: &Structure,
+    lin: &mut Lin,
+    w: &mut [Matrix6x3<f64>],
+) -> bool {
+    let mut outs = Vec::with_capacity(st.chunks.len());
+    let (mut v, mut gp, mut w) = (&mut lin.v[..], &mut lin.gp[..], w);
+    for r in &st.chunks {
+        let (v0, v1) = std::mem::take(&mut v).split_at_mut(r.len());
+        let (g0, g1) = std::mem::take(&mut gp).split_at_mut(r.len());
+        let (w0, w1) = std::mem::take(&mut w).split_at_mut(st.w_ptr[r.end] - st.w_ptr[r.start]);
+        outs.push((
+            r.clone(),
+            VoOut {
+                v: v0,
+                gp: g0,
+                w: w0,
+            },
+        ));
+        (v, gp, w) = (v1, g1, w1);
+    }
+    let parts: Vec<Option<VoSums>> = outs
+        .into_par_iter()
+        .map(|(r, out)| vo_part(p, s, st, r, out))
         .collect();
     for part in parts {
         let Some(part) = part else { return false };
@@ -234,8 +298,6 @@ fn linearise_vo(p: &BaProblem<'_>, s: &BaState, st: &Structure, lin: &mut Lin) -
         for (k, g) in part.g.iter().enumerate().take(6 * (st.lay.kfs - 1)) {
             lin.g[k] += g;
         }
-        lin.v.extend(part.v);
-        lin.gp.extend(part.gp);
         lin.cost += part.cost;
         lin.count += part.count;
     }
@@ -302,16 +364,23 @@ fn linearise_blobs_epipolar(p: &BaProblem<'_>, s: &BaState, st: &Structure, lin:
     }
 }
 
-fn linearise(p: &BaProblem<'_>, s: &BaState, st: &Structure) -> Option<Lin> {
+/// Linearises every term at `s`; the keypoints' `W` entries go to `w` (overwritten, also
+/// when `None` is returned).
+fn linearise(
+    p: &BaProblem<'_>,
+    s: &BaState,
+    st: &Structure,
+    w: &mut [Matrix6x3<f64>],
+) -> Option<Lin> {
     let mut lin = Lin {
         u: vec![Matrix6::zeros(); st.pat.slots()],
         g: vec![0.0; 6 * st.lay.blocks()],
-        v: Vec::with_capacity(s.points.len()),
-        gp: Vec::with_capacity(s.points.len()),
+        v: vec![Matrix3::zeros(); s.points.len()],
+        gp: vec![Vector3::zeros(); s.points.len()],
         cost: 0.0,
         count: 0,
     };
-    if !linearise_vo(p, s, st, &mut lin) || !linearise_markers(p, s, st, &mut lin) {
+    if !linearise_vo(p, s, st, &mut lin, w) || !linearise_markers(p, s, st, &mut lin) {
         return None;
     }
     linearise_blobs_epipolar(p, s, st, &mut lin);
@@ -327,182 +396,188 @@ fn damped_inverse(v: &Matrix3<f64>, lambda: f64) -> Matrix3<f64> {
     v.try_inverse().unwrap_or_else(Matrix3::zeros)
 }
 
-/// `W = J_kf^T J_point` of the keypoints of point `j` (keyframe 0 left out), by block.
-fn point_w(
-    p: &BaProblem<'_>,
-    s: &BaState,
-    st: &Structure,
-    j: usize,
-    out: &mut Vec<(usize, Matrix6x3<f64>)>,
-) {
-    out.clear();
-    for &o in &st.by_point[j] {
-        let Some(a) = st.lay.kf(p.vo[o].kf) else {
-            continue;
-        };
-        if let Some((_, jp, jx, _)) = vo_term(p, s, &p.vo[o]) {
-            out.push((a, jp.transpose() * jx));
-        }
-    }
-}
-
 /// Points eliminated together: their updates of one block of the reduced system are
 /// summed in registers before the block is written (the update is memory-bound otherwise).
 const GROUP: usize = 16;
 
-/// One keyframe's `W` (keypoints of one point in one keyframe summed, which is exact) and
-/// `Z = W V^-1` for a point of the group.
-#[derive(Clone, Copy)]
-struct Entry {
-    block: usize,
-    member: usize,
-    w: Matrix6x3<f64>,
-    z: Matrix6x3<f64>,
+/// A group's entries, sorted by (block, member), as separate `Z = W V^-1` and `W` arrays
+/// (the kernel streams the `W` of every later block for each block's `Z`), and per block
+/// `(block, first entry, mask of the members that see it)`.
+#[derive(Default)]
+struct Group {
+    keys: Vec<(usize, usize, usize)>,
+    unsorted_z: Vec<Matrix6x3<f64>>,
+    z: Vec<Matrix6x3<f64>>,
+    w: Vec<Matrix6x3<f64>>,
+    kfs: Vec<(usize, usize, u64)>,
 }
 
-/// The entries of a group of points, sorted by block, and per block `(block, first entry,
-/// mask of the members that see it)`.
-#[allow(clippy::too_many_arguments)]
+/// Gathers the `W` entries of the points `group` (at most 64) into `out` with their `Z`
+/// and adds `Z g_p` to `rhs`.
 fn gather(
     lin: &Lin,
-    p: &BaProblem<'_>,
-    s: &BaState,
+    w: &[Matrix6x3<f64>],
     st: &Structure,
-    group: Range<usize>,
-    lambda: f64,
+    (group, lambda): (Range<usize>, f64),
     rhs: &mut [f64],
-    out: &mut (Vec<Entry>, Vec<(usize, usize, u64)>),
+    out: &mut Group,
 ) {
-    let (entries, kfs) = out;
-    entries.clear();
-    kfs.clear();
-    let mut w = Vec::new();
+    out.keys.clear();
+    out.unsorted_z.clear();
+    out.z.clear();
+    out.w.clear();
+    out.kfs.clear();
+    let base = st.w_ptr[group.start];
     for (member, j) in group.enumerate() {
         let vi = damped_inverse(&lin.v[j], lambda);
-        point_w(p, s, st, j, &mut w);
-        let first = entries.len();
-        for &(block, wa) in &w {
-            let len = entries.len();
-            match entries.last_mut() {
-                Some(e) if len > first && e.block == block => e.w += wa,
-                _ => entries.push(Entry {
-                    block,
-                    member,
-                    w: wa,
-                    z: Matrix6x3::zeros(),
-                }),
-            }
-        }
-        for e in &mut entries[first..] {
-            e.z = e.w * vi;
-            let za = e.z * lin.gp[j];
+        let r = st.w_ptr[j]..st.w_ptr[j + 1];
+        for (e, (we, &block)) in r.clone().zip(w[r.clone()].iter().zip(&st.w_block[r])) {
+            let z = we * vi;
+            let za = z * lin.gp[j];
             for k in 0..6 {
-                rhs[6 * e.block + k] += za[k];
+                rhs[6 * block + k] += za[k];
             }
+            out.keys.push((block, member, e));
+            out.unsorted_z.push(z);
         }
     }
-    entries.sort_by_key(|e| (e.block, e.member));
-    for (k, e) in entries.iter().enumerate() {
-        match kfs.last_mut() {
-            Some(last) if last.0 == e.block => last.2 |= 1 << e.member,
-            _ => kfs.push((e.block, k, 1 << e.member)),
+    out.keys.sort_unstable();
+    for (k, &(block, member, e)) in out.keys.iter().enumerate() {
+        out.w.push(w[e]);
+        out.z.push(out.unsorted_z[e - base]);
+        match out.kfs.last_mut() {
+            Some(last) if last.0 == block => last.2 |= 1 << member,
+            _ => out.kfs.push((block, k, 1 << member)),
         }
     }
 }
 
 /// `sum_j W_j V_j^-1 W_j^T` (upper blocks) and `sum_j W_j V_j^-1 g_j` over a range of
-/// points, `GROUP` points at a time.
+/// points, `GROUP` points at a time, added into `blocks` and `rhs`.
 fn schur_part(
-    lin: &Lin,
-    p: &BaProblem<'_>,
-    s: &BaState,
-    st: &Structure,
+    (lin, w, st): (&Lin, &[Matrix6x3<f64>], &Structure),
     r: Range<usize>,
     lambda: f64,
-) -> (Vec<Matrix6<f64>>, Vec<f64>) {
-    let mut blocks = vec![Matrix6::zeros(); st.pat.slots()];
-    let mut rhs = vec![0.0; 6 * st.lay.blocks()];
-    let mut scratch = (Vec::new(), Vec::new());
+    (blocks, rhs): (&mut [Matrix6<f64>], &mut [f64]),
+) {
+    let mut group = Group::default();
     let mut g0 = r.start;
     while g0 < r.end {
         let g1 = (g0 + GROUP).min(r.end);
-        gather(lin, p, s, st, g0..g1, lambda, &mut rhs, &mut scratch);
-        eliminate_group(&st.pat, &scratch.0, &scratch.1, &mut blocks);
+        gather(lin, w, st, (g0..g1, lambda), rhs, &mut group);
+        eliminate_group(&st.pat, &group, blocks);
         g0 = g1;
     }
-    (blocks, rhs)
 }
 
 /// Adds a group's `sum_p Z_pa W_pb^T` into the blocks `(a, b >= a)`: the inner loop of
-/// the Schur complement, run with AVX2 + FMA when the CPU has them.
-fn eliminate_group(
-    pat: &BlockPattern,
-    entries: &[Entry],
-    kfs: &[(usize, usize, u64)],
-    blocks: &mut [Matrix6<f64>],
-) {
+/// the Schur complement, with an AVX2 + FMA register kernel when the CPU has them.
+fn eliminate_group(pat: &BlockPattern, g: &Group, blocks: &mut [Matrix6<f64>]) {
     #[cfg(target_arch = "x86_64")]
-    if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
-        // SAFETY: the CPU supports AVX2 and FMA (checked just above).
-        unsafe { eliminate_group_fma(pat, entries, kfs, blocks) };
+    if std::is_x86_feature_detected!("avx2")
+        && std::is_x86_feature_detected!("fma")
+        && std::is_x86_feature_detected!("popcnt")
+    {
+        // SAFETY: the CPU supports AVX2, FMA and POPCNT (checked just above).
+        unsafe { eliminate_group_fma(pat, g, blocks) };
         return;
     }
-    eliminate_body::<false>(pat, entries, kfs, blocks);
+    eliminate_body::<false>(pat, g, blocks);
 }
 
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-unsafe fn eliminate_group_fma(
-    pat: &BlockPattern,
-    entries: &[Entry],
-    kfs: &[(usize, usize, u64)],
-    blocks: &mut [Matrix6<f64>],
-) {
-    eliminate_body::<true>(pat, entries, kfs, blocks);
+#[target_feature(enable = "avx2,fma,popcnt")]
+unsafe fn eliminate_group_fma(pat: &BlockPattern, g: &Group, blocks: &mut [Matrix6<f64>]) {
+    eliminate_body::<true>(pat, g, blocks);
 }
 
+/// The group's entries of block `a` (first entry, member mask) and of block `b`.
+type Pair = ((usize, u64), (usize, u64));
+
 #[inline(always)]
-fn eliminate_body<const FMA: bool>(
-    pat: &BlockPattern,
-    entries: &[Entry],
-    kfs: &[(usize, usize, u64)],
-    blocks: &mut [Matrix6<f64>],
-) {
-    for (ia, &(a, ea, ma)) in kfs.iter().enumerate() {
+fn eliminate_body<const FMA: bool>(pat: &BlockPattern, g: &Group, blocks: &mut [Matrix6<f64>]) {
+    for (ia, &(a, ea, ma)) in g.kfs.iter().enumerate() {
         let (start, cols) = pat.row(a);
         let mut pos = 0;
-        for &(b, eb, mb) in &kfs[ia..] {
-            let mut both = ma & mb;
-            if both == 0 {
+        for &(b, eb, mb) in &g.kfs[ia..] {
+            if ma & mb == 0 {
                 continue;
             }
             while cols[pos] as usize != b {
                 pos += 1;
             }
-            let mut acc = [0.0f64; 36];
-            while both != 0 {
-                let bit = both & both.wrapping_neg();
-                both &= both - 1;
-                let za = entries[ea + (ma & (bit - 1)).count_ones() as usize].z;
-                let wb = entries[eb + (mb & (bit - 1)).count_ones() as usize].w;
-                let (zs, ws) = (za.as_slice(), wb.as_slice());
-                for jc in 0..6 {
-                    let (w0, w1, w2) = (ws[jc], ws[jc + 6], ws[jc + 12]);
-                    for i in 0..6 {
-                        let o = &mut acc[6 * jc + i];
-                        *o = if FMA {
-                            zs[i].mul_add(w0, zs[6 + i].mul_add(w1, zs[12 + i].mul_add(w2, *o)))
-                        } else {
-                            *o + zs[i] * w0 + zs[6 + i] * w1 + zs[12 + i] * w2
-                        };
-                    }
-                }
+            let out = &mut blocks[start + pos];
+            #[cfg(target_arch = "x86_64")]
+            if FMA {
+                // SAFETY: `FMA` is only set by `eliminate_group_fma`, which runs only on
+                // CPUs with AVX2, FMA and POPCNT.
+                unsafe { pair_fma(g, ((ea, ma), (eb, mb)), out) };
+                continue;
             }
-            let out = blocks[start + pos].as_mut_slice();
-            for (o, v) in out.iter_mut().zip(acc) {
-                *o += v;
+            pair_portable(g, ((ea, ma), (eb, mb)), out);
+        }
+    }
+}
+
+/// Index of the entry of the member `bit` in the block whose entries start at `e` and
+/// whose members are `mask`.
+#[inline(always)]
+fn member_entry(e: usize, mask: u64, bit: u64) -> usize {
+    e + (mask & (bit - 1)).count_ones() as usize
+}
+
+/// `out += sum_p Z_pa W_pb^T` over the members that see both blocks.
+fn pair_portable(g: &Group, ((ea, ma), (eb, mb)): Pair, out: &mut Matrix6<f64>) {
+    let mut both = ma & mb;
+    while both != 0 {
+        let bit = both & both.wrapping_neg();
+        both &= both - 1;
+        let z = &g.z[member_entry(ea, ma, bit)];
+        let w = &g.w[member_entry(eb, mb, bit)];
+        *out += z * w.transpose();
+    }
+}
+
+/// [`pair_portable`] in registers: the 6 x 6 sum is 6 columns of 4 + 2 lanes (12 of the
+/// 16 AVX registers), each member adds 3 rank-1 products (a column of `Z` times a
+/// broadcast entry of `W`), and the block is read and written once per pair.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma,popcnt")]
+#[inline]
+unsafe fn pair_fma(g: &Group, ((ea, ma), (eb, mb)): Pair, out: &mut Matrix6<f64>) {
+    use std::arch::x86_64::{
+        _mm256_add_pd, _mm256_broadcast_sd, _mm256_castpd256_pd128, _mm256_fmadd_pd,
+        _mm256_loadu_pd, _mm256_setzero_pd, _mm256_storeu_pd, _mm_add_pd, _mm_fmadd_pd,
+        _mm_loadu_pd, _mm_setzero_pd, _mm_storeu_pd,
+    };
+    let mut hi = [_mm256_setzero_pd(); 6];
+    let mut lo = [_mm_setzero_pd(); 6];
+    let mut both = ma & mb;
+    while both != 0 {
+        let bit = both & both.wrapping_neg();
+        both &= both - 1;
+        // Column-major 6 x 3: column c is [6c, 6c + 6).
+        let z = g.z[member_entry(ea, ma, bit)].as_slice();
+        let w = g.w[member_entry(eb, mb, bit)].as_slice();
+        for c in 0..3 {
+            let zh = _mm256_loadu_pd(z[6 * c..6 * c + 4].as_ptr());
+            let zl = _mm_loadu_pd(z[6 * c + 4..6 * c + 6].as_ptr());
+            for jc in 0..6 {
+                let s = _mm256_broadcast_sd(&w[jc + 6 * c]);
+                hi[jc] = _mm256_fmadd_pd(zh, s, hi[jc]);
+                lo[jc] = _mm_fmadd_pd(zl, _mm256_castpd256_pd128(s), lo[jc]);
             }
         }
+    }
+    let o = out.as_mut_slice();
+    for jc in 0..6 {
+        let (h, l) = (&mut o[6 * jc..6 * jc + 4], 6 * jc + 4);
+        _mm256_storeu_pd(
+            h.as_mut_ptr(),
+            _mm256_add_pd(_mm256_loadu_pd(h.as_ptr()), hi[jc]),
+        );
+        let l = &mut o[l..l + 2];
+        _mm_storeu_pd(l.as_mut_ptr(), _mm_add_pd(_mm_loadu_pd(l.as_ptr()), lo[jc]));
     }
 }
 
@@ -510,8 +585,7 @@ fn eliminate_body<const FMA: bool>(
 /// `g - W V^-1 g_p`.
 fn reduced(
     lin: &Lin,
-    p: &BaProblem<'_>,
-    s: &BaState,
+    w: &[Matrix6x3<f64>],
     st: &Structure,
     lambda: f64,
 ) -> (Vec<Matrix6<f64>>, Vec<f64>) {
@@ -526,12 +600,18 @@ fn reduced(
     let parts: Vec<_> = st
         .chunks
         .par_iter()
-        .map(|r| schur_part(lin, p, s, st, r.clone(), lambda))
+        .map(|r| {
+            let mut pb = vec![Matrix6::zeros(); st.pat.slots()];
+            let mut pr = vec![0.0; 6 * st.lay.blocks()];
+            schur_part((lin, w, st), r.clone(), lambda, (&mut pb, &mut pr));
+            (pb, pr)
+        })
         .collect();
     for (pb, pr) in parts {
-        for (b, d) in blocks.iter_mut().zip(&pb) {
-            *b -= d;
-        }
+        blocks
+            .par_iter_mut()
+            .zip(pb.par_iter())
+            .for_each(|(b, d)| *b -= d);
         for (r, d) in rhs.iter_mut().zip(&pr) {
             *r -= d;
         }
@@ -559,8 +639,12 @@ fn apply(s: &BaState, st: &Structure, d: &[f64], dx: &[Vector3<f64>]) -> BaState
 }
 
 /// One damped step: `None` when the reduced system is not positive definite.
-fn step(lin: &Lin, p: &BaProblem<'_>, s: &BaState, st: &Structure, lambda: f64) -> Option<BaState> {
-    let (blocks, rhs) = reduced(lin, p, s, st, lambda);
+fn step(
+    (lin, w, st): (&Lin, &[Matrix6x3<f64>], &Structure),
+    s: &BaState,
+    lambda: f64,
+) -> Option<BaState> {
+    let (blocks, rhs) = reduced(lin, w, st, lambda);
     let llt = st.pat.factor(&blocks)?;
     let b = faer::Mat::from_fn(rhs.len(), 1, |i, _| -rhs[i]);
     let x = llt.solve(&b);
@@ -570,12 +654,11 @@ fn step(lin: &Lin, p: &BaProblem<'_>, s: &BaState, st: &Structure, lambda: f64) 
     }
     let dx: Vec<Vector3<f64>> = (0..s.points.len())
         .into_par_iter()
-        .map_init(Vec::new, |w, j| {
-            point_w(p, s, st, j, w);
+        .map(|j| {
             let mut acc = lin.gp[j];
-            for (a, wa) in w.iter() {
-                let da = nalgebra::Vector6::from_column_slice(&d[6 * a..6 * a + 6]);
-                acc += wa.transpose() * da;
+            let r = st.w_ptr[j]..st.w_ptr[j + 1];
+            for (we, &a) in w[r.clone()].iter().zip(&st.w_block[r]) {
+                acc += we.transpose() * Vector6::from_column_slice(&d[6 * a..6 * a + 6]);
             }
             -(damped_inverse(&lin.v[j], lambda) * acc)
         })
@@ -583,20 +666,28 @@ fn step(lin: &Lin, p: &BaProblem<'_>, s: &BaState, st: &Structure, lambda: f64) 
     Some(apply(s, st, &d, &dx))
 }
 
-/// Runs Levenberg-Marquardt from `start`.
+/// Runs Levenberg-Marquardt from `start`. Each iteration linearises once (the keypoint
+/// `W` blocks are cached for the Schur complement and the back-substitution); a rejected
+/// step linearises the kept state again, as the candidate's overwrote the cache.
 pub fn solve(p: &BaProblem<'_>, start: BaState, max_iterations: usize) -> Option<BaSolution> {
     let st = structure(p, &start)?;
+    let mut w = vec![Matrix6x3::zeros(); st.w_block.len()];
     let mut s = start;
-    let mut n = linearise(p, &s, &st)?;
+    let mut n = linearise(p, &s, &st, &mut w)?;
     let initial_cost = n.cost;
-    let mut lambda = 1e-4;
-    let mut iterations = 0;
+    let (mut lambda, mut iterations, mut rejected) = (1e-4, 0, 0);
     while iterations < max_iterations {
         iterations += 1;
-        let candidate =
-            step(&n, p, &s, &st, lambda).and_then(|c| linearise(p, &c, &st).map(|m| (c, m)));
-        match candidate {
-            Some((c, m)) if m.cost < n.cost => {
+        let Some(c) = step((&n, &w, &st), &s, lambda) else {
+            rejected += 1;
+            lambda *= 10.0;
+            if lambda > 1e6 {
+                break;
+            }
+            continue;
+        };
+        match linearise(p, &c, &st, &mut w) {
+            Some(m) if m.cost < n.cost => {
                 let done = n.cost - m.cost < 1e-7 * n.cost;
                 (s, n) = (c, m);
                 lambda = (lambda * 0.2).max(1e-10);
@@ -605,6 +696,8 @@ pub fn solve(p: &BaProblem<'_>, start: BaState, max_iterations: usize) -> Option
                 }
             }
             _ => {
+                rejected += 1;
+                n = linearise(p, &s, &st, &mut w)?;
                 lambda *= 10.0;
                 if lambda > 1e6 {
                     break;
@@ -614,26 +707,24 @@ pub fn solve(p: &BaProblem<'_>, start: BaState, max_iterations: usize) -> Option
     }
     let unknowns = 6 * st.lay.blocks() + 3 * s.points.len();
     let variance_factor = (n.cost / n.count.saturating_sub(unknowns).max(1) as f64).max(1e-12);
-    let camera_covariances = covariances(&n, p, &s, &st, variance_factor)?;
+    let camera_covariances = covariances((&n, &w, &st), variance_factor)?;
     Some(BaSolution {
         state: s,
         camera_covariances,
         initial_cost,
         final_cost: n.cost,
         iterations,
+        rejected,
         variance_factor,
     })
 }
 
 /// Camera blocks of the inverse reduced (undamped) system.
 fn covariances(
-    n: &Lin,
-    p: &BaProblem<'_>,
-    s: &BaState,
-    st: &Structure,
+    (n, w, st): (&Lin, &[Matrix6x3<f64>], &Structure),
     factor: f64,
 ) -> Option<Vec<Matrix6<f64>>> {
-    let (blocks, _) = reduced(n, p, s, st, 0.0);
+    let (blocks, _) = reduced(n, w, st, 0.0);
     let llt = st.pat.factor(&blocks)?;
     let dim = 6 * st.lay.blocks();
     let first = 6 * st.lay.cam(0);
