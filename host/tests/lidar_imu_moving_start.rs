@@ -14,7 +14,7 @@ use msreg_host::dataset::ImuRecord;
 use msreg_host::lidar::{ScanLoadError, ScanSource};
 use msreg_host::pointcloud::PointCloud;
 use msreg_host::sim::{simulate_lidar_imu, LidarImuSim, LidarImuSimConfig, LidarSimConfig};
-use nalgebra::{Isometry3, Vector6};
+use nalgebra::{Isometry3, UnitQuaternion, Vector3, Vector6};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -91,7 +91,12 @@ fn run(seed: u64, rate_hz: f64, duration_s: f64) -> Outcome {
     };
     config.imu.rate_hz = rate_hz;
     let sim = simulate_lidar_imu(&config).expect("valid simulation");
-    let cut = peak_motion_ns(&sim.imu);
+    // `MSREG_CUT=0` (studies): the whole recording, standstill included.
+    let cut = if std::env::var("MSREG_CUT").as_deref() == Ok("0") {
+        sim.imu[0].stamp_ns
+    } else {
+        peak_motion_ns(&sim.imu)
+    };
     let imu: Vec<ImuRecord> = sim
         .imu
         .iter()
@@ -123,6 +128,9 @@ fn run(seed: u64, rate_hz: f64, duration_s: f64) -> Outcome {
         .try_inverse()
         .map_or(f64::NAN, |info| e.dot(&(info * e)));
     let td_err = c.time_offset_s - config.lidar.time_offset_s;
+    if std::env::var("MSREG_STUDY").is_ok() {
+        study(seed, rate_hz, &sim, &c, config.lidar.time_offset_s);
+    }
     Outcome {
         seed,
         rate_hz,
@@ -149,6 +157,146 @@ fn run(seed: u64, rate_hz: f64, duration_s: f64) -> Outcome {
                 .map(|e| format!("{:.1} s {} {:.2e}", e.t_s, e.kind, e.magnitude))
                 .collect::<Vec<_>>()
         ),
+    }
+}
+
+/// Studies (`MSREG_STUDY=1`): the extrinsic's error against its sigma early in the run,
+/// and the fused increments' errors against the truth, normalised by their assigned
+/// sigma, by phase of the run.
+fn study(seed: u64, rate_hz: f64, sim: &LidarImuSim, c: &lidar_imu::LidarImuCalibration, td: f64) {
+    let truth = &sim.t_imu_lidar;
+    let mut line = String::new();
+    for t in [1.0, 2.0, 3.0, 4.0, 5.0, 10.0, 20.0, 40.0] {
+        let Some(h) = c
+            .report
+            .filter
+            .history
+            .iter()
+            .take_while(|h| h.t_s <= t)
+            .last()
+        else {
+            continue;
+        };
+        let p = truth.translation.vector - Vector3::from(h.translation_m);
+        let q = UnitQuaternion::from_scaled_axis(Vector3::from(h.rotation_vector));
+        let r = (q.inverse() * truth.rotation).scaled_axis();
+        let zt = (0..3)
+            .map(|i| (p[i] / h.sigma_trans_m[i]).abs())
+            .fold(0.0, f64::max);
+        let zr = (0..3)
+            .map(|i| (r[i].to_degrees() / h.sigma_rot_deg[i]).abs())
+            .fold(0.0, f64::max);
+        line += &format!(
+            " | {t:.0} s: sig {:.3} deg {:.1} mm, |z| rot {zr:.1} trans {zt:.1}",
+            h.sigma_rot_deg.iter().fold(0.0f64, |a, b| a.max(*b)),
+            h.sigma_trans_m.iter().fold(0.0f64, |a, b| a.max(*b)) * 1e3,
+        );
+    }
+    println!("study {rate_hz} Hz seed {seed} extrinsic{line}");
+    if std::env::var("MSREG_STUDY").as_deref() == Ok("2") {
+        trace(seed, c, truth, td);
+    }
+    increment_study(seed, rate_hz, sim, c, td);
+}
+
+/// The fused increments' errors against the truth, normalised by their assigned sigma, by
+/// phase of the run, and their lag-1 autocorrelation.
+fn increment_study(
+    seed: u64,
+    rate_hz: f64,
+    sim: &LidarImuSim,
+    c: &lidar_imu::LidarImuCalibration,
+    td: f64,
+) {
+    let inc = |a: f64, b: f64| sim.t_g_l(a).inverse() * sim.t_g_l(b);
+    let mut phases = [[0.0f64; 3]; 4];
+    let mut matched = 0usize;
+    // Lag-1 autocorrelation of the normalised errors of consecutive fused increments
+    // (after update 100): sums of u_k u_(k-1) and u_k^2, rotation and translation.
+    let mut lag = [[0.0f64; 2]; 2];
+    let mut last: Option<(usize, Vector6<f64>)> = None;
+    for (k, pair) in c.report.scans.windows(2).enumerate() {
+        let (prev, this) = (&pair[0], &pair[1]);
+        let (Some(r), Some(t), Some(sigma)) =
+            (this.delta_rotation, this.delta_translation, this.sigma)
+        else {
+            continue;
+        };
+        if this.status != "matched" {
+            continue;
+        }
+        let a = sim.seconds(prev.reference_stamp_ns) + td;
+        let b = sim.seconds(this.reference_stamp_ns) + td;
+        let truth = inc(a, b);
+        let er = (truth.rotation.inverse() * UnitQuaternion::from_scaled_axis(Vector3::from(r)))
+            .scaled_axis();
+        let et = Vector3::from(t) - truth.translation.vector;
+        let u = Vector6::from_fn(|i, _| {
+            if i < 3 {
+                er[i] / sigma[i]
+            } else {
+                et[i - 3] / sigma[i]
+            }
+        });
+        if let Some((_, v)) = last.filter(|(j, _)| *j + 1 == k && matched >= 100) {
+            for (b, range) in [(0, 0..3), (1, 3..6)] {
+                for i in range {
+                    lag[b][0] += u[i] * v[i];
+                    lag[b][1] += 0.5 * (u[i] * u[i] + v[i] * v[i]);
+                }
+            }
+        }
+        last = Some((k, u));
+        let phase = match matched {
+            0..=99 => 0,
+            100..=199 => 1,
+            200..=349 => 2,
+            _ => 3,
+        };
+        matched += 1;
+        let cell = &mut phases[phase];
+        cell[0] += (0..3).map(|i| (er[i] / sigma[i]).powi(2)).sum::<f64>() / 3.0;
+        cell[1] += (0..3).map(|i| (et[i] / sigma[i + 3]).powi(2)).sum::<f64>() / 3.0;
+        cell[2] += 1.0;
+    }
+    println!(
+        "study {rate_hz} Hz seed {seed} increments: mean (e/sigma)^2 rot, trans by updates \
+         0-99 / 100-199 / 200-349 / 350+: {}",
+        phases
+            .iter()
+            .map(|c| format!("{:.3}, {:.3} (n {})", c[0] / c[2], c[1] / c[2], c[2]))
+            .collect::<Vec<_>>()
+            .join(" / ")
+    );
+    println!(
+        "study {rate_hz} Hz seed {seed} lag-1 autocorrelation of increment errors (after 100): \
+         rot {:+.2}, trans {:+.2}; final scale {:.3}, settled NIS/dof {:.2}",
+        lag[0][0] / lag[0][1],
+        lag[1][0] / lag[1][1],
+        c.report.final_covariance_scale,
+        c.report.settled_nis_per_dof
+    );
+}
+
+/// The first 60 updates: time offset, translation error and sigma, NIS (`MSREG_STUDY=2`).
+fn trace(seed: u64, c: &lidar_imu::LidarImuCalibration, truth: &Isometry3<f64>, td: f64) {
+    for h in c.report.filter.history.iter().take(60) {
+        let p = Vector3::from(h.translation_m) - truth.translation.vector;
+        println!(
+            "trace seed {seed} {:.2} s: t_d err {:+.3} ms (sigma {:.3}), trans err [{:+.1}, \
+             {:+.1}, {:+.1}] mm (sigma [{:.1}, {:.1}, {:.1}]), NIS {:.1} {}",
+            h.t_s,
+            (h.time_offset_s - td) * 1e3,
+            h.sigma_time_offset_s * 1e3,
+            p.x * 1e3,
+            p.y * 1e3,
+            p.z * 1e3,
+            h.sigma_trans_m[0] * 1e3,
+            h.sigma_trans_m[1] * 1e3,
+            h.sigma_trans_m[2] * 1e3,
+            h.nis,
+            h.accepted
+        );
     }
 }
 
