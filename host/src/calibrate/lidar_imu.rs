@@ -40,6 +40,7 @@ pub mod moving;
 
 use std::time::Instant;
 
+use msreg_estimator::state::imu as imu_block;
 use msreg_estimator::{Ekf, Error as FilterError, RelativePose, Scalar};
 use nalgebra::{Isometry3, Matrix6, Vector3, Vector6};
 use serde::Serialize;
@@ -227,6 +228,12 @@ pub struct NoiseAdaptation {
     pub correlation_window: usize,
     /// Largest inflation for correlated errors.
     pub max_inflation: f64,
+    /// Smallest lag-1 autocorrelation used: 0 (the default) inflates for positive
+    /// correlation only; below 0 a negative one deflates the NDT term by
+    /// `(1 + rho) / (1 - rho)` (scan-to-local-map increments are differences of per-scan
+    /// registration errors, rho -0.2 to -0.5; docs/lidar_imu.md, "Moving start": an
+    /// experiment, not the default).
+    pub min_correlation: f64,
 }
 
 impl Default for NoiseAdaptation {
@@ -240,6 +247,7 @@ impl Default for NoiseAdaptation {
             bounds: [0.01, 10.0],
             correlation_window: 0,
             max_inflation: 4.0,
+            min_correlation: 0.0,
         }
     }
 }
@@ -420,6 +428,9 @@ pub fn calibrate<T: Scalar>(
 
     let started = Instant::now();
     let mut feed = LidarFeed::new(input.scans, options, first_imu.stamp_ns, (0, false));
+    if moving.is_some() {
+        feed = feed.annealed_by_imu_state();
+    }
     drive_imu(&mut ekf, imu, standstill.as_ref(), progress, &mut feed)?;
     feed.skip_remaining();
     progress(1.0);
@@ -561,6 +572,18 @@ fn extrinsic_sigma_ratio<
             }
         })
         .fold(0.0, f64::max)
+}
+
+/// The filter's largest velocity sigma, m/s.
+fn velocity_sigma<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize>(
+    ekf: &Ekf<T, S, C, N, F>,
+) -> f64 {
+    let cov = ekf.covariance();
+    let v = imu_block::VELOCITY.idx;
+    (v..v + 3)
+        .map(|i| cov[(i, i)].to_f64())
+        .fold(0.0, f64::max)
+        .sqrt()
 }
 
 /// Last firing offset of a scan, ns.
@@ -742,6 +765,10 @@ pub(crate) struct LidarFeed<'a> {
     innovation_pairs: Vec<(f64, f64)>,
     /// Inflation of the NDT term for time-correlated errors, `(1 + rho) / (1 - rho)`.
     inflation: f64,
+    /// Anneal the floor by the IMU velocity's sigma too (a moving start, see
+    /// [`LidarFeed::annealed_by_imu_state`]): `None` off, `Some(None)` on and the sigma at
+    /// the first scan not yet read, `Some(Some(sigma))` on.
+    imu_anneal: Option<Option<f64>>,
 }
 
 impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize>
@@ -795,6 +822,7 @@ impl<'a> LidarFeed<'a> {
             last_innovation: None,
             innovation_pairs: Vec::new(),
             inflation: 1.0,
+            imu_anneal: None,
             map: (options.local_map_scans > 0)
                 .then(|| {
                     LocalMap::new(
@@ -804,6 +832,43 @@ impl<'a> LidarFeed<'a> {
                     )
                 })
                 .and_then(Result::ok),
+        }
+    }
+
+    /// Also anneals the floor by the IMU velocity's sigma relative to its value at the
+    /// first scan: the floor's excess then shrinks no faster than the larger of the
+    /// extrinsic's and the velocity's sigma ratios. For a moving start, whose IMU state comes
+    /// from the dynamic alignment with a wide velocity sigma (0.1 m/s): at peak motion the
+    /// extrinsic sigma falls to a few per cent of its prior within a second, while the
+    /// velocity, with which the scans are deskewed and the increments predicted, is still
+    /// settling; the floor stands for that error until the filter has settled it
+    /// (docs/lidar_imu.md, "Moving start: the floor and the IMU state").
+    pub(crate) fn annealed_by_imu_state(mut self) -> Self {
+        self.imu_anneal = Some(None);
+        self
+    }
+
+    /// The velocity sigma ratio of [`LidarFeed::annealed_by_imu_state`] (0 when off).
+    fn imu_sigma_ratio<
+        T: Scalar,
+        const S: usize,
+        const C: usize,
+        const N: usize,
+        const F: usize,
+    >(
+        &mut self,
+        ekf: &Ekf<T, S, C, N, F>,
+    ) -> f64 {
+        let Some(stored) = self.imu_anneal else {
+            return 0.0;
+        };
+        let now = velocity_sigma(ekf);
+        let first = stored.unwrap_or(now);
+        self.imu_anneal = Some(Some(first));
+        if first > 0.0 {
+            now / first
+        } else {
+            0.0
         }
     }
 
@@ -1060,7 +1125,7 @@ impl<'a> LidarFeed<'a> {
         };
         record.fitness = Some(result.fitness);
         record.iterations = Some(result.iterations);
-        let sigma_ratio = extrinsic_sigma_ratio(ekf, self.sensor);
+        let sigma_ratio = extrinsic_sigma_ratio(ekf, self.sensor).max(self.imu_sigma_ratio(ekf));
         let (covariance, ndt_share) = self.measurement_covariance(
             match self.options.ndt_covariance {
                 NdtCovariance::Hessian => &result.covariance,
@@ -1159,7 +1224,7 @@ impl<'a> LidarFeed<'a> {
                 .iter()
                 .fold((0.0, 0.0), |(n, d), (x, y)| (n + x, d + y));
             if pairs.len() * 2 >= a.correlation_window && den > 0.0 {
-                let rho = (num / den).clamp(0.0, 0.95);
+                let rho = (num / den).clamp(a.min_correlation.min(0.0), 0.95);
                 self.inflation = ((1.0 + rho) / (1.0 - rho)).min(a.max_inflation);
             }
         }

@@ -30,7 +30,11 @@
 //!    where in the sweep a raw match refers to depends on the scene).
 //! 3. **Alignment** (`pose_imu::moving_start` on that odometry at that offset), and the
 //!    filter starts from it with its time offset at the estimate (and the prior's sigma:
-//!    the estimate's own sigma is optimistic, docs/lidar_imu.md "Moving start").
+//!    the estimate's own sigma is optimistic, docs/lidar_imu.md "Moving start"). The
+//!    filter's measurement floor then anneals no faster than the IMU velocity's sigma
+//!    (`LidarFeed::annealed_by_imu_state`): at peak motion the extrinsic sigma alone falls
+//!    within a second, before the aligned IMU state has settled, and the filter diverged
+//!    on some seeds (docs/lidar_imu.md, "Moving start: the floor and the IMU state").
 
 use msreg_estimator::Scalar;
 use msreg_estimator::{FilterConfig, PoseImuEkf};
