@@ -746,3 +746,45 @@ fn covariances(
             .collect(),
     )
 }
+
+#[cfg(all(test, target_arch = "x86_64"))]
+mod kernel_tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// The AVX2/FMA register kernel against the portable sum it replaces, on random groups
+    /// (the infra tests only reach the kernel the CPU picks; CPUs without AVX2 get the
+    /// portable one).
+    #[test]
+    fn register_kernel_equals_the_portable_sum() {
+        if !(std::is_x86_feature_detected!("avx2")
+            && std::is_x86_feature_detected!("fma")
+            && std::is_x86_feature_detected!("popcnt"))
+        {
+            eprintln!("SKIP register_kernel_equals_the_portable_sum: no AVX2/FMA on this CPU");
+            return;
+        }
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(14);
+        let random = |rng: &mut rand_chacha::ChaCha8Rng| rng.gen_range(-1.0..1.0);
+        for _ in 0..200 {
+            let members = (1u64 << GROUP) - 1;
+            let ma = (rng.gen::<u64>() & members).max(1);
+            let mb = (rng.gen::<u64>() & members) | (ma & ma.wrapping_neg());
+            let entries = (ma.count_ones() + mb.count_ones()) as usize;
+            let mut g = Group::default();
+            for _ in 0..entries {
+                g.z.push(Matrix6x3::from_fn(|_, _| random(&mut rng)));
+                g.w.push(Matrix6x3::from_fn(|_, _| random(&mut rng)));
+            }
+            let pair = ((0, ma), (ma.count_ones() as usize, mb));
+            let start = Matrix6::from_fn(|_, _| random(&mut rng));
+            let (mut portable, mut register) = (start, start);
+            pair_portable(&g, pair, &mut portable);
+            // SAFETY: the CPU supports AVX2, FMA and POPCNT (checked above).
+            unsafe { pair_fma(&g, pair, &mut register) };
+            let err = (portable - register).amax();
+            assert!(err < 1e-12 * (1.0 + portable.amax()), "{err:e}");
+            assert!((portable - start).amax() > 0.0, "the pair shares a member");
+        }
+    }
+}
