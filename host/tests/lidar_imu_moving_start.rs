@@ -120,17 +120,10 @@ fn calibrate_cut(
         imu_noise: &sim.imu_noise,
         scans: &scans,
     };
-    let mut options = LidarImuOptions {
+    let options = LidarImuOptions {
         anneal_by_sigma: std::env::var("MSREG_ANNEAL_SIGMA").as_deref() != Ok("0"),
         ..LidarImuOptions::default()
     };
-    // `MSREG_CORRELATION=window,min` (studies): the NDT term scaled for the innovations'
-    // lag-1 autocorrelation over `window` pairs, down to `min`.
-    if let (Ok(v), Some(adapt)) = (std::env::var("MSREG_CORRELATION"), &mut options.adapt) {
-        let (w, m) = v.split_once(',').expect("window,min");
-        adapt.correlation_window = w.parse().expect("a window");
-        adapt.min_correlation = m.parse().expect("a correlation");
-    }
     let c = lidar_imu::calibrate::<f64>(&input, &options, &mut |_| {}).expect("calibration runs");
     (c, cut)
 }

@@ -228,12 +228,6 @@ pub struct NoiseAdaptation {
     pub correlation_window: usize,
     /// Largest inflation for correlated errors.
     pub max_inflation: f64,
-    /// Smallest lag-1 autocorrelation used: 0 (the default) inflates for positive
-    /// correlation only; below 0 a negative one deflates the NDT term by
-    /// `(1 + rho) / (1 - rho)` (scan-to-local-map increments are differences of per-scan
-    /// registration errors, rho -0.2 to -0.5; docs/lidar_imu.md, "Moving start": an
-    /// experiment, not the default).
-    pub min_correlation: f64,
 }
 
 impl Default for NoiseAdaptation {
@@ -247,7 +241,6 @@ impl Default for NoiseAdaptation {
             bounds: [0.01, 10.0],
             correlation_window: 0,
             max_inflation: 4.0,
-            min_correlation: 0.0,
         }
     }
 }
@@ -1224,7 +1217,7 @@ impl<'a> LidarFeed<'a> {
                 .iter()
                 .fold((0.0, 0.0), |(n, d), (x, y)| (n + x, d + y));
             if pairs.len() * 2 >= a.correlation_window && den > 0.0 {
-                let rho = (num / den).clamp(a.min_correlation.min(0.0), 0.95);
+                let rho = (num / den).clamp(0.0, 0.95);
                 self.inflation = ((1.0 + rho) / (1.0 - rho)).min(a.max_inflation);
             }
         }
