@@ -8,6 +8,7 @@
 mod data;
 mod figures;
 mod html;
+mod slices;
 mod svg;
 #[cfg(test)]
 mod tests;

@@ -258,3 +258,32 @@ fn infra_report_renders() {
     assert_ids("infra", &html, &ids);
     assert_renders("infra", tmp.path(), &ids);
 }
+
+#[test]
+fn prior_map_report_renders_with_mi_slices_and_overlays() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let ds = tmp.path().join("ds").to_string_lossy().into_owned();
+    run_ok(&["simulate", "prior-map", &ds, "--seed", "12", "--small"]);
+    let (json, html) = reports(tmp.path(), &["calibrate", "prior-map", &ds]);
+    let ids = [
+        "status",
+        "result",
+        "fig-residuals",
+        "fig-sigmas",
+        "fig-mi-slices",
+        "overlay-0",
+        "overlay-1",
+    ];
+    assert_ids("prior-map", &html, &ids);
+    // The figure draws what the report holds: six slices, each peaking at the estimate
+    // within one step (the refinement's optimum).
+    let slices = json["mi_slices"].as_array().expect("mi_slices");
+    assert_eq!(slices.len(), 6);
+    for s in slices {
+        let offsets = s["offsets"].as_array().expect("offsets");
+        let step = offsets[1].as_f64().expect("o") - offsets[0].as_f64().expect("o");
+        let peak = s["peak_offset"].as_f64().expect("peak");
+        assert!(peak.abs() <= step * 1.0001, "{}: peak {peak}", s["dof"]);
+    }
+    assert_renders("prior-map", tmp.path(), &ids);
+}

@@ -21,6 +21,8 @@ pub enum Kind {
     Targetless,
     /// `calibrate infra`.
     Infra,
+    /// `calibrate prior-map` (a static camera in a prior map, mutual information).
+    PriorMap,
     /// Anything else: only the generic tables.
     Other,
 }
@@ -35,6 +37,8 @@ impl Kind {
             Kind::CameraImu
         } else if has("history") {
             Kind::PoseImu
+        } else if has("mi_slices") && has("t_world_cam") {
+            Kind::PriorMap
         } else if has("nmi") && has("t_cam_lidar") {
             Kind::Targetless
         } else if has("frames_total") && has("method") {
@@ -55,6 +59,7 @@ impl Kind {
             Kind::LidarCamera => "LiDAR-camera calibration",
             Kind::Targetless => "LiDAR-camera calibration (targetless, mutual information)",
             Kind::Infra => "infrastructure-camera calibration",
+            Kind::PriorMap => "camera in a prior map (mutual information)",
             Kind::Other => "msreg report",
         }
     }
@@ -66,6 +71,7 @@ impl Kind {
             Kind::LidarImu => "T_imu_lidar",
             Kind::CameraImu => "T_imu_cam",
             Kind::LidarCamera | Kind::Targetless => "T_cam_lidar",
+            Kind::PriorMap => "T_world_cam",
             Kind::Infra | Kind::Other => "",
         }
     }
@@ -165,7 +171,10 @@ pub fn result_rows(report: &Value, history: Option<&History>) -> Vec<ResultRow> 
             })
             .collect();
     }
-    let Some(m) = report.get("t_cam_lidar").filter(|m| m.is_array()) else {
+    let matrix = ["t_cam_lidar", "t_world_cam"]
+        .iter()
+        .find_map(|key| report.get(*key).filter(|m| m.is_array()));
+    let Some(m) = matrix else {
         return Vec::new();
     };
     let rows: [[f64; 4]; 4] = std::array::from_fn(|r| nums(m.get(r)));
@@ -232,6 +241,20 @@ pub fn column(report: &Value, array: &str, field: &str) -> Vec<f64> {
         .unwrap_or_default()
 }
 
+/// The numbers of the array `key` (NaN-free).
+pub fn values(report: &Value, key: &str) -> Vec<f64> {
+    report
+        .get(key)
+        .and_then(Value::as_array)
+        .map(|a| {
+            a.iter()
+                .map(|v| num(Some(v)))
+                .filter(|v| v.is_finite())
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
 /// The residual series each pipeline's report carries.
 pub fn residuals(report: &Value, kind: Kind, history: Option<&History>) -> Vec<Residuals> {
     let mut out: Vec<Residuals> = Vec::new();
@@ -289,6 +312,18 @@ pub fn residuals(report: &Value, kind: Kind, history: Option<&History>) -> Vec<R
                 "blob reprojection RMSE per camera",
                 "px",
                 column(report, "cameras", "blob_rmse_px"),
+            );
+        }
+        Kind::PriorMap => {
+            push(
+                "surveyed points after MI",
+                "reprojection error of each surveyed point, px",
+                values(report, "survey_px"),
+            );
+            push(
+                "surveyed points at the initialisation",
+                "reprojection error of each surveyed point, px",
+                values(report, "survey_px_initial"),
             );
         }
         _ => {}

@@ -24,7 +24,7 @@ text-align:right;font-size:13px}th{background:#f4f4f4}td.k{text-align:left}\
 img.overlay{max-width:100%}section{margin-top:1.5em}";
 
 /// Arrays drawn as figures or too long for a table; they stay in the embedded JSON.
-const NOT_TABULATED: [&str; 4] = ["history", "scans", "excitation", "sample"];
+const NOT_TABULATED: [&str; 5] = ["history", "scans", "excitation", "sample", "mi_slices"];
 /// Longest array shown as a table.
 const MAX_TABLE_ROWS: usize = 200;
 
@@ -62,6 +62,10 @@ pub fn page(report: &Value, images: &[Image<'_>]) -> String {
         figures::sigmas(&rows),
     );
     section("Reprojection of one image", figures::reprojection(report));
+    section(
+        "MI slices through the estimate (Fig. 7.8 / 7.9)",
+        super::slices::mi_slices(report),
+    );
     section("Overlays", overlays(images));
     section("Health events", events(report, history.is_some()));
     section("Details", Some(details(report)));

@@ -123,6 +123,61 @@ fn lidar_camera_matrix_becomes_a_rotation_vector_row() {
     assert!(!html.contains("id=\"fig-convergence\""));
 }
 
+/// A prior-map report: a downward camera 8 m up, six MI slices, two peaking off centre.
+fn prior_map_report() -> Value {
+    let slice = |dof: &str, unit: &str, peak: f64| {
+        let offsets: Vec<f64> = (-4..=4).map(|j| 0.25 * j as f64).collect();
+        let mi: Vec<f64> = offsets
+            .iter()
+            .map(|d| 0.6 - 0.05 * (d - peak) * (d - peak))
+            .collect();
+        let quadratic: Vec<f64> = offsets.iter().map(|d| 0.6 - 0.08 * d * d).collect();
+        json!({"dof": dof, "unit": unit, "offsets": offsets, "mi": mi,
+               "quadratic": quadratic, "peak_offset": peak})
+    };
+    json!({
+        "dataset": "ds", "image": "cam0/data/0.png", "points_used": 1000,
+        "grid_evaluations": 1875, "iterations": 8, "converged": true, "mi": 0.6, "nmi": 1.1,
+        "mi_hard": 0.5, "nmi_hard": 1.05, "n_eff": 900,
+        "sigma_rot_deg": [0.01, 0.01, 0.006], "sigma_trans_m": [0.003, 0.003, 0.002],
+        "survey_px_initial": [4.0, 6.0, 5.0], "survey_px": [0.05, 0.07, 0.04],
+        "survey_median_px_initial": 5.0, "survey_median_px": 0.05,
+        "t_world_cam": [[1.0, 0.0, 0.0, 2.0], [0.0, -1.0, 0.0, 3.0], [0.0, 0.0, -1.0, 8.0], [0.0, 0.0, 0.0, 1.0]],
+        "mi_slices": [slice("rot_x_cam", "deg", 0.0), slice("rot_y_cam", "deg", 0.0),
+                      slice("rot_z_cam", "deg", 0.25), slice("x_world", "m", 0.0),
+                      slice("y_world", "m", -0.5), slice("z_world", "m", 0.0)],
+    })
+}
+
+#[test]
+fn prior_map_page_draws_the_mi_slices_and_the_survey_errors() {
+    // Given a prior-map report
+    let report = prior_map_report();
+    assert_eq!(Kind::of(&report), Kind::PriorMap);
+    // When it is rendered
+    let html = render_html(&report);
+    // Then the slices figure has six clipped panels, each with its curve, parabola and peak
+    assert_eq!(html.matches("id=\"fig-mi-slices\"").count(), 1);
+    for i in 0..6 {
+        assert!(
+            html.contains(&format!("id=\"clip-mi-slice-{i}\"")),
+            "panel {i}"
+        );
+    }
+    for dof in ["rot_x_cam", "rot_z_cam", "y_world", "z_world"] {
+        assert!(html.contains(&format!("{dof} (MI, nats)")), "{dof}");
+    }
+    // the estimate is T_world_cam with its sigmas; the camera 8 m up
+    assert!(html.contains("Result: T_world_cam"));
+    assert!(html.contains("<td class=\"k\">tz</td><td>8000.0000</td><td>2.0000</td>"));
+    // the survey errors are a histogram, the slices are not a table
+    assert!(html.contains("surveyed points after MI"));
+    assert!(!html.contains("id=\"mi_slices\""));
+    for tag in ["svg", "g", "clipPath", "section"] {
+        assert_balanced(&html, tag);
+    }
+}
+
 #[test]
 fn html_is_chosen_by_extension() {
     use std::path::Path;
