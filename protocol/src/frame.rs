@@ -78,38 +78,10 @@ pub fn encode<M: Serialize>(seq: u32, msg: &M, out: &mut [u8]) -> Result<usize, 
         return Err(FrameError::BufferTooSmall);
     }
     out[body_end..body_end + CRC_LEN].copy_from_slice(&crc.to_le_bytes());
-    let len = encode_in_place(out, overhead, n + CRC_LEN)?;
+    let len =
+        cobs::encode_in_place(out, overhead, n + CRC_LEN).ok_or(FrameError::BufferTooSmall)?;
     *out.get_mut(len).ok_or(FrameError::BufferTooSmall)? = 0;
     Ok(len + 1)
-}
-
-/// COBS-encodes `buf[start..start + n]` into `buf[0..]`; `start` must exceed the overhead.
-fn encode_in_place(buf: &mut [u8], start: usize, n: usize) -> Result<usize, FrameError> {
-    let (mut code_at, mut w, mut code) = (0usize, 1usize, 1u8);
-    for r in start..start + n {
-        let b = buf[r];
-        if w > r {
-            return Err(FrameError::BufferTooSmall);
-        }
-        if b == 0 {
-            buf[code_at] = code;
-            code_at = w;
-            w += 1;
-            code = 1;
-            continue;
-        }
-        buf[w] = b;
-        w += 1;
-        code += 1;
-        if code == 0xFF {
-            buf[code_at] = code;
-            code_at = w;
-            w += 1;
-            code = 1;
-        }
-    }
-    buf[code_at] = code;
-    Ok(w)
 }
 
 /// Decodes one frame (without its delimiter) in place.
