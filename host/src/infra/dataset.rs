@@ -4,17 +4,24 @@
 use std::path::{Path, PathBuf};
 
 use msreg_estimator::camera::Camera;
-use nalgebra::Vector3;
+use nalgebra::{Isometry3, Vector2, Vector3};
 
 use super::colmap::{read_model, write_model, ColmapModel};
+use super::detect::{blobs_from_images, markers_from_images};
 use super::io::{
     matrix_rows, read_blobs_csv, read_cameras_yaml, read_markers_csv, write_blobs_csv,
     write_cameras_yaml, write_markers_csv, Blob, CameraResult, InfraError, InfraResultFile,
     InfraSection, MarkerDetection, MarkerSpec,
 };
+use super::render::{blob_frame, marker_frame, RenderLook};
 use super::sim::InfraSim;
 use crate::camera_yaml::{camera_yaml_string, read_camera_yaml};
-use crate::dataset::{write_groundtruth_csv, GroundTruthRecord};
+use crate::dataset::{
+    write_camera_csv, write_groundtruth_csv, CameraFrame, GroundTruthRecord, CAMERA_CSV,
+};
+use crate::vision::aruco::Dictionary;
+use crate::vision::blobs::BlobParams;
+use crate::vision::GrayImage;
 
 /// One infrastructure camera's input: its detections, or why they could not be read.
 #[derive(Debug)]
@@ -62,18 +69,11 @@ impl InfraDataset {
         let marker = MarkerSpec::read(&dir.join("marker.yaml"))?;
         let vo = read_model(&dir.join("vo"))?;
         check_vo_camera(dir, &vo, &f_camera)?;
-        let blobs_path = dir.join("cam0/blobs.csv");
-        let blobs = if blobs_path.exists() {
-            read_blobs_csv(&blobs_path)?
-        } else {
-            Vec::new()
-        };
+        let blobs = read_blobs(dir)?;
         let cameras = read_cameras_yaml(&dir.join("infra/cameras.yaml"))?
             .into_iter()
             .map(|(id, camera)| {
-                let path = dir.join("infra").join(&id).join("markers.csv");
-                let detections = read_markers_csv(&path)
-                    .map(|d| d.into_iter().filter(|m| m.marker_id == marker.id).collect());
+                let detections = read_marker_detections(dir, &id, &marker);
                 CameraInput {
                     id,
                     camera,
@@ -89,6 +89,45 @@ impl InfraDataset {
             vo,
         })
     }
+}
+
+/// `cam0/blobs.csv`; else the blobs detected in F's images (`cam0/data.csv` + `data/`);
+/// else none.
+fn read_blobs(dir: &Path) -> Result<Vec<Blob>, InfraError> {
+    let csv = dir.join("cam0/blobs.csv");
+    let images = dir.join(CAMERA_CSV);
+    if csv.exists() {
+        read_blobs_csv(&csv)
+    } else if images.exists() {
+        blobs_from_images(&images, &BlobParams::default())
+    } else {
+        Ok(Vec::new())
+    }
+}
+
+/// Camera `id`'s detections of the robot's marker: `infra/<id>/markers.csv`, else detected
+/// in its images (`infra/<id>/data.csv` + `data/`). Without either, the CSV's read error.
+fn read_marker_detections(
+    dir: &Path,
+    id: &str,
+    marker: &MarkerSpec,
+) -> Result<Vec<MarkerDetection>, InfraError> {
+    let camera_dir = dir.join("infra").join(id);
+    let csv = camera_dir.join("markers.csv");
+    let images = camera_dir.join("data.csv");
+    if !csv.exists() && images.exists() {
+        let dictionary =
+            marker
+                .dictionary
+                .parse::<Dictionary>()
+                .map_err(|e| InfraError::Parse {
+                    path: dir.join("marker.yaml"),
+                    line: 0,
+                    message: e.to_string(),
+                })?;
+        return markers_from_images(&images, dictionary, marker.id);
+    }
+    read_markers_csv(&csv).map(|d| d.into_iter().filter(|m| m.marker_id == marker.id).collect())
 }
 
 /// The COLMAP camera must be `cam0/`'s F (resolution and projection of a few rays).
@@ -128,13 +167,64 @@ fn write_text(path: &Path, text: &str) -> Result<(), InfraError> {
 }
 
 impl InfraSim {
-    /// Writes the dataset layout of CONVENTIONS.md plus `groundtruth/`.
+    /// Writes the dataset layout of CONVENTIONS.md plus `groundtruth/`, with the detections
+    /// as CSV (`cam0/blobs.csv`, `infra/<id>/markers.csv`).
     pub fn write(&self, dir: &Path) -> Result<(), InfraError> {
+        self.write_common(dir)?;
+        write_blobs_csv(&dir.join("cam0/blobs.csv"), &self.blobs)?;
+        for (cam, det) in self.cameras.iter().zip(&self.detections) {
+            write_markers_csv(&dir.join("infra").join(&cam.id).join("markers.csv"), det)?;
+        }
+        Ok(())
+    }
+
+    /// [`InfraSim::write`] with rendered images in place of the CSV detections
+    /// (`--images`): each camera's frames of the marker and F's keyframes, see
+    /// [`super::render`]. `seed` drives the sensor noise.
+    pub fn write_with_images(&self, dir: &Path, seed: u64) -> Result<(), InfraError> {
+        self.write_common(dir)?;
+        let look = RenderLook::default();
+        let dictionary =
+            self.marker
+                .dictionary
+                .parse::<Dictionary>()
+                .map_err(|e| InfraError::Parse {
+                    path: dir.join("marker.yaml"),
+                    line: 0,
+                    message: e.to_string(),
+                })?;
+        for (k, (cam, views)) in self.cameras.iter().zip(&self.marker_views).enumerate() {
+            let frames: Vec<(u64, &Isometry3<f64>)> = views.iter().map(|(s, t)| (*s, t)).collect();
+            write_frames(
+                &dir.join("infra").join(&cam.id),
+                &frames,
+                |&(stamp, t_c_m)| {
+                    let mut rng = image_rng(seed, k as u64 + 1, stamp);
+                    let marker = (dictionary, self.marker.id as usize);
+                    marker_frame(
+                        &cam.camera,
+                        t_c_m,
+                        self.marker.side_m,
+                        marker,
+                        &look,
+                        &mut rng,
+                    )
+                },
+            )?;
+        }
+        let keyframes: Vec<(u64, &Vec<Vector2<f64>>)> =
+            self.blob_views.iter().map(|(s, v)| (*s, v)).collect();
+        write_frames(&dir.join("cam0"), &keyframes, |&(stamp, spots)| {
+            blob_frame(&self.f_camera, spots, &look, &mut image_rng(seed, 0, stamp))
+        })
+    }
+
+    /// Everything but the detections: cameras, VO, marker and ground truth.
+    fn write_common(&self, dir: &Path) -> Result<(), InfraError> {
         write_text(
             &dir.join("cam0/camera.yaml"),
             &camera_yaml_string(&self.f_camera),
         )?;
-        write_blobs_csv(&dir.join("cam0/blobs.csv"), &self.blobs)?;
         write_model(&dir.join("vo"), &self.vo)?;
         let marker = serde_yaml::to_string(&self.marker).unwrap_or_default();
         write_text(&dir.join("marker.yaml"), &marker)?;
@@ -146,10 +236,9 @@ impl InfraSim {
         let infra = dir.join("infra");
         std::fs::create_dir_all(&infra).map_err(io(&infra))?;
         write_cameras_yaml(&infra.join("cameras.yaml"), &list)?;
-        for (cam, det) in self.cameras.iter().zip(&self.detections) {
+        for cam in &self.cameras {
             let d: PathBuf = infra.join(&cam.id);
             std::fs::create_dir_all(&d).map_err(io(&d))?;
-            write_markers_csv(&d.join("markers.csv"), det)?;
         }
         self.write_groundtruth(&dir.join("groundtruth"))
     }
@@ -228,4 +317,48 @@ impl InfraSim {
             .collect();
         super::align::similarity_scale(&vo, &truth)
     }
+}
+
+/// The noise generator of one rendered image: its own stream per camera, seeded by the
+/// stamp, so images can be rendered in any order.
+fn image_rng(seed: u64, camera: u64, stamp_ns: u64) -> rand_chacha::ChaCha8Rng {
+    use rand::SeedableRng;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ stamp_ns.rotate_left(17));
+    rng.set_stream(camera);
+    rng
+}
+
+/// Renders `frames` in parallel into `<dir>/data/<stamp>.png` and lists them in
+/// `<dir>/data.csv`.
+fn write_frames<F, V>(dir: &Path, frames: &[(u64, V)], render: F) -> Result<(), InfraError>
+where
+    F: Fn(&(u64, V)) -> GrayImage + Sync,
+    V: Sync,
+{
+    use rayon::prelude::*;
+    let data = dir.join("data");
+    std::fs::create_dir_all(&data).map_err(io(&data))?;
+    let listed: Vec<CameraFrame> = frames
+        .par_iter()
+        .map(|frame| {
+            let path = data.join(format!("{}.png", frame.0));
+            render(frame)
+                .to_luma8()
+                .save(&path)
+                .map_err(|e| InfraError::Io {
+                    path: path.clone(),
+                    source: std::io::Error::other(e),
+                })?;
+            Ok(CameraFrame {
+                stamp_ns: frame.0,
+                path,
+            })
+        })
+        .collect::<Result<_, InfraError>>()?;
+    let csv = dir.join("data.csv");
+    write_camera_csv(&csv, &listed).map_err(|e| InfraError::Parse {
+        path: csv.clone(),
+        line: 0,
+        message: e.to_string(),
+    })
 }

@@ -91,8 +91,14 @@ pub struct InfraSim {
     pub cameras: Vec<InfraCamera>,
     /// Marker detections per camera (same order).
     pub detections: Vec<Vec<MarkerDetection>>,
+    /// The true marker pose `T_C_M` at each detection of `detections` (same order): what
+    /// `--images` renders.
+    pub marker_views: Vec<Vec<(u64, Isometry3<f64>)>>,
     /// Blob detections in F keyframes.
     pub blobs: Vec<Blob>,
+    /// Per keyframe: the true pixels of every camera centre within range in view of F, and
+    /// the clutter spots: what `--images` renders.
+    pub blob_views: Vec<KeyframeSpots>,
     /// The VO as a COLMAP model (OpenCV pixels inside; the writer adds 0.5).
     pub vo: ColmapModel,
     /// True `T_W_F` at each keyframe.
@@ -132,16 +138,16 @@ pub fn simulate(config: &InfraSimConfig) -> InfraSim {
         side_m: config.marker_side_m,
     };
     let mut det_rng = rng(config.seed, 2);
-    let detections = cameras
+    let (detections, marker_views) = cameras
         .iter()
         .map(|c| marker_detections(config, &motion, c, &t_f_m, &marker, &mut det_rng))
-        .collect();
+        .unzip();
     let n_kf = (motion.duration_s / config.keyframe_period_s) as usize + 1;
     let kf_times: Vec<f64> = (0..n_kf)
         .map(|k| k as f64 * config.keyframe_period_s)
         .collect();
     let keyframe_truth: Vec<Isometry3<f64>> = kf_times.iter().map(|&t| motion.pose(t)).collect();
-    let blobs = blob_detections(
+    let (blobs, blob_views) = blob_detections(
         config,
         &f_camera,
         &cameras,
@@ -169,7 +175,9 @@ pub fn simulate(config: &InfraSimConfig) -> InfraSim {
         t_f_m,
         cameras,
         detections,
+        marker_views,
         blobs,
+        blob_views,
         vo: vo.model,
         keyframe_truth,
         trajectory,
@@ -185,10 +193,10 @@ fn marker_detections<R: Rng>(
     t_f_m: &Isometry3<f64>,
     marker: &MarkerSpec,
     rng: &mut R,
-) -> Vec<MarkerDetection> {
+) -> (Vec<MarkerDetection>, Vec<(u64, Isometry3<f64>)>) {
     let noise = Normal::new(0.0, config.marker_noise_px).expect("finite sigma");
     let corners = marker.corners_in_marker();
-    let mut out = Vec::new();
+    let (mut out, mut views) = (Vec::new(), Vec::new());
     let mut t = cam.phase_s;
     while t <= motion.duration_s {
         let t_c_m = cam.t_world_cam.inverse() * motion.pose(t) * t_f_m;
@@ -206,10 +214,11 @@ fn marker_detections<R: Rng>(
                 marker_id: marker.id,
                 corners,
             });
+            views.push((stamp_of(t), t_c_m));
         }
         t += cam.period_s;
     }
-    out
+    (out, views)
 }
 
 /// The four corner pixels when the marker is detectable (see the module docs).
@@ -237,6 +246,9 @@ fn image_marker(
     (side >= 10.0).then_some(px)
 }
 
+/// A keyframe's stamp and the pixels of the lights and clutter in it.
+pub type KeyframeSpots = (u64, Vec<Vector2<f64>>);
+
 fn blob_detections<R: Rng>(
     config: &InfraSimConfig,
     f: &Camera<f64>,
@@ -244,17 +256,24 @@ fn blob_detections<R: Rng>(
     kf_times: &[f64],
     kf_poses: &[Isometry3<f64>],
     rng: &mut R,
-) -> Vec<Blob> {
+) -> (Vec<Blob>, Vec<KeyframeSpots>) {
     let noise = Normal::new(0.0, config.blob_noise_px).expect("finite sigma");
     let clutter = Poisson::new(config.clutter_per_keyframe.max(1e-9)).expect("positive mean");
     let (w, h) = f.resolution;
     let centre = Vector2::new(f64::from(w) / 2.0 - 0.5, f64::from(h) / 2.0 - 0.5);
-    let mut out = Vec::new();
+    let (mut out, mut views) = (Vec::new(), Vec::new());
     for (&t, pose) in kf_times.iter().zip(kf_poses) {
         let stamp_ns = stamp_of(t);
+        let mut spots = Vec::new();
         for cam in cameras {
             let p_f = pose.inverse_transform_point(&cam.t_world_cam.translation.vector.into());
-            if p_f.coords.norm() > 15.0 || !rng.gen_bool(0.95) {
+            if p_f.coords.norm() > 15.0 {
+                continue;
+            }
+            let projected = f.project(&p_f.coords).filter(|q| f.in_image(&q.pixel, 2.0));
+            spots.extend(projected.map(|q| q.pixel));
+            // A CSV detection misses 5 % of the visible cameras (rendered, they are all lit).
+            if !rng.gen_bool(0.95) {
                 continue;
             }
             let Some(q) = f.project(&p_f.coords) else {
@@ -268,13 +287,13 @@ fn blob_detections<R: Rng>(
         for _ in 0..clutter.sample(rng) as usize {
             let r = 450.0 * rng.gen::<f64>().sqrt();
             let a = rng.gen_range(0.0..std::f64::consts::TAU);
-            out.push(Blob {
-                stamp_ns,
-                uv: centre + Vector2::new(a.cos(), a.sin()) * r,
-            });
+            let uv = centre + Vector2::new(a.cos(), a.sin()) * r;
+            out.push(Blob { stamp_ns, uv });
+            spots.push(uv);
         }
+        views.push((stamp_ns, spots));
     }
-    out
+    (out, views)
 }
 
 struct SimulatedVo {
