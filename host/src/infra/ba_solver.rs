@@ -8,19 +8,19 @@
 //!   parallel (one partial reduced system per thread);
 //! - the reduced system (6 per keyframe `k >= 1`, camera and `T_F_M`) keeps a fixed
 //!   block-sparse pattern ([`super::blocksym`]) and is factored by faer's sparse
-//!   (supernodal) Cholesky, symbolic analysis once;
+//!   (supernodal) Cholesky, symbolic analysis once (in the blocks' own order when that
+//!   fills less than minimum degree), its buffers reused across iterations;
 //! - the marker, blob and epipolar terms are linearised in parallel.
 //!
 //! Damping: `lambda * diag` on the reduced-side blocks and on each point block, as
 //! Marquardt scaled; the step is accepted when the robust cost decreases.
 
-use faer::linalg::solvers::Solve;
 use nalgebra::{Matrix3, Matrix6, Matrix6x3, SMatrix, SVector, Vector3, Vector6};
 use rayon::prelude::*;
 use std::ops::Range;
 
 use super::ba::{blob_term, epipolar_term, marker_term, plus, vo_term, BaProblem, BaState};
-use super::blocksym::{BlockPattern, PatternBuilder};
+use super::blocksym::{BlockPattern, Factor, PatternBuilder};
 
 /// Solution of the bundle adjustment.
 #[derive(Clone, Debug)]
@@ -581,42 +581,74 @@ unsafe fn pair_fma(g: &Group, ((ea, ma), (eb, mb)): Pair, out: &mut Matrix6<f64>
     }
 }
 
+/// Buffers of the reduced system kept across iterations (tens of MB each at the benchmark
+/// size; allocated anew, their page faults cost ~10 % of the run): the system, one
+/// partial Schur complement per point range, and the Cholesky factor.
+struct Work {
+    blocks: Vec<Matrix6<f64>>,
+    rhs: Vec<f64>,
+    parts: Vec<(Vec<Matrix6<f64>>, Vec<f64>)>,
+    factor: Option<Factor>,
+}
+
+impl Work {
+    fn new(st: &Structure) -> Self {
+        let part = || {
+            (
+                vec![Matrix6::zeros(); st.pat.slots()],
+                vec![0.0; 6 * st.lay.blocks()],
+            )
+        };
+        Self {
+            blocks: vec![Matrix6::zeros(); st.pat.slots()],
+            rhs: vec![0.0; 6 * st.lay.blocks()],
+            parts: st.chunks.iter().map(|_| part()).collect(),
+            factor: None,
+        }
+    }
+
+    /// Factors `self.blocks` into the kept factor; false if not positive definite.
+    fn factor(&mut self, pat: &BlockPattern) -> bool {
+        if let Some(f) = &mut self.factor {
+            if pat.refactor(&self.blocks, f) {
+                return true;
+            }
+            self.factor = None;
+            return false;
+        }
+        self.factor = pat.factor(&self.blocks);
+        self.factor.is_some()
+    }
+}
+
 /// The damped reduced system `S = U + lambda diag U - W V^-1 W^T` and its right-hand side
-/// `g - W V^-1 g_p`.
-fn reduced(
-    lin: &Lin,
-    w: &[Matrix6x3<f64>],
-    st: &Structure,
-    lambda: f64,
-) -> (Vec<Matrix6<f64>>, Vec<f64>) {
-    let mut blocks = lin.u.clone();
+/// `g - W V^-1 g_p`, into `work.blocks` and `work.rhs`.
+fn reduced(lin: &Lin, w: &[Matrix6x3<f64>], st: &Structure, lambda: f64, work: &mut Work) {
+    work.blocks.copy_from_slice(&lin.u);
     for b in 0..st.lay.blocks() {
         let slot = st.pat.slot(b, b).expect("diagonal");
         for k in 0..6 {
-            blocks[slot][(k, k)] += lambda * lin.u[slot][(k, k)].max(1e-9);
+            work.blocks[slot][(k, k)] += lambda * lin.u[slot][(k, k)].max(1e-9);
         }
     }
-    let mut rhs = lin.g.clone();
-    let parts: Vec<_> = st
-        .chunks
-        .par_iter()
-        .map(|r| {
-            let mut pb = vec![Matrix6::zeros(); st.pat.slots()];
-            let mut pr = vec![0.0; 6 * st.lay.blocks()];
-            schur_part((lin, w, st), r.clone(), lambda, (&mut pb, &mut pr));
-            (pb, pr)
-        })
-        .collect();
-    for (pb, pr) in parts {
-        blocks
+    work.rhs.copy_from_slice(&lin.g);
+    work.parts
+        .par_iter_mut()
+        .zip(st.chunks.par_iter())
+        .for_each(|((pb, pr), r)| {
+            pb.fill(Matrix6::zeros());
+            pr.fill(0.0);
+            schur_part((lin, w, st), r.clone(), lambda, (pb, pr));
+        });
+    for (pb, pr) in &work.parts {
+        work.blocks
             .par_iter_mut()
             .zip(pb.par_iter())
             .for_each(|(b, d)| *b -= d);
-        for (r, d) in rhs.iter_mut().zip(&pr) {
+        for (r, d) in work.rhs.iter_mut().zip(pr) {
             *r -= d;
         }
     }
-    (blocks, rhs)
 }
 
 fn apply(s: &BaState, st: &Structure, d: &[f64], dx: &[Vector3<f64>]) -> BaState {
@@ -643,11 +675,15 @@ fn step(
     (lin, w, st): (&Lin, &[Matrix6x3<f64>], &Structure),
     s: &BaState,
     lambda: f64,
+    work: &mut Work,
 ) -> Option<BaState> {
-    let (blocks, rhs) = reduced(lin, w, st, lambda);
-    let llt = st.pat.factor(&blocks)?;
-    let b = faer::Mat::from_fn(rhs.len(), 1, |i, _| -rhs[i]);
-    let x = llt.solve(&b);
+    reduced(lin, w, st, lambda, work);
+    if !work.factor(&st.pat) {
+        return None;
+    }
+    let rhs = &work.rhs;
+    let mut x = faer::Mat::from_fn(rhs.len(), 1, |i, _| -rhs[i]);
+    st.pat.solve(work.factor.as_ref()?, &mut x);
     let d: Vec<f64> = (0..rhs.len()).map(|i| x[(i, 0)]).collect();
     if d.iter().any(|v| !v.is_finite()) {
         return None;
@@ -672,13 +708,14 @@ fn step(
 pub fn solve(p: &BaProblem<'_>, start: BaState, max_iterations: usize) -> Option<BaSolution> {
     let st = structure(p, &start)?;
     let mut w = vec![Matrix6x3::zeros(); st.w_block.len()];
+    let mut work = Work::new(&st);
     let mut s = start;
     let mut n = linearise(p, &s, &st, &mut w)?;
     let initial_cost = n.cost;
     let (mut lambda, mut iterations, mut rejected) = (1e-4, 0, 0);
     while iterations < max_iterations {
         iterations += 1;
-        let Some(c) = step((&n, &w, &st), &s, lambda) else {
+        let Some(c) = step((&n, &w, &st), &s, lambda, &mut work) else {
             rejected += 1;
             lambda *= 10.0;
             if lambda > 1e6 {
@@ -707,7 +744,7 @@ pub fn solve(p: &BaProblem<'_>, start: BaState, max_iterations: usize) -> Option
     }
     let unknowns = 6 * st.lay.blocks() + 3 * s.points.len();
     let variance_factor = (n.cost / n.count.saturating_sub(unknowns).max(1) as f64).max(1e-12);
-    let camera_covariances = covariances((&n, &w, &st), variance_factor)?;
+    let camera_covariances = covariances((&n, &w, &st), variance_factor, &mut work)?;
     Some(BaSolution {
         state: s,
         camera_covariances,
@@ -723,12 +760,15 @@ pub fn solve(p: &BaProblem<'_>, start: BaState, max_iterations: usize) -> Option
 fn covariances(
     (n, w, st): (&Lin, &[Matrix6x3<f64>], &Structure),
     factor: f64,
+    work: &mut Work,
 ) -> Option<Vec<Matrix6<f64>>> {
-    let (blocks, _) = reduced(n, w, st, 0.0);
-    let llt = st.pat.factor(&blocks)?;
+    reduced(n, w, st, 0.0, work);
+    if !work.factor(&st.pat) {
+        return None;
+    }
     let dim = 6 * st.lay.blocks();
     let first = 6 * st.lay.cam(0);
-    let e = faer::Mat::from_fn(
+    let mut x = faer::Mat::from_fn(
         dim,
         6 * st.lay.cams,
         |i, j| {
@@ -739,7 +779,7 @@ fn covariances(
             }
         },
     );
-    let x = llt.solve(&e);
+    st.pat.solve(work.factor.as_ref()?, &mut x);
     Some(
         (0..st.lay.cams)
             .map(|c| Matrix6::from_fn(|i, j| x[(first + 6 * c + i, 6 * c + j)] * factor))
