@@ -402,14 +402,56 @@ const GROUP: usize = 16;
 
 /// A group's entries, sorted by (block, member), as separate `Z = W V^-1` and `W` arrays
 /// (the kernel streams the `W` of every later block for each block's `Z`), and per block
-/// `(block, first entry, mask of the members that see it)`.
+/// `(block, first entry, mask of the members that see it)`. The sort is a counting sort:
+/// `seen` (a bit per block) gives the group's blocks in order, `index` the position of a
+/// block in `kfs`, `cursor` the next free entry of each block.
 #[derive(Default)]
 struct Group {
-    keys: Vec<(usize, usize, usize)>,
-    unsorted_z: Vec<Matrix6x3<f64>>,
     z: Vec<Matrix6x3<f64>>,
     w: Vec<Matrix6x3<f64>>,
     kfs: Vec<(usize, usize, u64)>,
+    seen: Vec<u64>,
+    index: Vec<usize>,
+    cursor: Vec<usize>,
+}
+
+impl Group {
+    /// Scratch for a reduced system of `blocks` blocks.
+    fn new(blocks: usize) -> Self {
+        Self {
+            seen: vec![0; blocks.div_ceil(64)],
+            index: vec![0; blocks],
+            ..Self::default()
+        }
+    }
+
+    /// `kfs` for the entries whose blocks are `blocks` (masks empty), `cursor` at the
+    /// first entry of each block, `z` and `w` sized.
+    fn layout(&mut self, blocks: &[usize]) {
+        self.kfs.clear();
+        for &b in blocks {
+            self.seen[b / 64] |= 1 << (b % 64);
+        }
+        for (i, word) in self.seen.iter_mut().enumerate() {
+            while *word != 0 {
+                let b = 64 * i + word.trailing_zeros() as usize;
+                *word &= *word - 1;
+                self.index[b] = self.kfs.len();
+                self.kfs.push((b, 0, 0));
+            }
+        }
+        for &b in blocks {
+            self.kfs[self.index[b]].1 += 1;
+        }
+        let mut first = 0;
+        for k in &mut self.kfs {
+            (k.1, first) = (first, first + k.1);
+        }
+        self.cursor.clear();
+        self.cursor.extend(self.kfs.iter().map(|k| k.1));
+        self.z.resize(blocks.len(), Matrix6x3::zeros());
+        self.w.resize(blocks.len(), Matrix6x3::zeros());
+    }
 }
 
 /// Gathers the `W` entries of the points `group` (at most 64) into `out` with their `Z`
@@ -422,32 +464,21 @@ fn gather(
     rhs: &mut [f64],
     out: &mut Group,
 ) {
-    out.keys.clear();
-    out.unsorted_z.clear();
-    out.z.clear();
-    out.w.clear();
-    out.kfs.clear();
-    let base = st.w_ptr[group.start];
+    out.layout(&st.w_block[st.w_ptr[group.start]..st.w_ptr[group.end]]);
     for (member, j) in group.enumerate() {
         let vi = damped_inverse(&lin.v[j], lambda);
         let r = st.w_ptr[j]..st.w_ptr[j + 1];
-        for (e, (we, &block)) in r.clone().zip(w[r.clone()].iter().zip(&st.w_block[r])) {
+        for (we, &block) in w[r.clone()].iter().zip(&st.w_block[r]) {
             let z = we * vi;
             let za = z * lin.gp[j];
             for k in 0..6 {
                 rhs[6 * block + k] += za[k];
             }
-            out.keys.push((block, member, e));
-            out.unsorted_z.push(z);
-        }
-    }
-    out.keys.sort_unstable();
-    for (k, &(block, member, e)) in out.keys.iter().enumerate() {
-        out.w.push(w[e]);
-        out.z.push(out.unsorted_z[e - base]);
-        match out.kfs.last_mut() {
-            Some(last) if last.0 == block => last.2 |= 1 << member,
-            _ => out.kfs.push((block, k, 1 << member)),
+            let slot = out.index[block];
+            let pos = out.cursor[slot];
+            out.cursor[slot] += 1;
+            (out.z[pos], out.w[pos]) = (z, *we);
+            out.kfs[slot].2 |= 1 << member;
         }
     }
 }
@@ -460,7 +491,7 @@ fn schur_part(
     lambda: f64,
     (blocks, rhs): (&mut [Matrix6<f64>], &mut [f64]),
 ) {
-    let mut group = Group::default();
+    let mut group = Group::new(st.lay.blocks());
     let mut g0 = r.start;
     while g0 < r.end {
         let g1 = (g0 + GROUP).min(r.end);
@@ -825,6 +856,38 @@ mod kernel_tests {
             let err = (portable - register).amax();
             assert!(err < 1e-12 * (1.0 + portable.amax()), "{err:e}");
             assert!((portable - start).amax() > 0.0, "the pair shares a member");
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// The counting sort of a group's entries against a comparison sort: blocks in order,
+    /// each block's first entry after the entries of the blocks before it.
+    #[test]
+    fn group_layout_equals_a_sort() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let blocks = 300;
+        let mut g = Group::new(blocks);
+        for _ in 0..100 {
+            let n = rng.gen_range(1..400);
+            let list: Vec<usize> = (0..n).map(|_| rng.gen_range(0..blocks)).collect();
+            g.layout(&list);
+            let mut sorted = list.clone();
+            sorted.sort_unstable();
+            let mut want: Vec<(usize, usize, u64)> = Vec::new();
+            for (k, &b) in sorted.iter().enumerate() {
+                if want.last().map(|l| l.0) != Some(b) {
+                    want.push((b, k, 0));
+                }
+            }
+            assert_eq!(g.kfs, want);
+            assert_eq!(g.cursor, want.iter().map(|k| k.1).collect::<Vec<_>>());
+            assert_eq!((g.z.len(), g.w.len()), (n, n));
+            assert!(g.seen.iter().all(|&w| w == 0), "the bitmap is left clear");
         }
     }
 }
