@@ -8,19 +8,19 @@
 //!   parallel (one partial reduced system per thread);
 //! - the reduced system (6 per keyframe `k >= 1`, camera and `T_F_M`) keeps a fixed
 //!   block-sparse pattern ([`super::blocksym`]) and is factored by faer's sparse
-//!   (supernodal) Cholesky, symbolic analysis once;
+//!   (supernodal) Cholesky, symbolic analysis once (in the blocks' own order when that
+//!   fills less than minimum degree), its buffers reused across iterations;
 //! - the marker, blob and epipolar terms are linearised in parallel.
 //!
 //! Damping: `lambda * diag` on the reduced-side blocks and on each point block, as
 //! Marquardt scaled; the step is accepted when the robust cost decreases.
 
-use faer::linalg::solvers::Solve;
 use nalgebra::{Matrix3, Matrix6, Matrix6x3, SMatrix, SVector, Vector3, Vector6};
 use rayon::prelude::*;
 use std::ops::Range;
 
 use super::ba::{blob_term, epipolar_term, marker_term, plus, vo_term, BaProblem, BaState};
-use super::blocksym::{BlockPattern, PatternBuilder};
+use super::blocksym::{BlockPattern, Factor, PatternBuilder};
 
 /// Solution of the bundle adjustment.
 #[derive(Clone, Debug)]
@@ -402,14 +402,56 @@ const GROUP: usize = 16;
 
 /// A group's entries, sorted by (block, member), as separate `Z = W V^-1` and `W` arrays
 /// (the kernel streams the `W` of every later block for each block's `Z`), and per block
-/// `(block, first entry, mask of the members that see it)`.
+/// `(block, first entry, mask of the members that see it)`. The sort is a counting sort:
+/// `seen` (a bit per block) gives the group's blocks in order, `index` the position of a
+/// block in `kfs`, `cursor` the next free entry of each block.
 #[derive(Default)]
 struct Group {
-    keys: Vec<(usize, usize, usize)>,
-    unsorted_z: Vec<Matrix6x3<f64>>,
     z: Vec<Matrix6x3<f64>>,
     w: Vec<Matrix6x3<f64>>,
     kfs: Vec<(usize, usize, u64)>,
+    seen: Vec<u64>,
+    index: Vec<usize>,
+    cursor: Vec<usize>,
+}
+
+impl Group {
+    /// Scratch for a reduced system of `blocks` blocks.
+    fn new(blocks: usize) -> Self {
+        Self {
+            seen: vec![0; blocks.div_ceil(64)],
+            index: vec![0; blocks],
+            ..Self::default()
+        }
+    }
+
+    /// `kfs` for the entries whose blocks are `blocks` (masks empty), `cursor` at the
+    /// first entry of each block, `z` and `w` sized.
+    fn layout(&mut self, blocks: &[usize]) {
+        self.kfs.clear();
+        for &b in blocks {
+            self.seen[b / 64] |= 1 << (b % 64);
+        }
+        for (i, word) in self.seen.iter_mut().enumerate() {
+            while *word != 0 {
+                let b = 64 * i + word.trailing_zeros() as usize;
+                *word &= *word - 1;
+                self.index[b] = self.kfs.len();
+                self.kfs.push((b, 0, 0));
+            }
+        }
+        for &b in blocks {
+            self.kfs[self.index[b]].1 += 1;
+        }
+        let mut first = 0;
+        for k in &mut self.kfs {
+            (k.1, first) = (first, first + k.1);
+        }
+        self.cursor.clear();
+        self.cursor.extend(self.kfs.iter().map(|k| k.1));
+        self.z.resize(blocks.len(), Matrix6x3::zeros());
+        self.w.resize(blocks.len(), Matrix6x3::zeros());
+    }
 }
 
 /// Gathers the `W` entries of the points `group` (at most 64) into `out` with their `Z`
@@ -422,32 +464,21 @@ fn gather(
     rhs: &mut [f64],
     out: &mut Group,
 ) {
-    out.keys.clear();
-    out.unsorted_z.clear();
-    out.z.clear();
-    out.w.clear();
-    out.kfs.clear();
-    let base = st.w_ptr[group.start];
+    out.layout(&st.w_block[st.w_ptr[group.start]..st.w_ptr[group.end]]);
     for (member, j) in group.enumerate() {
         let vi = damped_inverse(&lin.v[j], lambda);
         let r = st.w_ptr[j]..st.w_ptr[j + 1];
-        for (e, (we, &block)) in r.clone().zip(w[r.clone()].iter().zip(&st.w_block[r])) {
+        for (we, &block) in w[r.clone()].iter().zip(&st.w_block[r]) {
             let z = we * vi;
             let za = z * lin.gp[j];
             for k in 0..6 {
                 rhs[6 * block + k] += za[k];
             }
-            out.keys.push((block, member, e));
-            out.unsorted_z.push(z);
-        }
-    }
-    out.keys.sort_unstable();
-    for (k, &(block, member, e)) in out.keys.iter().enumerate() {
-        out.w.push(w[e]);
-        out.z.push(out.unsorted_z[e - base]);
-        match out.kfs.last_mut() {
-            Some(last) if last.0 == block => last.2 |= 1 << member,
-            _ => out.kfs.push((block, k, 1 << member)),
+            let slot = out.index[block];
+            let pos = out.cursor[slot];
+            out.cursor[slot] += 1;
+            (out.z[pos], out.w[pos]) = (z, *we);
+            out.kfs[slot].2 |= 1 << member;
         }
     }
 }
@@ -460,7 +491,7 @@ fn schur_part(
     lambda: f64,
     (blocks, rhs): (&mut [Matrix6<f64>], &mut [f64]),
 ) {
-    let mut group = Group::default();
+    let mut group = Group::new(st.lay.blocks());
     let mut g0 = r.start;
     while g0 < r.end {
         let g1 = (g0 + GROUP).min(r.end);
@@ -581,42 +612,74 @@ unsafe fn pair_fma(g: &Group, ((ea, ma), (eb, mb)): Pair, out: &mut Matrix6<f64>
     }
 }
 
+/// Buffers of the reduced system kept across iterations (tens of MB each at the benchmark
+/// size; allocated anew, their page faults cost ~10 % of the run): the system, one
+/// partial Schur complement per point range, and the Cholesky factor.
+struct Work {
+    blocks: Vec<Matrix6<f64>>,
+    rhs: Vec<f64>,
+    parts: Vec<(Vec<Matrix6<f64>>, Vec<f64>)>,
+    factor: Option<Factor>,
+}
+
+impl Work {
+    fn new(st: &Structure) -> Self {
+        let part = || {
+            (
+                vec![Matrix6::zeros(); st.pat.slots()],
+                vec![0.0; 6 * st.lay.blocks()],
+            )
+        };
+        Self {
+            blocks: vec![Matrix6::zeros(); st.pat.slots()],
+            rhs: vec![0.0; 6 * st.lay.blocks()],
+            parts: st.chunks.iter().map(|_| part()).collect(),
+            factor: None,
+        }
+    }
+
+    /// Factors `self.blocks` into the kept factor; false if not positive definite.
+    fn factor(&mut self, pat: &BlockPattern) -> bool {
+        if let Some(f) = &mut self.factor {
+            if pat.refactor(&self.blocks, f) {
+                return true;
+            }
+            self.factor = None;
+            return false;
+        }
+        self.factor = pat.factor(&self.blocks);
+        self.factor.is_some()
+    }
+}
+
 /// The damped reduced system `S = U + lambda diag U - W V^-1 W^T` and its right-hand side
-/// `g - W V^-1 g_p`.
-fn reduced(
-    lin: &Lin,
-    w: &[Matrix6x3<f64>],
-    st: &Structure,
-    lambda: f64,
-) -> (Vec<Matrix6<f64>>, Vec<f64>) {
-    let mut blocks = lin.u.clone();
+/// `g - W V^-1 g_p`, into `work.blocks` and `work.rhs`.
+fn reduced(lin: &Lin, w: &[Matrix6x3<f64>], st: &Structure, lambda: f64, work: &mut Work) {
+    work.blocks.copy_from_slice(&lin.u);
     for b in 0..st.lay.blocks() {
         let slot = st.pat.slot(b, b).expect("diagonal");
         for k in 0..6 {
-            blocks[slot][(k, k)] += lambda * lin.u[slot][(k, k)].max(1e-9);
+            work.blocks[slot][(k, k)] += lambda * lin.u[slot][(k, k)].max(1e-9);
         }
     }
-    let mut rhs = lin.g.clone();
-    let parts: Vec<_> = st
-        .chunks
-        .par_iter()
-        .map(|r| {
-            let mut pb = vec![Matrix6::zeros(); st.pat.slots()];
-            let mut pr = vec![0.0; 6 * st.lay.blocks()];
-            schur_part((lin, w, st), r.clone(), lambda, (&mut pb, &mut pr));
-            (pb, pr)
-        })
-        .collect();
-    for (pb, pr) in parts {
-        blocks
+    work.rhs.copy_from_slice(&lin.g);
+    work.parts
+        .par_iter_mut()
+        .zip(st.chunks.par_iter())
+        .for_each(|((pb, pr), r)| {
+            pb.fill(Matrix6::zeros());
+            pr.fill(0.0);
+            schur_part((lin, w, st), r.clone(), lambda, (pb, pr));
+        });
+    for (pb, pr) in &work.parts {
+        work.blocks
             .par_iter_mut()
             .zip(pb.par_iter())
             .for_each(|(b, d)| *b -= d);
-        for (r, d) in rhs.iter_mut().zip(&pr) {
+        for (r, d) in work.rhs.iter_mut().zip(pr) {
             *r -= d;
         }
     }
-    (blocks, rhs)
 }
 
 fn apply(s: &BaState, st: &Structure, d: &[f64], dx: &[Vector3<f64>]) -> BaState {
@@ -643,11 +706,15 @@ fn step(
     (lin, w, st): (&Lin, &[Matrix6x3<f64>], &Structure),
     s: &BaState,
     lambda: f64,
+    work: &mut Work,
 ) -> Option<BaState> {
-    let (blocks, rhs) = reduced(lin, w, st, lambda);
-    let llt = st.pat.factor(&blocks)?;
-    let b = faer::Mat::from_fn(rhs.len(), 1, |i, _| -rhs[i]);
-    let x = llt.solve(&b);
+    reduced(lin, w, st, lambda, work);
+    if !work.factor(&st.pat) {
+        return None;
+    }
+    let rhs = &work.rhs;
+    let mut x = faer::Mat::from_fn(rhs.len(), 1, |i, _| -rhs[i]);
+    st.pat.solve(work.factor.as_ref()?, &mut x);
     let d: Vec<f64> = (0..rhs.len()).map(|i| x[(i, 0)]).collect();
     if d.iter().any(|v| !v.is_finite()) {
         return None;
@@ -672,13 +739,14 @@ fn step(
 pub fn solve(p: &BaProblem<'_>, start: BaState, max_iterations: usize) -> Option<BaSolution> {
     let st = structure(p, &start)?;
     let mut w = vec![Matrix6x3::zeros(); st.w_block.len()];
+    let mut work = Work::new(&st);
     let mut s = start;
     let mut n = linearise(p, &s, &st, &mut w)?;
     let initial_cost = n.cost;
     let (mut lambda, mut iterations, mut rejected) = (1e-4, 0, 0);
     while iterations < max_iterations {
         iterations += 1;
-        let Some(c) = step((&n, &w, &st), &s, lambda) else {
+        let Some(c) = step((&n, &w, &st), &s, lambda, &mut work) else {
             rejected += 1;
             lambda *= 10.0;
             if lambda > 1e6 {
@@ -707,7 +775,7 @@ pub fn solve(p: &BaProblem<'_>, start: BaState, max_iterations: usize) -> Option
     }
     let unknowns = 6 * st.lay.blocks() + 3 * s.points.len();
     let variance_factor = (n.cost / n.count.saturating_sub(unknowns).max(1) as f64).max(1e-12);
-    let camera_covariances = covariances((&n, &w, &st), variance_factor)?;
+    let camera_covariances = covariances((&n, &w, &st), variance_factor, &mut work)?;
     Some(BaSolution {
         state: s,
         camera_covariances,
@@ -723,12 +791,15 @@ pub fn solve(p: &BaProblem<'_>, start: BaState, max_iterations: usize) -> Option
 fn covariances(
     (n, w, st): (&Lin, &[Matrix6x3<f64>], &Structure),
     factor: f64,
+    work: &mut Work,
 ) -> Option<Vec<Matrix6<f64>>> {
-    let (blocks, _) = reduced(n, w, st, 0.0);
-    let llt = st.pat.factor(&blocks)?;
+    reduced(n, w, st, 0.0, work);
+    if !work.factor(&st.pat) {
+        return None;
+    }
     let dim = 6 * st.lay.blocks();
     let first = 6 * st.lay.cam(0);
-    let e = faer::Mat::from_fn(
+    let mut x = faer::Mat::from_fn(
         dim,
         6 * st.lay.cams,
         |i, j| {
@@ -739,7 +810,7 @@ fn covariances(
             }
         },
     );
-    let x = llt.solve(&e);
+    st.pat.solve(work.factor.as_ref()?, &mut x);
     Some(
         (0..st.lay.cams)
             .map(|c| Matrix6::from_fn(|i, j| x[(first + 6 * c + i, 6 * c + j)] * factor))
@@ -785,6 +856,38 @@ mod kernel_tests {
             let err = (portable - register).amax();
             assert!(err < 1e-12 * (1.0 + portable.amax()), "{err:e}");
             assert!((portable - start).amax() > 0.0, "the pair shares a member");
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// The counting sort of a group's entries against a comparison sort: blocks in order,
+    /// each block's first entry after the entries of the blocks before it.
+    #[test]
+    fn group_layout_equals_a_sort() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let blocks = 300;
+        let mut g = Group::new(blocks);
+        for _ in 0..100 {
+            let n = rng.gen_range(1..400);
+            let list: Vec<usize> = (0..n).map(|_| rng.gen_range(0..blocks)).collect();
+            g.layout(&list);
+            let mut sorted = list.clone();
+            sorted.sort_unstable();
+            let mut want: Vec<(usize, usize, u64)> = Vec::new();
+            for (k, &b) in sorted.iter().enumerate() {
+                if want.last().map(|l| l.0) != Some(b) {
+                    want.push((b, k, 0));
+                }
+            }
+            assert_eq!(g.kfs, want);
+            assert_eq!(g.cursor, want.iter().map(|k| k.1).collect::<Vec<_>>());
+            assert_eq!((g.z.len(), g.w.len()), (n, n));
+            assert!(g.seen.iter().all(|&w| w == 0), "the bitmap is left clear");
         }
     }
 }

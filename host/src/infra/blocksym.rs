@@ -2,10 +2,20 @@
 //! and its sparse Cholesky factorisation (faer's supernodal `LL^T`, symbolic analysis done
 //! once per pattern). The reduced camera / keyframe system of the bundle adjustment
 //! ([`super::ba`]) lives here.
+//!
+//! Ordering: the symbolic analysis is done twice, with faer's approximate minimum degree
+//! and with the blocks in their own order, and the one with the smaller factor is kept.
+//! The bundle adjustment numbers its blocks keyframe by keyframe in time, then the
+//! cameras: a band (plus the loop closure's border), for which that order gives a factor
+//! of less than half the entries of the minimum-degree one (docs/benchmarks.md).
 
-use faer::linalg::solvers::Solve;
-use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::llt::factor::LltRegularization;
+use faer::sparse::linalg::cholesky::{
+    factorize_symbolic_cholesky, LltRef, SymbolicCholesky, SymmetricOrdering,
+};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+use faer::Conj;
 use nalgebra::Matrix6;
 
 /// Collects the block pairs of a pattern (a bit per block pair).
@@ -74,7 +84,17 @@ pub struct BlockPattern {
     row_idx: Vec<usize>,
     /// Per CSC entry: `36 * slot + i + 6 * j` into the column-major blocks.
     src: Vec<usize>,
-    symbolic: SymbolicLlt<usize>,
+    symbolic: SymbolicCholesky<usize>,
+}
+
+/// A numeric Cholesky factor of a [`BlockPattern`] matrix; its buffers are reused by
+/// [`BlockPattern::refactor`].
+pub struct Factor {
+    /// The factor's values (faer's supernodal layout).
+    l: Vec<f64>,
+    /// The matrix's values in the CSC layout.
+    vals: Vec<f64>,
+    scratch: MemBuffer,
 }
 
 impl BlockPattern {
@@ -101,7 +121,15 @@ impl BlockPattern {
         }
         let n = 6 * nb;
         let sym = SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &row_idx);
-        let symbolic = SymbolicLlt::try_new(sym, faer::Side::Upper).ok()?;
+        let analyse =
+            |ord| factorize_symbolic_cholesky(sym, faer::Side::Upper, ord, Default::default()).ok();
+        let own = analyse(SymmetricOrdering::Identity)?;
+        let amd = analyse(SymmetricOrdering::Amd)?;
+        let symbolic = if amd.len_val() < own.len_val() {
+            amd
+        } else {
+            own
+        };
         Some(Self {
             nb,
             row_ptr,
@@ -137,24 +165,61 @@ impl BlockPattern {
         cols.binary_search(&(c as u32)).ok().map(|k| start + k)
     }
 
+    /// Entries of the Cholesky factor (the chosen ordering's fill included).
+    pub fn factor_len(&self) -> usize {
+        self.symbolic.len_val()
+    }
+
     /// Cholesky factor of the matrix whose upper blocks are `blocks` (one per slot);
     /// `None` when it is not positive definite.
-    pub fn factor(&self, blocks: &[Matrix6<f64>]) -> Option<Llt<usize, f64>> {
-        let vals: Vec<f64> = self
-            .src
-            .iter()
-            .map(|&k| blocks[k / 36].as_slice()[k % 36])
-            .collect();
+    pub fn factor(&self, blocks: &[Matrix6<f64>]) -> Option<Factor> {
+        let par = faer::get_global_parallelism();
+        let scratch = self
+            .symbolic
+            .factorize_numeric_llt_scratch::<f64>(par, Default::default())
+            .or(self.symbolic.solve_in_place_scratch::<f64>(1, par));
+        let mut f = Factor {
+            l: vec![0.0; self.symbolic.len_val()],
+            vals: vec![0.0; self.src.len()],
+            scratch: MemBuffer::try_new(scratch).ok()?,
+        };
+        self.refactor(blocks, &mut f).then_some(f)
+    }
+
+    /// [`Self::factor`] into the buffers of an earlier factor `f` of this pattern; false
+    /// (and `f` unusable until the next success) when the matrix is not positive definite.
+    pub fn refactor(&self, blocks: &[Matrix6<f64>], f: &mut Factor) -> bool {
+        for (v, &k) in f.vals.iter_mut().zip(&self.src) {
+            *v = blocks[k / 36].as_slice()[k % 36];
+        }
         let n = 6 * self.nb;
         let sym = SymbolicSparseColMatRef::new_checked(n, n, &self.col_ptr, None, &self.row_idx);
-        let mat = SparseColMatRef::new(sym, &vals);
-        Llt::try_new_with_symbolic(self.symbolic.clone(), mat, faer::Side::Upper).ok()
+        let mat = SparseColMatRef::new(sym, &f.vals);
+        self.symbolic
+            .factorize_numeric_llt(
+                &mut f.l,
+                mat,
+                faer::Side::Upper,
+                LltRegularization::default(),
+                faer::get_global_parallelism(),
+                MemStack::new(&mut f.scratch),
+                Default::default(),
+            )
+            .is_ok()
     }
-}
 
-/// Solves `L L^T x = b` for the columns of `b` (row-major `n x k` given as a faer matrix).
-pub fn solve(llt: &Llt<usize, f64>, b: &faer::Mat<f64>) -> faer::Mat<f64> {
-    llt.solve(b)
+    /// Solves `A x = b` in place for the columns of `b`, `f` the factor of `A`.
+    pub fn solve(&self, f: &Factor, b: &mut faer::Mat<f64>) {
+        let par = faer::get_global_parallelism();
+        let req = self.symbolic.solve_in_place_scratch::<f64>(b.ncols(), par);
+        let mut buf = MemBuffer::new(req);
+        LltRef::new(&self.symbolic, &f.l).solve_in_place_with_conj(
+            Conj::No,
+            b.as_mut(),
+            par,
+            MemStack::new(&mut buf),
+        );
+    }
 }
 
 #[cfg(test)]
@@ -197,7 +262,8 @@ mod tests {
             dense.view_mut((6 * k, 6 * k), (6, 6)).copy_from(&d);
         }
         let rhs = faer::Mat::from_fn(6 * nb, 2, |i, j| (i + 3 * j) as f64 * 0.1 - 1.0);
-        let x = solve(&pat.factor(&blocks).expect("pd"), &rhs);
+        let mut x = rhs.clone();
+        pat.solve(&pat.factor(&blocks).expect("pd"), &mut x);
         let rd = DMatrix::from_fn(6 * nb, 2, |i, j| rhs[(i, j)]);
         let xd = dense.cholesky().expect("dense pd").solve(&rd);
         for i in 0..6 * nb {
@@ -205,6 +271,18 @@ mod tests {
                 assert!((x[(i, j)] - xd[(i, j)]).abs() < 1e-9, "{i},{j}");
             }
         }
+        // Refactoring into the same buffers: twice the matrix, half the solution.
+        let mut f = pat.factor(&blocks).expect("pd");
+        let doubled: Vec<Matrix6<f64>> = blocks.iter().map(|b| b * 2.0).collect();
+        assert!(pat.refactor(&doubled, &mut f));
+        let mut half = rhs.clone();
+        pat.solve(&f, &mut half);
+        for i in 0..6 * nb {
+            for j in 0..2 {
+                assert!((2.0 * half[(i, j)] - xd[(i, j)]).abs() < 1e-9, "{i},{j}");
+            }
+        }
+        assert!(pat.factor_len() >= pat.src.len());
         assert_eq!(pat.slot(1, 0), None);
         assert!(pat.slot(0, 1).is_none() && pat.slot(0, 3).is_some());
     }
