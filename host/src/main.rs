@@ -369,8 +369,8 @@ fn calibrate_pose_imu(args: &CalibratePoseImu) -> Result<(), Failure> {
         pose_imu::calibrate::<f64>(&input, &options, &mut progress)
     };
     bar.finish_and_clear();
-    let calibration = outcome.map_err(|pose_imu::PoseImuError::BadInput(m)| {
-        Failure::BadInput(anyhow!("{}: {m}", args.dataset.display()))
+    let calibration = outcome.map_err(|e: msreg_host::calibrate::InputError| {
+        Failure::BadInput(anyhow!("{}: {e}", args.dataset.display()))
     })?;
     let result = CalibrationResult {
         pose0: Some(calibration.imu_sensor_estimate()),

@@ -13,6 +13,7 @@
 
 pub mod cli;
 
+use super::InputError;
 use std::time::Instant;
 
 use msreg_estimator::camera::Camera;
@@ -29,7 +30,7 @@ use super::gyro_bias;
 use super::init;
 use super::pose_imu::{
     self, describe_moving_start, drive_imu, finish, initial_state, moving_start, with_gyro_bias,
-    with_moving_start, ImuHooks, PoseImuError, PoseImuOptions, PoseImuReport, Run, Timing,
+    with_moving_start, ImuHooks, PoseImuOptions, PoseImuReport, Run, Timing,
 };
 use crate::dataset::{ExtrinsicEstimate, ImuNoiseYaml, ImuRecord, PoseRecord, PoseSensorYaml};
 use crate::vision::pnp::{solve_pnp, PnpSolution};
@@ -226,7 +227,7 @@ pub fn calibrate<T: Scalar>(
     input: &CameraImuInput<'_>,
     options: &CameraImuOptions,
     progress: &mut dyn FnMut(f64),
-) -> Result<CameraImuCalibration, PoseImuError> {
+) -> Result<CameraImuCalibration, InputError> {
     let started = Instant::now();
     let poses = frame_poses(input.camera, input.frames);
     let (motion, pixel_sigma) =
@@ -281,7 +282,7 @@ pub fn reprojection_start<T: Scalar>(
     input: &CameraImuInput<'_>,
     options: &CameraImuOptions,
     progress: &mut dyn FnMut(f64),
-) -> Result<ReprojectionStart, PoseImuError> {
+) -> Result<ReprojectionStart, InputError> {
     let poses = frame_poses(input.camera, input.frames);
     let (motion, pixel_sigma) = motion_calibration::<T>(input, &poses, options, progress)?;
     let at_rest = init::detect_standstill(input.imu, options.prior.min_standstill_s).is_some();
@@ -311,13 +312,13 @@ pub(crate) fn motion_calibration<T: Scalar>(
     poses: &[FramePose],
     options: &CameraImuOptions,
     progress: &mut dyn FnMut(f64),
-) -> Result<(CameraImuCalibration, f64), PoseImuError> {
+) -> Result<(CameraImuCalibration, f64), InputError> {
     if poses.len() < 3 {
-        return Err(PoseImuError::BadInput(format!(
-            "cam0: {} of {} images have a target pose; at least 3 are needed",
-            poses.len(),
-            input.frames.len()
-        )));
+        return Err(InputError::TooFewTargetPoses {
+            found: poses.len(),
+            images: input.frames.len(),
+            needed: 3,
+        });
     }
     let pixel_sigma = options
         .pixel_sigma
@@ -384,7 +385,7 @@ fn reprojection_calibration<T: Scalar>(
     extrinsic_prior: ExtrinsicPrior,
     started: Instant,
     progress: &mut dyn FnMut(f64),
-) -> Result<CameraImuCalibration, PoseImuError> {
+) -> Result<CameraImuCalibration, InputError> {
     let Start {
         motion,
         pixel_sigma,
@@ -392,9 +393,7 @@ fn reprojection_calibration<T: Scalar>(
     } = *start;
     let imu = input.imu;
     if imu.is_empty() {
-        return Err(PoseImuError::BadInput(
-            "imu0/data.csv: no IMU samples".into(),
-        ));
+        return Err(InputError::NoImuSamples);
     }
     let standstill = init::detect_standstill(imu, options.prior.min_standstill_s);
     let StartFromMotion {
@@ -496,7 +495,7 @@ fn start_from_motion<T: Scalar>(
     standstill: Option<&init::Standstill>,
     start: &Start<'_>,
     extrinsic_prior: ExtrinsicPrior,
-) -> Result<StartFromMotion<T>, PoseImuError> {
+) -> Result<StartFromMotion<T>, InputError> {
     let PriorFromMotion {
         initial,
         config,
@@ -506,7 +505,7 @@ fn start_from_motion<T: Scalar>(
         moving_start,
     } = prior_from_motion(input, options, standstill, start, extrinsic_prior)?;
     let ekf = CameraImuEkf::<T>::new(&config, &initial)
-        .map_err(|e| PoseImuError::BadInput(format!("imu0/imu.yaml: invalid noise ({e})")))?;
+        .map_err(|error| InputError::InvalidNoise { error })?;
     Ok(StartFromMotion {
         ekf,
         prior,
@@ -522,7 +521,7 @@ pub(crate) fn prior_from_motion<T: Scalar>(
     standstill: Option<&init::Standstill>,
     start: &Start<'_>,
     extrinsic_prior: ExtrinsicPrior,
-) -> Result<PriorFromMotion<T>, PoseImuError> {
+) -> Result<PriorFromMotion<T>, InputError> {
     let imu = input.imu;
     let motion = start.motion;
     let m = &motion.report.filter;
@@ -692,7 +691,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize>
         ekf: &mut Ekf<T, S, C, N, F>,
         index: usize,
         _rec: &ImuRecord,
-    ) -> Result<(), PoseImuError> {
+    ) -> Result<(), InputError> {
         while self.next_due(ekf).is_some() {
             self.fuse_next(ekf, index);
         }

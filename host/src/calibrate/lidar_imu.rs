@@ -51,11 +51,12 @@ use super::gyro_bias::GyroBiasEstimate;
 use super::init::{self, RotationInit, Standstill};
 use super::pose_imu::{
     describe_moving_start, drive_imu, finish, hand_eye_and_gyro_bias, start_filter, FilterStart,
-    ImuHooks, PoseImuError, PoseImuOptions, PoseImuReport, Run, Timing, HAND_EYE_MIN_PAIRS,
+    ImuHooks, PoseImuOptions, PoseImuReport, Run, Timing, HAND_EYE_MIN_PAIRS,
 };
+use super::InputError;
 use crate::dataset::{ImuNoiseYaml, ImuRecord};
 use crate::lidar::deskew::{imu_time, DeskewedScan};
-use crate::lidar::{deskew_scan, PoseBuffer, ScanLoadError, ScanSource};
+use crate::lidar::{deskew_scan, PoseBuffer, ScanSource};
 use crate::ndt::{align, LocalMap, NdtParams, NdtResult, NdtTarget};
 use crate::pointcloud::{voxel_downsample, PointCloud};
 
@@ -383,27 +384,22 @@ pub fn calibrate<T: Scalar>(
     input: &LidarImuInput<'_>,
     options: &LidarImuOptions,
     progress: &mut dyn FnMut(f64),
-) -> Result<LidarImuCalibration, PoseImuError> {
+) -> Result<LidarImuCalibration, InputError> {
     let imu = input.imu;
     let Some(first_imu) = imu.first() else {
-        return Err(PoseImuError::BadInput(
-            "imu0/data.csv: no IMU samples".into(),
-        ));
+        return Err(InputError::NoImuSamples);
     };
     if input.scans.len() < 3 {
-        return Err(PoseImuError::BadInput(format!(
-            "lidar0/: {} scans; at least 3 are needed",
-            input.scans.len()
-        )));
+        return Err(InputError::TooFew {
+            file: "lidar0/",
+            what: "scans",
+            found: input.scans.len(),
+            needed: 3,
+        });
     }
-    options
-        .ndt
-        .validate()
-        .map_err(|e| PoseImuError::BadInput(e.to_string()))?;
+    options.ndt.validate()?;
     if options.ndt_covariance != NdtCovariance::Hessian && !options.ndt.sandwich_covariance {
-        return Err(PoseImuError::BadInput(
-            "options: a sandwich NDT covariance needs ndt.sandwich_covariance".into(),
-        ));
+        return Err(InputError::SandwichWithoutCovariance);
     }
     let started = Instant::now();
     let standstill = init::detect_standstill(imu, options.filter.min_standstill_s);
@@ -493,7 +489,7 @@ fn start_filter_for<T: Scalar>(
     options: &LidarImuOptions,
     standstill: Option<&Standstill>,
     raw: RawRotations,
-) -> Result<(FilterStart<T>, Option<moving::MovingStartReport>), PoseImuError> {
+) -> Result<(FilterStart<T>, Option<moving::MovingStartReport>), InputError> {
     let imu = input.imu;
     Ok(match (standstill, raw.rotation) {
         (None, Ok(rotation)) => {
@@ -526,12 +522,12 @@ fn settled_nis(records: &[ScanRecord], options: &LidarImuOptions) -> f64 {
 }
 
 /// Loads scan `k`: `Ok(None)` for a documented skip (zero points), an error for bad input.
-fn load(scans: &dyn ScanSource, k: usize) -> Result<Option<PointCloud>, PoseImuError> {
+fn load(scans: &dyn ScanSource, k: usize) -> Result<Option<PointCloud>, InputError> {
     match scans.load(k) {
         Ok(c) if c.is_empty() => Ok(None),
         Ok(c) => Ok(Some(c)),
-        Err(ScanLoadError::Empty(_)) => Ok(None),
-        Err(ScanLoadError::Bad(m)) => Err(PoseImuError::BadInput(m)),
+        Err(e) if e.is_empty_scan() => Ok(None),
+        Err(e) => Err(e.into()),
     }
 }
 
@@ -607,7 +603,7 @@ pub(crate) fn rotation_init(
     scans: &dyn ScanSource,
     standstill: Option<&Standstill>,
     options: &LidarImuOptions,
-) -> Result<RotationStart, PoseImuError> {
+) -> Result<RotationStart, InputError> {
     let r = rotation_start(imu, scans, standstill, options)?;
     Ok((r.rotation, r.gyro_bias, r.outliers))
 }
@@ -630,7 +626,7 @@ fn rotation_start(
     scans: &dyn ScanSource,
     standstill: Option<&Standstill>,
     options: &LidarImuOptions,
-) -> Result<RawRotations, PoseImuError> {
+) -> Result<RawRotations, InputError> {
     let first = imu.first().map_or(0, |r| r.stamp_ns);
     let until = first.saturating_add((options.init_duration_s * 1e9) as u64);
     let mut increments = Vec::new();
@@ -772,7 +768,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize>
         ekf: &mut Ekf<T, S, C, N, F>,
         index: usize,
         _rec: &ImuRecord,
-    ) -> Result<(), PoseImuError> {
+    ) -> Result<(), InputError> {
         while self.next_due(ekf)?.is_some() {
             self.fuse_next(ekf, index);
         }
@@ -876,7 +872,7 @@ impl<'a> LidarFeed<'a> {
     >(
         &mut self,
         ekf: &Ekf<T, S, C, N, F>,
-    ) -> Result<Option<u64>, PoseImuError> {
+    ) -> Result<Option<u64>, InputError> {
         loop {
             if let Some(p) = self.pending.as_ref() {
                 let reference = p.stamp_ns.saturating_add(p.ref_offset_ns);

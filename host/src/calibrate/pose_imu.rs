@@ -6,6 +6,7 @@
 //! the filter holds an IMU sample at or after that time (`Ekf::is_due`; the filter
 //! propagates over the readings interpolated to it), with the current estimate of `t_d`.
 
+use super::InputError;
 use std::time::Instant;
 
 use msreg_estimator::{
@@ -62,14 +63,6 @@ impl Default for PoseImuOptions {
             min_standstill_s: 0.3,
         }
     }
-}
-
-/// Why the pipeline could not run.
-#[derive(Debug, thiserror::Error)]
-pub enum PoseImuError {
-    /// The input violates what the filter needs (named file and sample).
-    #[error("{0}")]
-    BadInput(String),
 }
 
 /// One point of the convergence history (after each relative-pose update).
@@ -174,18 +167,18 @@ pub fn calibrate<T: Scalar>(
     input: &PoseImuInput<'_>,
     options: &PoseImuOptions,
     progress: &mut dyn FnMut(f64),
-) -> Result<PoseImuCalibration, PoseImuError> {
+) -> Result<PoseImuCalibration, InputError> {
     let (imu, poses) = (input.imu, input.poses);
     let (Some(first_imu), Some(_)) = (imu.first(), imu.last()) else {
-        return Err(PoseImuError::BadInput(
-            "imu0/data.csv: no IMU samples".into(),
-        ));
+        return Err(InputError::NoImuSamples);
     };
     if poses.len() < 3 {
-        return Err(PoseImuError::BadInput(format!(
-            "pose0/data.csv: {} poses; at least 3 are needed",
-            poses.len()
-        )));
+        return Err(InputError::TooFew {
+            file: "pose0/data.csv",
+            what: "poses",
+            found: poses.len(),
+            needed: 3,
+        });
     }
     let started = Instant::now();
     let standstill = init::detect_standstill(imu, options.min_standstill_s);
@@ -332,7 +325,7 @@ impl<T: Scalar> ImuHooks<T> for PoseFeed<'_> {
         ekf: &mut PoseImuEkf<T>,
         index: usize,
         _rec: &ImuRecord,
-    ) -> Result<(), PoseImuError> {
+    ) -> Result<(), InputError> {
         while let Some(pose) = self.poses.get(self.next_pose) {
             if !ekf.is_due(0, pose.stamp_ns) {
                 break;
@@ -353,7 +346,7 @@ pub(crate) trait ImuHooks<T: Scalar, E = PoseImuEkf<T>> {
     /// After sample `index` (`rec`) was fed (the filter stands at the previous sample and
     /// holds `rec` as its look-ahead): fuse every measurement that is now due
     /// (`msreg_estimator::Ekf::is_due`).
-    fn fuse_due(&mut self, ekf: &mut E, index: usize, rec: &ImuRecord) -> Result<(), PoseImuError>;
+    fn fuse_due(&mut self, ekf: &mut E, index: usize, rec: &ImuRecord) -> Result<(), InputError>;
 
     /// After sample `rec` was fed (and a standstill ZUPT applied), before `fuse_due`.
     fn after_sample(&mut self, _ekf: &E, _rec: &ImuRecord) {}
@@ -393,29 +386,27 @@ pub(crate) fn drive_imu<T: Scalar, E: ImuFilter<T>>(
     standstill: Option<&Standstill>,
     progress: &mut dyn FnMut(f64),
     hooks: &mut dyn ImuHooks<T, E>,
-) -> Result<(), PoseImuError> {
+) -> Result<(), InputError> {
     let (Some(first_imu), Some(last_imu)) = (imu.first(), imu.last()) else {
         return Ok(());
     };
     let total = (last_imu.stamp_ns - first_imu.stamp_ns).max(1) as f64;
     for (i, rec) in imu.iter().enumerate() {
-        ekf.propagate(&convert::imu_sample::<T>(rec)).map_err(|e| {
-            PoseImuError::BadInput(format!(
-                "imu0/data.csv: {e}, ending at the sample stamped {} ns (sample {} of the file)",
-                rec.stamp_ns,
-                i + 1
-            ))
-        })?;
+        ekf.propagate(&convert::imu_sample::<T>(rec))
+            .map_err(|error| InputError::ImuSample {
+                error,
+                stamp_ns: rec.stamp_ns,
+                sample: i + 1,
+            })?;
         let at_rest = standstill.is_some_and(|s| rec.stamp_ns <= s.until_ns);
         if at_rest && i % 20 == 0 && ekf.imu_period_ns().is_some() {
             // A gated-out ZUPT is a report, not an error; an error is one.
-            ekf.update_zero_velocity().map_err(|e| {
-                PoseImuError::BadInput(format!(
-                    "imu0/data.csv: zero-velocity update at the sample stamped {} ns (sample {} of the file): {e}",
-                    rec.stamp_ns,
-                    i + 1
-                ))
-            })?;
+            ekf.update_zero_velocity()
+                .map_err(|error| InputError::ZeroVelocity {
+                    error,
+                    stamp_ns: rec.stamp_ns,
+                    sample: i + 1,
+                })?;
         }
         hooks.after_sample(ekf, rec);
         hooks.fuse_due(ekf, i, rec)?;
@@ -450,7 +441,7 @@ pub(crate) fn start_filter<T: Scalar>(
         Option<&GyroBiasEstimate>,
     ),
     (options, planar): (&PoseImuOptions, Option<&PlanarStart>),
-) -> Result<FilterStart<T>, PoseImuError> {
+) -> Result<FilterStart<T>, InputError> {
     let (rotation_init, init_problem) = match rotation {
         Ok(r) => (r, None),
         Err(e) => (
@@ -494,10 +485,10 @@ pub(crate) fn start_filter<T: Scalar>(
         None => initial,
     };
     let mut ekf = PoseImuEkf::<T>::new(&config, &initial)
-        .map_err(|e| PoseImuError::BadInput(format!("imu0/imu.yaml: invalid noise ({e})")))?;
+        .map_err(|error| InputError::InvalidNoise { error })?;
     if let Some(p) = planar {
         ekf.hold_translation_axis(0, Some(convert::vec3(&p.motion.axis_imu)))
-            .map_err(|e| PoseImuError::BadInput(format!("planar rotation axis: {e}")))?;
+            .map_err(|error| InputError::PlanarAxis { error })?;
     }
     Ok(FilterStart {
         ekf,
@@ -548,7 +539,21 @@ pub(crate) enum MovingStart {
     /// failed (nothing to align with).
     NotNeeded,
     /// The dynamic initialisation could not run (its reason).
-    Failed(String),
+    Failed(MovingStartFailure),
+}
+
+/// Why the dynamic initialisation of a moving start could not run.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MovingStartFailure {
+    /// The alignment of the odometry with the pre-integrated IMU failed.
+    #[error(transparent)]
+    Alignment(#[from] dynamic_init::DynamicInitError),
+    /// The first IMU sample lies outside the aligned odometry.
+    #[error("the first IMU sample is outside the data")]
+    OutsideData,
+    /// No LiDAR odometry in the first seconds to align with.
+    #[error("no LiDAR odometry in the first seconds")]
+    NoOdometry,
 }
 
 /// The report's words for a moving start.
@@ -602,11 +607,11 @@ pub(crate) fn moving_start(
         accel_noise_density: imu_noise.accelerometer_noise_density,
         ..DynamicInitOptions::default()
     };
-    let solution = dynamic_init::initialise(&input, &options)
-        .map_err(|e| MovingStart::Failed(e.to_string()))?;
+    let solution =
+        dynamic_init::initialise(&input, &options).map_err(|e| MovingStart::Failed(e.into()))?;
     solution
         .filter_prior(imu, 0.0)
-        .ok_or_else(|| MovingStart::Failed("the first IMU sample is outside the data".into()))
+        .ok_or(MovingStart::Failed(MovingStartFailure::OutsideData))
 }
 
 /// The prior with the moving start's IMU state: orientation, velocity and biases with their
@@ -646,7 +651,7 @@ pub(crate) fn initial_state<T: Scalar>(
     standstill: Option<&Standstill>,
     rotation: &nalgebra::UnitQuaternion<f64>,
     options: &PoseImuOptions,
-) -> Result<InitialState<T, 1>, PoseImuError> {
+) -> Result<InitialState<T, 1>, InputError> {
     let accel = standstill.map_or_else(
         || {
             let n = imu.len().min(400);
@@ -654,12 +659,10 @@ pub(crate) fn initial_state<T: Scalar>(
         },
         |s| s.accel_mean,
     );
-    let mut state = InitialState::<T, 1>::at_rest(convert::vec3(&accel)).ok_or_else(|| {
-        PoseImuError::BadInput(format!(
-            "imu0/data.csv: mean accelerometer reading {:.2} m/s^2 at the start is not gravity",
-            accel.norm()
-        ))
-    })?;
+    let mut state =
+        InitialState::<T, 1>::at_rest(convert::vec3(&accel)).ok_or(InputError::NotGravity {
+            accel_norm: accel.norm(),
+        })?;
     match standstill {
         Some(s) => {
             state.imu.gyro_bias = convert::vec3(&s.gyro_mean);

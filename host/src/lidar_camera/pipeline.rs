@@ -28,7 +28,7 @@ use super::solver::{
 use crate::camera_yaml::{read_camera_yaml, read_target_yaml, Target};
 use crate::dataset::{list_scans, LIDAR_DIR};
 use crate::pointcloud::{read_pcd, PointCloud};
-use crate::solve::{solve_se3, LmOptions, LmSummary, Loss};
+use crate::solve::{solve_se3, LmError, LmOptions, LmSummary, Loss};
 use crate::vision::GrayImage;
 
 /// Which cost the result minimises.
@@ -40,6 +40,16 @@ pub enum Method {
     /// Point to plane, then point to back-projected plane (eq. 2.7).
     #[default]
     Pbpc,
+}
+
+impl Method {
+    /// The method's name in the thesis (PPC-Cal, PBPC-Cal).
+    pub fn label(self) -> &'static str {
+        match self {
+            Method::Ppc => "PPC-Cal",
+            Method::Pbpc => "PBPC-Cal",
+        }
+    }
 }
 
 /// Options of the whole calibration.
@@ -225,9 +235,14 @@ pub enum SolveError {
     /// The boards are (nearly) parallel: no closed-form start.
     #[error("the board normals do not span 3D (boards too similar in orientation)")]
     Degenerate,
-    /// The solver failed.
-    #[error("{0}")]
-    Solver(String),
+    /// The solver failed in one of the two stages.
+    #[error("{}: {error}", stage.label())]
+    Solver {
+        /// The stage (PPC-Cal first, then PBPC-Cal).
+        stage: Method,
+        /// The solver's reason.
+        error: LmError,
+    },
 }
 
 fn lm_options(loss: Loss) -> LmOptions {
@@ -274,7 +289,10 @@ pub fn solve(
         start,
         &lm_options(Loss::Huber(options.huber_sigmas)),
     )
-    .map_err(|e| SolveError::Solver(format!("PPC-Cal: {e}")))?;
+    .map_err(|error| SolveError::Solver {
+        stage: Method::Ppc,
+        error,
+    })?;
     let ppc_run = SolverRun::from(&ppc, clock.elapsed().as_secs_f64());
     let associations: Vec<[usize; 4]> = frames
         .iter()
@@ -308,7 +326,10 @@ pub fn solve(
                 ppc.pose,
                 &lm_options(Loss::Huber(options.huber_sigmas)),
             )
-            .map_err(|e| SolveError::Solver(format!("PBPC-Cal: {e}")))?;
+            .map_err(|error| SolveError::Solver {
+                stage: Method::Pbpc,
+                error,
+            })?;
             let run = SolverRun::from(&pbpc, clock.elapsed().as_secs_f64());
             (pbpc.pose, pbpc.covariance, Some(run))
         }

@@ -17,7 +17,7 @@ use crate::calibrate::camera_imu::cli::detect_corner_frames;
 use crate::calibrate::camera_imu::{CameraImuInput, CameraImuOptions};
 use crate::calibrate::pose_imu::PoseImuInput;
 use crate::dataset::Dataset;
-use crate::monitor::cli::DriveFiles;
+use crate::monitor::DriveFiles;
 use crate::monitor::MonitorOptions;
 use crate::vision::frames::CameraDataset;
 
@@ -190,30 +190,25 @@ pub struct ReplayOutcome {
 /// `msreg monitor` runs it; odometry when it has `pose0/` only; else target corners of `cam0/`.
 pub fn dataset_stream(dataset: &Path, options: &StreamOptions) -> Result<ReplayStream, LinkError> {
     if dataset.join("pose1").is_dir() {
-        let files =
-            DriveFiles::read(dataset, None).map_err(|e| LinkError::Dataset(format!("{e:#}")))?;
-        let input = files
-            .input()
-            .map_err(|e| LinkError::Dataset(format!("{e:#}")))?;
+        let files = DriveFiles::read(dataset, None)?;
+        let input = files.input()?;
         return build_monitor_stream(&input, &MonitorOptions::default(), options);
     }
-    let data = Dataset::open(dataset).map_err(|e| LinkError::Dataset(e.to_string()))?;
-    let missing = |e: crate::dataset::DatasetError| LinkError::Dataset(e.to_string());
-    let imu = data.require_imu().map_err(missing)?;
-    let imu_noise = data.require_imu_noise().map_err(missing)?;
+    let data = Dataset::open(dataset)?;
+    let imu = data.require_imu()?;
+    let imu_noise = data.require_imu_noise()?;
     if data.pose0.is_some() || !dataset.join("cam0").is_dir() {
         let input = PoseImuInput {
             imu,
             imu_noise,
-            poses: data.require_pose0().map_err(missing)?,
-            pose_noise: data.require_pose0_sensor().map_err(missing)?,
+            poses: data.require_pose0()?,
+            pose_noise: data.require_pose0_sensor()?,
         };
         return build_stream(&input, options);
     }
-    let camera = CameraDataset::open(dataset).map_err(|e| LinkError::Dataset(e.to_string()))?;
+    let camera = CameraDataset::open(dataset)?;
     let (frames, detection) =
-        detect_corner_frames(&camera, &crate::vision::DetectorParams::default(), &|_| {})
-            .map_err(|e| LinkError::Dataset(e.to_string()))?;
+        detect_corner_frames(&camera, &crate::vision::DetectorParams::default(), &|_| {})?;
     eprintln!(
         "msreg: board found in {} of {} images ({:.1} s)",
         detection.detected, detection.images, detection.time_s

@@ -31,8 +31,8 @@ use super::LinkError;
 use crate::calibrate::camera_imu::{
     self, pnp_of, CameraImuInput, CameraImuOptions, CornerFrame, ReprojectionStart, MIN_CORNERS,
 };
-use crate::calibrate::init;
 use crate::calibrate::pose_imu::{PoseImuInput, PoseImuOptions};
+use crate::calibrate::{init, InputError};
 use crate::dataset::{ImuNoiseYaml, ImuRecord};
 
 /// Options of the stream.
@@ -124,21 +124,26 @@ fn nominal_period_ns(input: &PoseImuInput<'_>) -> u64 {
 /// The configuration the pipeline would start from.
 pub fn config(input: &PoseImuInput<'_>, options: &StreamOptions) -> Result<Config, LinkError> {
     let imu = input.imu;
-    if imu.is_empty() || input.poses.len() < 3 {
-        return Err(LinkError::Dataset(
-            "the dataset needs IMU samples and at least 3 poses".into(),
-        ));
+    if imu.is_empty() {
+        return Err(InputError::NoImuSamples.into());
+    }
+    if input.poses.len() < 3 {
+        return Err(InputError::TooFew {
+            file: "pose0/data.csv",
+            what: "poses",
+            found: input.poses.len(),
+            needed: 3,
+        }
+        .into());
     }
     let p = &options.pipeline;
     let standstill = init::detect_standstill(imu, p.min_standstill_s);
     let gyro_bias = standstill.map_or_else(Vector3::zeros, |s| s.gyro_mean);
     let period_ns = nominal_period_ns(input);
     let rotation = init::hand_eye_rotation(imu, input.poses, &gyro_bias, period_ns * 3 / 2)
-        .map_err(|e| {
-            LinkError::Dataset(format!(
-                "hand-eye rotation initialisation failed ({e:?}): the recording needs rotation \
-                 about at least two axes"
-            ))
+        .map_err(|error| InputError::HandEyeRotation {
+            sensor: "pose0/",
+            error,
         })?;
     let base = imu_config(imu, input.imu_noise, options);
     Ok(Config {
@@ -384,10 +389,9 @@ pub fn build_camera_stream(
     options: &StreamOptions,
 ) -> Result<ReplayStream, LinkError> {
     let Some(first_imu) = input.imu.first() else {
-        return Err(LinkError::Dataset("imu0/data.csv: no IMU samples".into()));
+        return Err(InputError::NoImuSamples.into());
     };
-    let start = camera_imu::reprojection_start::<f64>(input, camera_options, &mut |_| {})
-        .map_err(|crate::calibrate::pose_imu::PoseImuError::BadInput(m)| LinkError::Dataset(m))?;
+    let start = camera_imu::reprojection_start::<f64>(input, camera_options, &mut |_| {})?;
     let config = camera_config(input, &start, options);
     let start_ns = first_imu.stamp_ns;
     let td_ns = (f64::from(config.sensor.time_offset_s) * 1e9) as i128;

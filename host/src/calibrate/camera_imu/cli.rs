@@ -16,7 +16,7 @@ use super::{
     calibrate, CameraImuCalibration, CameraImuInput, CameraImuOptions, CameraImuReport,
     CameraUpdate, CornerFrame, ReprojectionSample,
 };
-use crate::calibrate::pose_imu::PoseImuError;
+use crate::calibrate::InputError;
 use crate::camera_yaml::{read_camera_yaml, read_target_yaml, Target};
 use crate::command::{progress_bar, Outcome};
 use crate::dataset::{
@@ -128,7 +128,7 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
     };
     filtering.finish_and_clear();
     let calibration =
-        outcome.map_err(|PoseImuError::BadInput(m)| anyhow!("{}: {m}", args.dataset.display()))?;
+        outcome.map_err(|e: InputError| anyhow!("{}: {e}", args.dataset.display()))?;
     CalibrationResult {
         cam0: Some(calibration.cam_imu_estimate()),
         ..CalibrationResult::default()

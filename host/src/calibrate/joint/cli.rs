@@ -18,7 +18,8 @@ use super::{
 };
 use crate::calibrate::camera_imu::cli::{load_corner_frames, DetectionSummary, LoadedFrames};
 use crate::calibrate::camera_imu::invert_with_covariance;
-use crate::calibrate::pose_imu::{PoseImuError, PoseImuReport};
+use crate::calibrate::pose_imu::PoseImuReport;
+use crate::calibrate::InputError;
 use crate::camera_yaml::{read_target_yaml, Target};
 use crate::command::{progress_bar, Outcome};
 use crate::dataset::{CalibrationResult, Dataset, ExtrinsicEstimate, TARGET_YAML};
@@ -97,7 +98,7 @@ pub fn run(args: &CalibrateJoint) -> anyhow::Result<Outcome> {
         target: &target,
     };
     let options = JointOptions::default();
-    let bad_input = |PoseImuError::BadInput(m)| anyhow!("{}: {m}", args.dataset.display());
+    let bad_input = |e: InputError| anyhow!("{}: {e}", args.dataset.display());
     let bar = progress_bar(
         1000,
         "{spinner} joint filter [{bar:40}] {percent}% {elapsed}",

@@ -8,7 +8,7 @@ use clap::Args;
 use indicatif::ProgressBar;
 
 use crate::calibrate::lidar_imu::{self, LidarImuInput, LidarImuOptions};
-use crate::calibrate::pose_imu::PoseImuError;
+use crate::calibrate::InputError;
 use crate::command::{progress_bar, Outcome};
 use crate::dataset::{CalibrationResult, Dataset};
 use crate::lidar::FileScans;
@@ -130,7 +130,7 @@ pub fn calibrate(args: &CalibrateLidarImu) -> anyhow::Result<Outcome> {
     });
     progress.finish_and_clear();
     let calibration =
-        outcome.map_err(|PoseImuError::BadInput(m)| anyhow!("{}: {m}", args.dataset.display()))?;
+        outcome.map_err(|e: InputError| anyhow!("{}: {e}", args.dataset.display()))?;
     CalibrationResult {
         lidar0: Some(calibration.imu_sensor_estimate()),
         ..CalibrationResult::default()

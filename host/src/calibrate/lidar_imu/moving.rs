@@ -36,6 +36,7 @@
 //!    within a second, before the aligned IMU state has settled, and the filter diverged
 //!    on some seeds (docs/lidar_imu.md, "Moving start: the floor and the IMU state").
 
+use crate::calibrate::InputError;
 use msreg_estimator::Scalar;
 use msreg_estimator::{FilterConfig, PoseImuEkf};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
@@ -48,7 +49,7 @@ use crate::calibrate::init::{self, RotationIncrement, RotationInit};
 use crate::calibrate::planar::golden_section;
 use crate::calibrate::pose_imu::{
     describe_moving_start, initial_state, moving_start, with_gyro_bias, with_moving_start,
-    FilterStart, MovingStart, PoseImuError, HAND_EYE_MIN_PAIRS,
+    FilterStart, MovingStart, MovingStartFailure, HAND_EYE_MIN_PAIRS,
 };
 use crate::dataset::{ImuNoiseYaml, ImuRecord, PoseRecord};
 use crate::lidar::{deskew_scan, PoseBuffer, ScanSource};
@@ -196,7 +197,7 @@ pub fn odometry(
     options: &LidarImuOptions,
     (r_i_l, gyro_bias, td_s): (&UnitQuaternion<f64>, &Vector3<f64>, f64),
     window_s: f64,
-) -> Result<InitOdometry, PoseImuError> {
+) -> Result<InitOdometry, InputError> {
     let (Some(first), Some(last)) = (imu.first(), imu.last()) else {
         return Ok(InitOdometry::default());
     };
@@ -337,7 +338,7 @@ fn deskewed_start(
     options: &LidarImuOptions,
     alignment: Alignment,
     window: f64,
-) -> Result<(Alignment, InitOdometry), PoseImuError> {
+) -> Result<(Alignment, InitOdometry), InputError> {
     let pass = |(rotation, gyro_bias, td): &Alignment| {
         let bias = gyro_bias.map_or_else(Vector3::zeros, |g| g.bias);
         let td = td.map_or(0.0, |t| t.offset_s);
@@ -411,7 +412,7 @@ pub(crate) fn start<T: Scalar>(
     options: &LidarImuOptions,
     (rotation, gyro_bias): (RotationInit, Option<GyroBiasEstimate>),
     increments: &[RotationIncrement],
-) -> Result<(FilterStart<T>, MovingStartReport), PoseImuError> {
+) -> Result<(FilterStart<T>, MovingStartReport), InputError> {
     let filter = &options.filter;
     let (rotation, gyro_bias, time_offset) = if filter.estimate_time_offset {
         at_time_offset(
@@ -441,9 +442,7 @@ pub(crate) fn start<T: Scalar>(
             imu_noise,
         )
     } else {
-        Err(MovingStart::Failed(
-            "no LiDAR odometry in the first seconds".into(),
-        ))
+        Err(MovingStart::Failed(MovingStartFailure::NoOdometry))
     };
     let initial = initial_state::<T>(imu, None, &rotation.rotation, filter)?;
     let (initial, gyro_bias_init) = with_gyro_bias(initial, None, gyro_bias.as_ref());
@@ -458,7 +457,7 @@ pub(crate) fn start<T: Scalar>(
     };
     let config = FilterConfig::new(convert::imu_noise::<T>(imu_noise));
     let ekf = PoseImuEkf::<T>::new(&config, &initial)
-        .map_err(|e| PoseImuError::BadInput(format!("imu0/imu.yaml: invalid noise ({e})")))?;
+        .map_err(|error| InputError::InvalidNoise { error })?;
     Ok((
         FilterStart {
             ekf,
