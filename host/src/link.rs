@@ -12,17 +12,19 @@
 //! - [`view`] draws the live monitor (full screen on a terminal, lines otherwise);
 //! - [`cli`] is what `msreg link replay | monitor | show | log` run.
 
-pub mod cli;
 pub mod client;
 pub mod defmt;
 pub mod monitor_stream;
 pub mod port;
 pub mod record;
+mod session;
 pub mod stream;
 pub mod view;
 
 pub use client::{Client, ClientOptions, Collected};
+pub use session::{dataset_stream, replay, replay_stream, show, ReplayOptions, ReplayOutcome};
 pub use stream::{build_stream, ReplayStream, StreamOptions};
+pub use view::{final_estimates, live_view, summary};
 
 /// Errors of the link.
 #[derive(Debug, thiserror::Error)]

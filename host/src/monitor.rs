@@ -15,7 +15,6 @@
 //! `calibrate::planar`) the lever arm of both sensors along the rotation axis is held at the
 //! calibration of record (not observable; a Schmidt direction).
 
-pub mod cli;
 mod files;
 mod replay;
 pub mod start;

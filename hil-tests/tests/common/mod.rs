@@ -494,7 +494,7 @@ pub fn host_reperrcal(dir: &Path) -> HostCameraRun {
     use msreg_host::vision::frames::CameraDataset;
     let data = Dataset::open(dir).expect("dataset opens");
     let camera = CameraDataset::open(dir).expect("camera dataset opens");
-    let (frames, _) = camera_imu::cli::detect_corner_frames(
+    let (frames, _) = camera_imu::detect_corner_frames(
         &camera,
         &msreg_host::vision::DetectorParams::default(),
         &|_| {},

@@ -11,9 +11,8 @@
 //! Both start from the hand-eye rotation of PnP rotation increments against the integrated
 //! gyro (eq. 4.5) and a zero translation (no tape measure).
 
-pub mod cli;
+pub mod frames;
 
-use super::InputError;
 use std::time::Instant;
 
 use msreg_estimator::camera::Camera;
@@ -32,8 +31,11 @@ use super::pose_imu::{
     self, describe_moving_start, drive_imu, finish, initial_state, moving_start, with_gyro_bias,
     with_moving_start, ImuHooks, PoseImuOptions, PoseImuReport, Run, Timing,
 };
+use super::InputError;
 use crate::dataset::{ExtrinsicEstimate, ImuNoiseYaml, ImuRecord, PoseRecord, PoseSensorYaml};
 use crate::vision::pnp::{solve_pnp, PnpSolution};
+
+pub use frames::{detect_corner_frames, DetectionSummary};
 
 /// The target corners found in one image.
 #[derive(Debug, Clone, PartialEq)]
@@ -58,7 +60,7 @@ pub struct CameraImuInput<'a> {
 }
 
 /// Which measurement the filter fuses.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum CameraUpdate {
     /// Corner reprojection (RepErrCal).

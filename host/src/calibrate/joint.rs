@@ -14,7 +14,6 @@
 //! they come from. `T_cam_lidar` is derived with its covariance from the joint covariance,
 //! cross terms included.
 
-pub mod cli;
 mod consistency;
 mod plane;
 

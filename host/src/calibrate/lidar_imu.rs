@@ -35,7 +35,6 @@
 //!    odometry chain restarts at that scan; a scan with zero points is skipped; a malformed
 //!    scan file stops the run with an error naming it.
 
-pub mod cli;
 pub mod moving;
 
 use std::time::Instant;

@@ -1,4 +1,4 @@
-//! `msreg monitor <dataset>`: the command-line face of [`super::monitor`].
+//! `msreg monitor <dataset>`: the command-line face of [`msreg_host::monitor::monitor`].
 //!
 //! Exit codes: 0 when the replay ran, alarms or not (finding a knock is the monitor doing its
 //! job; the alarms are printed and in the report); with `--fail-on-alarm`, 1 when an alarm
@@ -9,7 +9,7 @@ use std::path::PathBuf;
 use anyhow::{anyhow, Context};
 use clap::Args;
 
-use super::{monitor, DriveFiles, MonitorOptions, MonitorReport};
+use msreg_host::monitor::{monitor, DriveFiles, MonitorOptions, MonitorReport};
 
 /// `msreg monitor`.
 #[derive(Debug, Args)]
@@ -65,7 +65,7 @@ fn write_outputs(args: &MonitorArgs, report: &MonitorReport) -> anyhow::Result<(
         eprintln!("msreg: wrote {}", path.display());
     }
     if let Some(path) = &args.plot {
-        super::timeline::write_timeline_svg(path, report)?;
+        msreg_host::monitor::timeline::write_timeline_svg(path, report)?;
         eprintln!("msreg: wrote {}", path.display());
     }
     Ok(())
