@@ -4,6 +4,7 @@
 pub mod camera_imu;
 pub mod convergence;
 pub mod convert;
+pub mod driver;
 pub mod dynamic_init;
 pub mod error;
 pub mod extrinsic;

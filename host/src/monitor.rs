@@ -89,7 +89,7 @@ pub enum MonitorError {
     #[error("the monitor could not start: dynamic alignment with pose0 failed: {reason}")]
     NoAlignment {
         /// Why.
-        reason: crate::calibrate::pose_imu::MovingStartFailure,
+        reason: crate::calibrate::driver::MovingStartFailure,
     },
     /// No IMU state could be formed at the start.
     #[error("the monitor could not start: no IMU prior")]

@@ -29,8 +29,10 @@ use super::camera_imu::{
 use super::convert;
 use super::init;
 use super::lidar_imu::{rotation_init, LidarFeed, LidarImuOptions};
-use super::pose_imu::{drive_imu, finish, ImuHooks, PoseImuCalibration, Timing};
+use super::pose_imu::{PoseImuCalibration, Timing};
 use super::InputError;
+use crate::calibrate::driver::verdict::finish;
+use crate::calibrate::driver::{drive_imu, ImuHooks};
 use crate::camera_yaml::CheckerboardTarget;
 use crate::dataset::{ImuNoiseYaml, ImuRecord};
 use crate::lidar::ScanSource;

@@ -14,8 +14,8 @@ use super::{
     SENSOR_NAMES,
 };
 use crate::calibrate::convert;
+use crate::calibrate::driver::nominal_period_ns;
 use crate::calibrate::observability::{self, HeldDirection};
-use crate::calibrate::pose_imu::nominal_period_ns;
 use crate::dataset::{ExtrinsicEstimate, PoseRecord};
 
 /// Options of [`monitor`].

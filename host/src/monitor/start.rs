@@ -8,10 +8,10 @@ use nalgebra::{Isometry3, Vector3};
 
 use super::{MonitorError, MonitorInput};
 use crate::calibrate::convert;
+use crate::calibrate::driver::{moving_start, nominal_period_ns, MovingStart};
 use crate::calibrate::gyro_bias::{self, GyroBiasEstimate};
 use crate::calibrate::init::{self, RotationIncrement, Standstill};
 use crate::calibrate::planar::{self, PlanarMotion};
-use crate::calibrate::pose_imu::{moving_start, nominal_period_ns, MovingStart};
 
 /// Shortest stationary start used for the IMU prior, s.
 const MIN_STANDSTILL_S: f64 = 1.0;

@@ -28,7 +28,7 @@
 //!    stamps (the last firings), so step 1 is repeated on them and the odometry rebuilt at
 //!    the new offset until it settles (the raw increments' offset is off by several ms:
 //!    where in the sweep a raw match refers to depends on the scene).
-//! 3. **Alignment** (`pose_imu::moving_start` on that odometry at that offset), and the
+//! 3. **Alignment** (`crate::calibrate::driver::moving_start` on that odometry at that offset), and the
 //!    filter starts from it with its time offset at the estimate (and the prior's sigma:
 //!    the estimate's own sigma is optimistic, docs/lidar_imu.md "Moving start"). The
 //!    filter's measurement floor then anneals no faster than the IMU velocity's sigma
@@ -43,14 +43,14 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 use super::{last_firing_ns, load, LidarImuOptions};
 use crate::calibrate::convert;
+use crate::calibrate::driver::{
+    describe_moving_start, initial_state, moving_start, with_gyro_bias, with_moving_start,
+    FilterStart, MovingStart, MovingStartFailure, HAND_EYE_MIN_PAIRS,
+};
 use crate::calibrate::dynamic_init::{DynamicInitOptions, FilterPrior};
 use crate::calibrate::gyro_bias::{hand_eye_with_gyro_bias, GyroBiasEstimate};
 use crate::calibrate::init::{self, RotationIncrement, RotationInit};
 use crate::calibrate::planar::golden_section;
-use crate::calibrate::pose_imu::{
-    describe_moving_start, initial_state, moving_start, with_gyro_bias, with_moving_start,
-    FilterStart, MovingStart, MovingStartFailure, HAND_EYE_MIN_PAIRS,
-};
 use crate::dataset::{ImuNoiseYaml, ImuRecord, PoseRecord};
 use crate::lidar::{deskew_scan, PoseBuffer, ScanSource};
 use crate::ndt::{align, NdtTarget};
