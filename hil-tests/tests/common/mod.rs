@@ -5,7 +5,8 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use msreg_hil_tests::Qemu;
-use msreg_host::calibrate::pose_imu::{self, PoseImuCalibration, PoseImuInput, PoseImuOptions};
+use msreg_host::calibrate::driver::report::{PoseImuCalibration, PoseImuOptions};
+use msreg_host::calibrate::pose_imu::{self, PoseImuInput};
 use msreg_host::dataset::Dataset;
 use msreg_host::link::stream::{build_stream, ReplayStream, StreamOptions};
 use msreg_host::link::{Client, ClientOptions, Collected};

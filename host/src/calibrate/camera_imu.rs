@@ -25,9 +25,10 @@ use serde::Serialize;
 
 use super::extrinsic::ImuExtrinsicCalibration;
 use super::init;
-use super::pose_imu::{self, PoseImuOptions, Timing};
+use super::pose_imu::{self};
 use super::InputError;
 use crate::calibrate::driver::drive_imu;
+use crate::calibrate::driver::report::{PoseImuOptions, Timing};
 use crate::calibrate::driver::verdict::finish;
 use crate::dataset::{ExtrinsicEstimate, ImuNoiseYaml, ImuRecord, PoseRecord};
 

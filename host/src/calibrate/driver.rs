@@ -1,11 +1,11 @@
 //! The machinery every IMU pipeline shares (pose-IMU, camera-IMU, LiDAR-IMU, joint): the filter start (standstill or moving start, hand-eye rotation, gyro bias), the loop over the IMU record with the pipeline's measurement feed as hooks ([`drive_imu`], generic over the filter layout `E` and the sensor's [`ImuHooks`]), and in [`verdict`] the convergence checks and the report.
 
 use crate::calibrate::convert;
+use crate::calibrate::driver::report::PoseImuOptions;
 use crate::calibrate::dynamic_init::{self, DynamicInitInput, DynamicInitOptions, FilterPrior};
 use crate::calibrate::gyro_bias::{self, GyroBiasEstimate};
 use crate::calibrate::init::{self, Standstill};
 use crate::calibrate::planar::PlanarStart;
-use crate::calibrate::pose_imu::PoseImuOptions;
 use crate::calibrate::InputError;
 use crate::dataset::{ImuNoiseYaml, ImuRecord, PoseRecord};
 use msreg_estimator::{
@@ -14,6 +14,7 @@ use msreg_estimator::{
 };
 use nalgebra::{Isometry3, Vector3};
 
+pub mod report;
 pub mod verdict;
 
 /// The gyro bias known before the filter: the standstill's mean, else the motion fit, else
@@ -349,13 +350,58 @@ pub(crate) fn with_moving_start<T: Scalar>(
 }
 
 /// Median spacing of the odometry, ns.
-pub(crate) fn nominal_period_ns(poses: &[PoseRecord]) -> u64 {
+pub fn nominal_period_ns(poses: &[PoseRecord]) -> u64 {
     let mut d: Vec<u64> = poses
         .windows(2)
         .map(|w| w[1].stamp_ns - w[0].stamp_ns)
         .collect();
     d.sort_unstable();
     d.get(d.len() / 2).copied().unwrap_or(100_000_000)
+}
+
+/// The IMU part of the filter prior, the one definition the host pipelines and the wire
+/// `Config` of `msreg link replay` share: at rest (gravity and gyro bias of the standstill)
+/// if the recording starts still, else level from the mean of the first 400 samples with
+/// large orientation and velocity sigmas (the sigmas are zero at rest: the prior's own).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ImuStartPrior {
+    /// Mean accelerometer reading that sets gravity, m/s^2.
+    pub accel_mean: Vector3<f64>,
+    /// Starting gyro bias (the standstill's mean; zero when moving), rad/s.
+    pub gyro_bias: Vector3<f64>,
+    /// Orientation (rad) and velocity (m/s) sigmas of a moving start; `None` at rest.
+    pub moving_sigmas: Option<(f64, f64)>,
+}
+
+/// Orientation (rad) and velocity (m/s) sigmas of a moving start: gravity direction and
+/// velocity are only roughly known.
+const MOVING_START_SIGMAS: (f64, f64) = (0.1, 1.0);
+
+impl ImuStartPrior {
+    /// The prior of `imu` with its initial standstill, if any.
+    pub fn of(imu: &[ImuRecord], standstill: Option<&Standstill>) -> Self {
+        let accel_mean = standstill.map_or_else(
+            || {
+                let n = imu.len().min(400);
+                imu[..n].iter().map(|r| r.accel).sum::<Vector3<f64>>() / n as f64
+            },
+            |s| s.accel_mean,
+        );
+        Self {
+            accel_mean,
+            gyro_bias: standstill.map_or_else(Vector3::zeros, |s| s.gyro_mean),
+            moving_sigmas: standstill.is_none().then_some(MOVING_START_SIGMAS),
+        }
+    }
+}
+
+/// Sigma of the time-offset prior: the option's when the offset is estimated, else zero.
+pub fn time_offset_sigma_s(options: &PoseImuOptions) -> f64 {
+    if options.estimate_time_offset {
+        options.time_offset_sigma_s
+    } else {
+        0.0
+    }
 }
 
 /// The filter prior: at rest if the recording starts still, else level with large sigmas.
@@ -365,36 +411,25 @@ pub(crate) fn initial_state<T: Scalar>(
     rotation: &nalgebra::UnitQuaternion<f64>,
     options: &PoseImuOptions,
 ) -> Result<InitialState<T, 1>, InputError> {
-    let accel = standstill.map_or_else(
-        || {
-            let n = imu.len().min(400);
-            imu[..n].iter().map(|r| r.accel).sum::<Vector3<f64>>() / n as f64
-        },
-        |s| s.accel_mean,
-    );
+    let prior = ImuStartPrior::of(imu, standstill);
+    let accel = prior.accel_mean;
     let mut state =
         InitialState::<T, 1>::at_rest(convert::vec3(&accel)).ok_or(InputError::NotGravity {
             accel_norm: accel.norm(),
         })?;
-    match standstill {
-        Some(s) => {
-            state.imu.gyro_bias = convert::vec3(&s.gyro_mean);
-        }
+    match prior.moving_sigmas {
         None => {
-            // Moving start: gravity direction and velocity are only roughly known.
-            state.sigma_orientation = T::lit(0.1);
-            state.sigma_velocity = T::lit(1.0);
+            state.imu.gyro_bias = convert::vec3(&prior.gyro_bias);
+        }
+        Some((orientation, velocity)) => {
+            state.sigma_orientation = T::lit(orientation);
+            state.sigma_velocity = T::lit(velocity);
         }
     }
     let extrinsic = msreg_estimator::Pose::new(
         convert::pose::<T>(&Isometry3::from_parts(Default::default(), *rotation)).rotation,
         Vector3::zeros(),
     );
-    let td_sigma = if options.estimate_time_offset {
-        options.time_offset_sigma_s
-    } else {
-        0.0
-    };
     Ok(state
         .with_extrinsic(
             0,
@@ -402,5 +437,5 @@ pub(crate) fn initial_state<T: Scalar>(
             T::lit(options.rotation_sigma_rad),
             T::lit(options.translation_sigma_m),
         )
-        .with_time_offset(0, T::zero(), T::lit(td_sigma)))
+        .with_time_offset(0, T::zero(), T::lit(time_offset_sigma_s(options))))
 }

@@ -29,8 +29,8 @@ use super::camera_imu::{
 use super::convert;
 use super::init;
 use super::lidar_imu::{rotation_init, LidarFeed, LidarImuOptions};
-use super::pose_imu::{PoseImuCalibration, Timing};
 use super::InputError;
+use crate::calibrate::driver::report::{PoseImuCalibration, Timing};
 use crate::calibrate::driver::verdict::finish;
 use crate::calibrate::driver::{drive_imu, ImuHooks};
 use crate::camera_yaml::CheckerboardTarget;
@@ -199,7 +199,7 @@ pub fn calibrate<T: Scalar>(
 /// The joint filter at its start and what the report says of it.
 struct JointStart<T: Scalar> {
     ekf: JointEkf<T>,
-    camera_prior: super::pose_imu::PoseImuOptions,
+    camera_prior: crate::calibrate::driver::report::PoseImuOptions,
     camera_rotation_init: init::RotationInit,
     lidar_rotation: init::RotationInit,
 }

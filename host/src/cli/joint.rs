@@ -16,11 +16,11 @@ use super::camera_imu::{load_corner_frames, LoadedFrames};
 use super::outcome::{progress_bar, Outcome};
 use msreg_host::calibrate::camera_imu::invert_with_covariance;
 use msreg_host::calibrate::camera_imu::DetectionSummary;
+use msreg_host::calibrate::driver::report::PoseImuReport;
 use msreg_host::calibrate::joint::{
     calibrate, chained_pairwise, JointCalibration, JointInput, JointOptions, LoopConsistency,
     OverlaySample, PlaneStats,
 };
-use msreg_host::calibrate::pose_imu::PoseImuReport;
 use msreg_host::calibrate::InputError;
 use msreg_host::camera_yaml::{read_target_yaml, Target};
 use msreg_host::dataset::{CalibrationResult, Dataset, ExtrinsicEstimate, TARGET_YAML};

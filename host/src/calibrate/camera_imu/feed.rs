@@ -2,9 +2,9 @@
 
 use super::*;
 use crate::calibrate::convert;
+use crate::calibrate::driver::report::PoseImuOptions;
 use crate::calibrate::driver::verdict::Run;
 use crate::calibrate::driver::ImuHooks;
-use crate::calibrate::pose_imu::PoseImuOptions;
 use crate::calibrate::InputError;
 use crate::dataset::ImuRecord;
 use msreg_estimator::camera::Camera;

@@ -1,7 +1,7 @@
 //! What camera-IMU calibration reports: per-image reprojection, the initialisation, a reprojection sample for the overlay.
 
 use super::*;
-use crate::calibrate::pose_imu::PoseImuReport;
+use crate::calibrate::driver::report::PoseImuReport;
 use nalgebra::Vector2;
 use serde::Serialize;
 

@@ -2,12 +2,12 @@
 
 use super::*;
 use crate::calibrate::convert;
+use crate::calibrate::driver::report::PoseImuOptions;
 use crate::calibrate::driver::{
     describe_moving_start, initial_state, moving_start, with_gyro_bias, with_moving_start,
 };
 use crate::calibrate::gyro_bias;
 use crate::calibrate::init;
-use crate::calibrate::pose_imu::PoseImuOptions;
 use crate::calibrate::InputError;
 use crate::dataset::PoseRecord;
 use msreg_estimator::{CameraImuEkf, FilterConfig, InitialState, Scalar};

@@ -1,11 +1,11 @@
 //! The end of an IMU pipeline's run: the convergence history, the checks that decide convergence (sigmas, NIS, observability) and the report.
 
 use crate::calibrate::convert;
-use crate::calibrate::init::{self, Standstill};
-use crate::calibrate::observability::{self, HeldDirection};
-use crate::calibrate::pose_imu::{
+use crate::calibrate::driver::report::{
     EventRecord, HistoryPoint, PoseImuCalibration, PoseImuReport, Timing,
 };
+use crate::calibrate::init::{self, Standstill};
+use crate::calibrate::observability::{self, HeldDirection};
 use crate::dataset::PoseRecord;
 use msreg_estimator::{
     health::HealthEvent, Ekf, Error as FilterError, PoseImuEkf, RelativePose, Scalar,

@@ -1,6 +1,6 @@
 //! The options of LiDAR-IMU calibration: NDT, deskew, the measurement noise and its adaptation.
 
-use crate::calibrate::pose_imu::PoseImuOptions;
+use crate::calibrate::driver::report::PoseImuOptions;
 use crate::ndt::NdtParams;
 use serde::Serialize;
 

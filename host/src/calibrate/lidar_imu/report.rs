@@ -1,6 +1,6 @@
 //! What LiDAR-IMU calibration reports: per-scan records, stage timing, the report.
 
-use crate::calibrate::pose_imu::PoseImuReport;
+use crate::calibrate::driver::report::PoseImuReport;
 use crate::ndt::NdtResult;
 use nalgebra::Isometry3;
 use serde::Serialize;
