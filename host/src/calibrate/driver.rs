@@ -1,4 +1,7 @@
-//! The machinery every IMU pipeline shares (pose-IMU, camera-IMU, LiDAR-IMU, joint): the filter start (standstill or moving start, hand-eye rotation, gyro bias), the loop over the IMU record with the pipeline's measurement feed as hooks ([`drive_imu`], generic over the filter layout `E` and the sensor's [`ImuHooks`]), and in [`verdict`] the convergence checks and the report.
+//! The machinery every IMU pipeline shares (pose-IMU, camera-IMU, LiDAR-IMU, joint): the filter
+//! start (standstill or moving start, hand-eye rotation, gyro bias), the loop over the IMU record
+//! with the pipeline's measurement feed as hooks ([`drive_imu`], generic over the filter layout `E`
+//! and the sensor's [`ImuHooks`]), and in [`verdict`] the convergence checks and the report.
 
 use crate::calibrate::convert;
 use crate::calibrate::driver::report::PoseImuOptions;

@@ -1,4 +1,5 @@
-//! The camera's measurement feed of the IMU driver: each image's corners (RepErrCal) or PnP relative pose (MoCal) fused when due, with the reprojection bookkeeping of the report.
+//! The camera's measurement feed of the IMU driver: each image's corners (RepErrCal) or PnP
+//! relative pose (MoCal) fused when due, with the reprojection bookkeeping of the report.
 
 use super::*;
 use crate::calibrate::convert;

@@ -1,4 +1,5 @@
-//! PnP poses of the images as odometry (MoCal, the start of RepErrCal): the camera in the target, increments with their noise, the pixel sigma from the PnP residuals.
+//! PnP poses of the images as odometry (MoCal, the start of RepErrCal): the camera in the target,
+//! increments with their noise, the pixel sigma from the PnP residuals.
 
 use super::*;
 use crate::calibrate::convert;

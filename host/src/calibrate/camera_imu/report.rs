@@ -1,4 +1,5 @@
-//! What camera-IMU calibration reports: per-image reprojection, the initialisation, a reprojection sample for the overlay.
+//! What camera-IMU calibration reports: per-image reprojection, the initialisation, a reprojection
+//! sample for the overlay.
 
 use super::*;
 use crate::calibrate::driver::report::PoseImuReport;

@@ -1,4 +1,5 @@
-//! The camera-IMU filter start: the IMU state from a standstill or the moving start, the extrinsic and target priors (RepErrCal's from MoCal's result).
+//! The camera-IMU filter start: the IMU state from a standstill or the moving start, the extrinsic
+//! and target priors (RepErrCal's from MoCal's result).
 
 use super::*;
 use crate::calibrate::convert;

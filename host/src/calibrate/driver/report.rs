@@ -1,4 +1,5 @@
-//! What every IMU pipeline shares besides the loop: the filter tuning ([`PoseImuOptions`]), the convergence history, health events, timing and the report of the filter run.
+//! What every IMU pipeline shares besides the loop: the filter tuning ([`PoseImuOptions`]), the
+//! convergence history, health events, timing and the report of the filter run.
 
 use crate::calibrate::extrinsic::ImuExtrinsicCalibration;
 use crate::calibrate::observability::DofObservability;

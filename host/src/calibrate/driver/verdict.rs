@@ -1,4 +1,5 @@
-//! The end of an IMU pipeline's run: the convergence history, the checks that decide convergence (sigmas, NIS, observability) and the report.
+//! The end of an IMU pipeline's run: the convergence history, the checks that decide convergence
+//! (sigmas, NIS, observability) and the report.
 
 use crate::calibrate::convert;
 use crate::calibrate::driver::report::{

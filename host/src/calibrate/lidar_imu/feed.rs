@@ -1,4 +1,6 @@
-//! The LiDAR's measurement feed of the IMU driver: scans deskewed with the filter's poses, registered by NDT to the previous one, fused as relative poses when due ([`update`](super::update): the registration and the update).
+//! The LiDAR's measurement feed of the IMU driver: scans deskewed with the filter's poses,
+//! registered by NDT to the previous one, fused as relative poses when due
+//! ([`update`](super::update): the registration and the update).
 
 use super::*;
 use crate::calibrate::convert;

@@ -1,4 +1,5 @@
-//! The hand-eye rotation start of LiDAR-IMU calibration: raw-scan NDT rotation increments against the integrated gyro, with the gyro bias fitted to the motion when there is no standstill.
+//! The hand-eye rotation start of LiDAR-IMU calibration: raw-scan NDT rotation increments against
+//! the integrated gyro, with the gyro bias fitted to the motion when there is no standstill.
 
 use super::*;
 use crate::calibrate::driver::{hand_eye_and_gyro_bias, HAND_EYE_MIN_PAIRS};
