@@ -55,6 +55,9 @@ rustfmt --edition 2021 --check firmware/build.rs firmware/src/lib.rs firmware/sr
 step "lint (cargo clippy --workspace --all-targets -D warnings)"
 cargo clippy --workspace --all-targets -- -D warnings
 
+step "import graph (tools/import_graph.py: imports point down, no cycle, no CLI crate in the library)"
+python3 tools/import_graph.py
+
 step "test (cargo test --workspace --release)"
 cargo test --workspace --release
 

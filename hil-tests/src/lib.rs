@@ -166,7 +166,7 @@ impl Qemu {
     }
 
     /// Frames of QEMU's stdout that did not decode (should be none).
-    pub fn undecodable_log_frames(&self) -> Vec<String> {
+    pub fn undecodable_log_frames(&self) -> Vec<defmt::DecodeError> {
         self.log()
             .into_iter()
             .filter_map(|d| match d {

@@ -11,7 +11,7 @@ mod monitor;
 use std::time::Duration;
 
 use common::*;
-use msreg_host::link::cli::{replay, ReplayOptions};
+use msreg_host::link::{replay, ReplayOptions};
 use msreg_host::sim::{simulate_camera_imu, CameraImuSimConfig, Knock, SimConfig};
 use msreg_protocol::{ErrorKind, HealthState, UpdateKind};
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
@@ -40,7 +40,7 @@ fn firmware_estimate_matches_host_f64_pipeline_and_ground_truth() {
     let status = outcome.status.expect("device status");
     println!(
         "{}",
-        msreg_host::link::cli::summary(&outcome.collected, Some(&status))
+        msreg_host::link::summary(&outcome.collected, Some(&status))
     );
     assert_eq!(status.imu_samples as usize, data.imu.len());
     assert_eq!(
@@ -67,7 +67,7 @@ fn firmware_estimate_matches_host_f64_pipeline_and_ground_truth() {
     println!("device vs truth: {truth:?}");
     assert!(truth.within_three_sigma, "{truth:?}");
     // and the recording re-opens
-    let shown = msreg_host::link::cli::show(&record).expect("recording re-opens");
+    let shown = msreg_host::link::show(&record).expect("recording re-opens");
     assert!(shown.contains("updates"), "{shown}");
     // and its defmt log reached the host decoded: boot, configuration, progress every 5 s
     for (prefix, at_least) in [
@@ -173,7 +173,7 @@ fn faults_are_typed_counted_and_the_session_recovers() {
     println!("injected {injected:?}");
     println!(
         "{}",
-        msreg_host::link::cli::summary(&run.client.collected, Some(&status))
+        msreg_host::link::summary(&run.client.collected, Some(&status))
     );
     for kind in [
         ErrorKind::Framing,
@@ -260,7 +260,7 @@ fn camera_corner_sets_on_the_device_match_host_reperrcal_and_ground_truth() {
     // no fault
     let status = outcome.status.expect("device status");
     let c = &outcome.collected;
-    println!("{}", msreg_host::link::cli::summary(c, Some(&status)));
+    println!("{}", msreg_host::link::summary(c, Some(&status)));
     assert_eq!(status.imu_samples as usize, imu_samples);
     assert_eq!(
         status.errors.iter().sum::<u32>(),
@@ -398,7 +398,7 @@ fn camera_messages_out_of_order_or_invalid_are_typed_faults() {
     let counts = |k: ErrorKind| status.errors[k.index()];
     println!(
         "{}",
-        msreg_host::link::cli::summary(&client.collected, Some(&status))
+        msreg_host::link::summary(&client.collected, Some(&status))
     );
     // Then each fault is counted and reported once by its kind, and nothing reset the device
     for kind in [

@@ -5,7 +5,7 @@
 //!
 //! Run: `cargo run --release -p msreg --example camera_imu_study -- [seeds] [duration_s]`
 
-use msreg_host::calibrate::camera_imu::cli::detect_corner_frames;
+use msreg_host::calibrate::camera_imu::detect_corner_frames;
 use msreg_host::calibrate::camera_imu::{
     calibrate, CameraImuCalibration, CameraImuInput, CameraImuOptions, CameraUpdate,
 };

@@ -13,7 +13,7 @@ use std::io::Write;
 use std::time::Instant;
 
 use msreg_estimator::camera::{Distortion, Projection};
-use msreg_host::mi::prior_map::cli::read_t_world_cam;
+use msreg_host::dataset::read_t_world_cam;
 use msreg_host::mi::prior_map::input::read_input;
 use msreg_host::mi::prior_map::{
     grid_pose, grid_scene, grid_stage, mi_scene, refine_stage, yaw_error, RegisterOptions,

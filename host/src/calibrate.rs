@@ -4,7 +4,9 @@
 pub mod camera_imu;
 pub mod convergence;
 pub mod convert;
+pub mod driver;
 pub mod dynamic_init;
+pub mod error;
 pub mod extrinsic;
 pub mod gyro_bias;
 pub mod init;
@@ -13,3 +15,5 @@ pub mod lidar_imu;
 pub mod observability;
 pub mod planar;
 pub mod pose_imu;
+
+pub use error::InputError;

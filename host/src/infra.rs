@@ -9,7 +9,6 @@ pub mod align;
 pub mod ba;
 pub mod ba_solver;
 pub mod blocksym;
-pub mod cli;
 pub mod colmap;
 pub mod dataset;
 pub mod detect;

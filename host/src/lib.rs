@@ -5,7 +5,6 @@
 pub mod bag;
 pub mod calibrate;
 pub mod camera_yaml;
-pub mod command;
 pub mod dataset;
 pub mod eval;
 pub mod infra;

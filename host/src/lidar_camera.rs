@@ -14,7 +14,7 @@
 
 pub mod board;
 pub mod camera_features;
-pub mod cli;
+pub mod dataset;
 pub mod lidar_features;
 pub mod mlre;
 pub mod pipeline;
@@ -25,4 +25,5 @@ pub mod solver;
 mod tests;
 
 pub use board::Board;
+pub use dataset::{read_image_list, LidarCameraDataset, LidarCameraInputError};
 pub use sim::{simulate_lidar_camera, LidarCameraSim, LidarCameraSimConfig, LidarModel};

@@ -3,19 +3,16 @@
 //! Exit codes (CONVENTIONS.md): 0 success; 1 the calibration ran but did not converge or
 //! failed its checks (the result is still written, with the reason); 2 bad input.
 
-mod aruco_cmd;
-mod convert_cmd;
-mod demo_cmd;
-mod detect_cmd;
-mod match_cmd;
+mod cli;
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::anyhow;
 use clap::{Args, Parser, Subcommand};
-use msreg_host::calibrate::pose_imu::{self, PoseImuInput, PoseImuOptions};
-use msreg_host::command::Outcome;
+use cli::outcome::Outcome;
+use msreg_host::calibrate::driver::report::PoseImuOptions;
+use msreg_host::calibrate::pose_imu::{self, PoseImuInput};
 use msreg_host::dataset::{CalibrationResult, Dataset};
 use msreg_host::eval;
 use msreg_host::sim::{self, SimConfig};
@@ -43,12 +40,12 @@ enum Command {
     Calibrate {
         /// Topics and noise files when the dataset argument is a bag.
         #[command(flatten)]
-        bag: convert_cmd::BagFlags,
+        bag: cli::convert::BagFlags,
         #[command(subcommand)]
         task: Task,
     },
     /// Convert a ROS 1 bag or an MCAP file to a dataset directory.
-    Convert(convert_cmd::ConvertArgs),
+    Convert(cli::convert::ConvertArgs),
     /// Errors of a result file against a dataset's groundtruth/.
     Eval {
         /// Result YAML.
@@ -61,31 +58,31 @@ enum Command {
     },
     /// Simulate, calibrate and evaluate every pipeline (pose-IMU, camera-IMU, LiDAR-IMU,
     /// LiDAR-camera) on short recordings; prints one table of errors against ground truth.
-    Demo(demo_cmd::DemoArgs),
+    Demo(cli::demo::DemoArgs),
     /// Talk to the firmware over a serial port: replay a dataset, monitor, show a recording.
     Link {
         #[command(subcommand)]
-        command: msreg_host::link::cli::LinkCommand,
+        command: cli::link::LinkCommand,
     },
     /// NDT scan matching of one pair: prints T_target_source, fitness, iterations, time.
-    Match(match_cmd::MatchArgs),
+    Match(cli::match_cmd::MatchArgs),
     /// Detect calibration targets in images.
     Detect {
         #[command(subcommand)]
         target: DetectTarget,
     },
     /// Replay the calibration health monitor over IMU + pose0 + pose1 (alarms, timeline).
-    Monitor(msreg_host::monitor::cli::MonitorArgs),
+    Monitor(cli::monitor::MonitorArgs),
 }
 
 #[derive(Subcommand)]
 enum DetectTarget {
     /// Inner corners of a Kalibr checkerboard, as CSV `image,corner_id,u,v`.
-    Checkerboard(detect_cmd::DetectCheckerboardArgs),
+    Checkerboard(cli::detect::DetectCheckerboardArgs),
     /// ArUco markers, as CSV `image,id,u0,v0,...,u3,v3` (corners in OpenCV order).
-    Aruco(aruco_cmd::DetectArucoArgs),
+    Aruco(cli::aruco::DetectArucoArgs),
     /// Bright blobs (e.g. infrastructure cameras in the fisheye), as CSV `image,u,v,area,peak`.
-    Blobs(aruco_cmd::DetectBlobsArgs),
+    Blobs(cli::aruco::DetectBlobsArgs),
 }
 
 // The variants are the subcommand names (`pose-imu`, `lidar-imu`, `camera-imu`).
@@ -95,23 +92,23 @@ enum Scenario {
     /// IMU + generic pose sensor (odometry) with drifting increments.
     PoseImu(SimulatePoseImu),
     /// IMU + spinning LiDAR (Ouster OS1-like, motion-distorted scans) in a box-world room.
-    LidarImu(msreg_host::calibrate::lidar_imu::cli::SimulateLidarImu),
+    LidarImu(cli::lidar_imu::SimulateLidarImu),
     /// IMU + camera waved in front of a checkerboard (rendered images, true corners).
-    CameraImu(msreg_host::sim::camera_cli::SimulateCameraImu),
+    CameraImu(cli::sim_camera::SimulateCameraImu),
     /// Static LiDAR + camera suite and a plain board at many still poses.
-    LidarCamera(msreg_host::lidar_camera::cli::SimulateLidarCamera),
+    LidarCamera(cli::lidar_camera::SimulateLidarCamera),
     /// IMU + camera + spinning LiDAR on one hand-held rig, in front of a checkerboard on a
     /// board both sensors see (joint calibration, both time offsets).
-    Joint(msreg_host::sim::joint_cli::SimulateJoint),
+    Joint(cli::sim_joint::SimulateJoint),
     /// Robot with an upward fisheye and a marker driving a loop under ~40 static
     /// infrastructure cameras (marker corners, blobs, COLMAP VO model).
-    Infra(msreg_host::infra::cli::SimulateInfra),
+    Infra(cli::infra::SimulateInfra),
     /// On-vehicle monitoring: a car-like drive with IMU, LiDAR odometry (pose0) and camera
     /// visual odometry (pose1), a camera knock partway through.
-    Drive(msreg_host::sim::drive_cli::SimulateDrive),
+    Drive(cli::sim_drive::SimulateDrive),
     /// A static downward fisheye at an intersection in a prior map (LiDAR map with
     /// reflectivity, satellite ortho image, GPS prior, survey points).
-    PriorMap(msreg_host::sim::prior_map_cli::SimulatePriorMap),
+    PriorMap(cli::sim_prior_map::SimulatePriorMap),
 }
 
 #[derive(Args)]
@@ -149,21 +146,21 @@ enum Task {
     /// Motion-based IMU to pose-sensor calibration (EKF over IMU + odometry).
     PoseImu(CalibratePoseImu),
     /// LiDAR-IMU calibration: predict, deskew, NDT, relative-pose update (EKF).
-    LidarImu(msreg_host::calibrate::lidar_imu::cli::CalibrateLidarImu),
+    LidarImu(cli::lidar_imu::CalibrateLidarImu),
     /// LiDAR-camera calibration with a plain board (PBPC-Cal or PPC-Cal), judged by MLRE.
-    LidarCamera(msreg_host::lidar_camera::cli::CalibrateLidarCamera),
+    LidarCamera(cli::lidar_camera::CalibrateLidarCamera),
     /// Camera-IMU calibration from checkerboard images: corner reprojection (RepErrCal) or
     /// PnP relative poses (MoCal) in the EKF.
-    CameraImu(msreg_host::calibrate::camera_imu::cli::CalibrateCameraImu),
+    CameraImu(cli::camera_imu::CalibrateCameraImu),
     /// Static infrastructure cameras registered from a robot's VO (COLMAP model), marker
     /// detections and blobs (chapter 6).
-    Infra(msreg_host::infra::cli::CalibrateInfra),
+    Infra(cli::infra::CalibrateInfra),
     /// Joint LiDAR-IMU-camera calibration in one EKF (chapter 5): LiDAR relative poses,
     /// checkerboard corners and the board plane both sensors see.
-    Joint(msreg_host::calibrate::joint::cli::CalibrateJoint),
+    Joint(cli::joint::CalibrateJoint),
     /// A static (fisheye) camera registered in a prior map: LiDAR map with reflectivity,
     /// satellite ortho image, GPS prior (chapter 7; ORB + PnP, then mutual information).
-    PriorMap(msreg_host::mi::prior_map::cli::CalibratePriorMap),
+    PriorMap(cli::prior_map::CalibratePriorMap),
 }
 
 #[derive(Args)]
@@ -222,59 +219,59 @@ fn run(command: Command) -> Result<(), Failure> {
         } => simulate_pose_imu(&args),
         Command::Simulate {
             scenario: Scenario::LidarImu(args),
-        } => Ok(msreg_host::calibrate::lidar_imu::cli::simulate(&args)?),
+        } => Ok(cli::lidar_imu::simulate(&args)?),
         Command::Simulate {
             scenario: Scenario::CameraImu(args),
-        } => Ok(msreg_host::sim::camera_cli::simulate(&args)?),
+        } => Ok(cli::sim_camera::simulate(&args)?),
         Command::Simulate {
             scenario: Scenario::Joint(args),
-        } => Ok(msreg_host::sim::joint_cli::simulate(&args)?),
+        } => Ok(cli::sim_joint::simulate(&args)?),
         Command::Simulate {
             scenario: Scenario::LidarCamera(args),
-        } => Ok(msreg_host::lidar_camera::cli::simulate(&args)?),
+        } => Ok(cli::lidar_camera::simulate(&args)?),
         Command::Simulate {
             scenario: Scenario::Infra(args),
-        } => Ok(msreg_host::infra::cli::simulate(&args)?),
+        } => Ok(cli::infra::simulate(&args)?),
         Command::Eval {
             result,
             dataset,
             json,
         } => evaluate(&result, &dataset, json),
-        Command::Demo(args) => demo_cmd::run_demo(&args),
-        Command::Convert(args) => convert_cmd::run(&args)
+        Command::Demo(args) => cli::demo::run_demo(&args),
+        Command::Convert(args) => cli::convert::run(&args)
             .map(|_| ())
             .map_err(Failure::BadInput),
-        Command::Link { command } => Ok(msreg_host::link::cli::run(command)?),
+        Command::Link { command } => Ok(cli::link::run(command)?),
         Command::Detect {
             target: DetectTarget::Checkerboard(args),
-        } => detect_cmd::run(&args)
+        } => cli::detect::run(&args)
             .map(|_| ())
             .map_err(Failure::BadInput),
         Command::Detect {
             target: DetectTarget::Aruco(args),
-        } => aruco_cmd::run_aruco(&args)
+        } => cli::aruco::run_aruco(&args)
             .map(|_| ())
             .map_err(Failure::BadInput),
         Command::Detect {
             target: DetectTarget::Blobs(args),
-        } => aruco_cmd::run_blobs(&args)
+        } => cli::aruco::run_blobs(&args)
             .map(|_| ())
             .map_err(Failure::BadInput),
         Command::Simulate {
             scenario: Scenario::Drive(args),
-        } => Ok(msreg_host::sim::drive_cli::simulate(&args)?),
+        } => Ok(cli::sim_drive::simulate(&args)?),
         Command::Simulate {
             scenario: Scenario::PriorMap(args),
-        } => Ok(msreg_host::sim::prior_map_cli::simulate(&args)?),
-        Command::Monitor(args) => match msreg_host::monitor::cli::run(&args)? {
-            msreg_host::monitor::cli::MonitorOutcome::Ran => Ok(()),
-            msreg_host::monitor::cli::MonitorOutcome::Failed(why) => {
+        } => Ok(cli::sim_prior_map::simulate(&args)?),
+        Command::Monitor(args) => match cli::monitor::run(&args)? {
+            cli::monitor::MonitorOutcome::Ran => Ok(()),
+            cli::monitor::MonitorOutcome::Failed(why) => {
                 eprintln!("msreg: monitor: {why}");
                 std::process::exit(1)
             }
         },
-        Command::Match(args) => match match_cmd::run(&args)? {
-            match_cmd::MatchOutcome { ok: true } => Ok(()),
+        Command::Match(args) => match cli::match_cmd::run(&args)? {
+            cli::match_cmd::MatchOutcome { ok: true } => Ok(()),
             _ => Err(Failure::NotConverged(
                 "NDT did not converge or the geometry is degenerate".into(),
             )),
@@ -284,18 +281,16 @@ fn run(command: Command) -> Result<(), Failure> {
 
 /// `msreg calibrate <task>`: a bag given as the dataset is converted first (its temporary
 /// dataset lives until the calibration has written its outputs).
-fn calibrate(bag: &convert_cmd::BagFlags, mut task: Task) -> Result<(), Failure> {
-    let _converted = convert_cmd::dataset_from_bag(task.dataset_mut(), bag)?;
+fn calibrate(bag: &cli::convert::BagFlags, mut task: Task) -> Result<(), Failure> {
+    let _converted = cli::convert::dataset_from_bag(task.dataset_mut(), bag)?;
     match task {
         Task::PoseImu(args) => calibrate_pose_imu(&args),
-        Task::LidarImu(args) => {
-            exit_code_of(msreg_host::calibrate::lidar_imu::cli::calibrate(&args)?)
-        }
-        Task::LidarCamera(args) => exit_code_of(msreg_host::lidar_camera::cli::calibrate(&args)?),
-        Task::CameraImu(args) => exit_code_of(msreg_host::calibrate::camera_imu::cli::run(&args)?),
-        Task::Joint(args) => exit_code_of(msreg_host::calibrate::joint::cli::run(&args)?),
-        Task::PriorMap(args) => exit_code_of(msreg_host::mi::prior_map::cli::calibrate(&args)?),
-        Task::Infra(args) => match msreg_host::infra::cli::calibrate(&args)? {
+        Task::LidarImu(args) => exit_code_of(cli::lidar_imu::calibrate(&args)?),
+        Task::LidarCamera(args) => exit_code_of(cli::lidar_camera::calibrate(&args)?),
+        Task::CameraImu(args) => exit_code_of(cli::camera_imu::run(&args)?),
+        Task::Joint(args) => exit_code_of(cli::joint::run(&args)?),
+        Task::PriorMap(args) => exit_code_of(cli::prior_map::calibrate(&args)?),
+        Task::Infra(args) => match cli::infra::calibrate(&args)? {
             true => Ok(()),
             false => Err(Failure::NotConverged(
                 "some infrastructure cameras could not be registered (listed above)".into(),
@@ -369,8 +364,8 @@ fn calibrate_pose_imu(args: &CalibratePoseImu) -> Result<(), Failure> {
         pose_imu::calibrate::<f64>(&input, &options, &mut progress)
     };
     bar.finish_and_clear();
-    let calibration = outcome.map_err(|pose_imu::PoseImuError::BadInput(m)| {
-        Failure::BadInput(anyhow!("{}: {m}", args.dataset.display()))
+    let calibration = outcome.map_err(|e: msreg_host::calibrate::InputError| {
+        Failure::BadInput(anyhow!("{}: {e}", args.dataset.display()))
     })?;
     let result = CalibrationResult {
         pose0: Some(calibration.imu_sensor_estimate()),
@@ -408,7 +403,7 @@ fn warn_unobservable(rows: &[msreg_host::calibrate::observability::DofObservabil
 }
 
 fn progress_bar() -> indicatif::ProgressBar {
-    msreg_host::command::progress_bar(1000, "{spinner} filtering [{bar:40}] {percent}% {elapsed}")
+    cli::outcome::progress_bar(1000, "{spinner} filtering [{bar:40}] {percent}% {elapsed}")
 }
 
 fn evaluate(result: &Path, dataset: &Path, json: bool) -> Result<(), Failure> {

@@ -12,7 +12,6 @@
 //! - [`markings`]: lane-marking crossings, an independent geometric check of an extrinsic
 //!   on a road scene (used to judge the real reference).
 
-pub mod cli;
 pub mod histogram;
 pub mod markings;
 pub mod prior_map;

@@ -15,7 +15,7 @@
 //! `calibrate::planar`) the lever arm of both sensors along the rotation axis is held at the
 //! calibration of record (not observable; a Schmidt direction).
 
-pub mod cli;
+mod files;
 mod replay;
 pub mod start;
 pub mod timeline;
@@ -25,6 +25,7 @@ use serde::Serialize;
 use crate::calibrate::observability::DofObservability;
 use crate::dataset::{ExtrinsicEstimate, ImuNoiseYaml, ImuRecord, PoseRecord, PoseSensorYaml};
 
+pub use files::{DriveFiles, DriveFilesError};
 pub use replay::{
     monitor, monitor_prior, pose_steps, MonitorOptions, PoseStep, ZERO_VELOCITY_EVERY,
 };
@@ -51,12 +52,67 @@ pub struct MonitorInput<'a> {
 /// Why the monitor could not run.
 #[derive(Debug, thiserror::Error)]
 pub enum MonitorError {
-    /// The input is unusable (the message names the file).
-    #[error("{0}")]
-    BadInput(String),
-    /// The filter could not be started on this recording.
-    #[error("the monitor could not start: {0}")]
-    NoStart(String),
+    /// `imu0/data.csv` has fewer than two samples.
+    #[error("imu0/data.csv: fewer than two IMU samples")]
+    TooFewImuSamples,
+    /// A pose sensor has fewer than two poses.
+    #[error("{sensor}/data.csv: fewer than two poses")]
+    TooFewPoses {
+        /// `pose0` or `pose1`.
+        sensor: &'static str,
+    },
+    /// The mean accelerometer reading of the standstill is not gravity.
+    #[error(
+        "imu0/data.csv: mean accelerometer reading {accel_norm:.2} m/s^2 at rest is not gravity"
+    )]
+    NotGravity {
+        /// Norm of the mean reading, m/s^2.
+        accel_norm: f64,
+    },
+    /// The filter refused an IMU sample.
+    #[error("imu0/data.csv: {error:?} at the sample stamped {stamp_ns} ns (sample {sample} of the file)")]
+    ImuSample {
+        /// The estimator's reason.
+        error: msreg_estimator::Error,
+        /// Stamp of the sample, ns.
+        stamp_ns: u64,
+        /// 1-based index of the sample in the file.
+        sample: usize,
+    },
+    /// The filter refused the noise figures or the calibration of record.
+    #[error("imu0/imu.yaml or prior: {error}")]
+    InvalidPrior {
+        /// The estimator's reason.
+        error: msreg_estimator::Error,
+    },
+    /// The dynamic alignment of a moving start failed.
+    #[error("the monitor could not start: dynamic alignment with pose0 failed: {reason}")]
+    NoAlignment {
+        /// Why.
+        reason: crate::calibrate::driver::MovingStartFailure,
+    },
+    /// No IMU state could be formed at the start.
+    #[error("the monitor could not start: no IMU prior")]
+    NoImuPrior,
+    /// The planar lever-arm axis could not be held.
+    #[error("the monitor could not start: planar axis: {error}")]
+    PlanarAxis {
+        /// The estimator's reason.
+        error: msreg_estimator::Error,
+    },
+}
+
+impl MonitorError {
+    /// True when the input was fine but the filter could not be started on this recording
+    /// (exit code 1, not 2).
+    pub fn is_no_start(&self) -> bool {
+        matches!(
+            self,
+            MonitorError::NoAlignment { .. }
+                | MonitorError::NoImuPrior
+                | MonitorError::PlanarAxis { .. }
+        )
+    }
 }
 
 /// One alarm.

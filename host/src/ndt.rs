@@ -52,4 +52,4 @@ pub use degeneracy::DegeneracyReport;
 pub use local_map::LocalMap;
 pub use map::{NdtCell, NdtMap, NdtTarget};
 pub use solver::{align, align_scans};
-pub use types::{NdtError, NdtParams, NdtResult, Neighbourhood};
+pub use types::{InvalidParam, NdtError, NdtParams, NdtResult, Neighbourhood};

@@ -33,9 +33,16 @@ pub struct ConvergenceSeries {
 pub enum PlotError {
     /// No usable font (text cannot be drawn).
     #[error(
-        "plot: no font: {0} (install Debian's fonts-dejavu-core or set MSREG_PLOT_FONT to a .ttf)"
+        "plot: no font: {}: {problem} (install Debian's fonts-dejavu-core or set MSREG_PLOT_FONT \
+         to a .ttf)",
+        path.display()
     )]
-    Font(String),
+    Font {
+        /// The font file tried.
+        path: PathBuf,
+        /// What is wrong with it.
+        problem: FontProblem,
+    },
     /// Nothing to plot.
     #[error("plot: the convergence history is empty")]
     Empty,
@@ -49,6 +56,22 @@ pub enum PlotError {
     },
 }
 
+/// What is wrong with the font file.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum FontProblem {
+    /// The file could not be read.
+    #[error("{message}")]
+    Unreadable {
+        /// The kind of the I/O error.
+        kind: std::io::ErrorKind,
+        /// The I/O error's text (from the OS).
+        message: String,
+    },
+    /// The bytes are not a TrueType font.
+    #[error("not a TrueType font")]
+    NotTrueType,
+}
+
 /// Where the font is looked for when `MSREG_PLOT_FONT` is not set.
 const DEFAULT_FONT: &str = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
 /// Family name the font is registered under.
@@ -56,17 +79,24 @@ const FAMILY: &str = "sans-serif";
 
 /// Registers the font once per process (plotters keeps a `'static` reference to it).
 fn register_font() -> Result<(), PlotError> {
-    static REGISTERED: OnceLock<Result<(), String>> = OnceLock::new();
+    static REGISTERED: OnceLock<Result<(), (PathBuf, FontProblem)>> = OnceLock::new();
     REGISTERED
         .get_or_init(|| {
             let path = std::env::var("MSREG_PLOT_FONT").unwrap_or_else(|_| DEFAULT_FONT.into());
-            let bytes = std::fs::read(&path).map_err(|e| format!("{path}: {e}"))?;
+            let path = PathBuf::from(path);
+            let bytes = std::fs::read(&path).map_err(|e| {
+                let problem = FontProblem::Unreadable {
+                    kind: e.kind(),
+                    message: e.to_string(),
+                };
+                (path.clone(), problem)
+            })?;
             let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
             plotters::style::register_font(FAMILY, FontStyle::Normal, bytes)
-                .map_err(|_| format!("{path}: not a TrueType font"))
+                .map_err(|_| (path.clone(), FontProblem::NotTrueType))
         })
         .clone()
-        .map_err(PlotError::Font)
+        .map_err(|(path, problem)| PlotError::Font { path, problem })
 }
 
 /// Vertical range of a panel: every estimate, the truth and the final +-3 sigma (the early,
@@ -205,7 +235,7 @@ mod tests {
                 // Something was drawn: not every pixel is white.
                 assert!(img.pixels().any(|p| p.0 != [255, 255, 255]));
             }
-            Err(PlotError::Font(m)) => println!("skipped: {m}"),
+            Err(e @ PlotError::Font { .. }) => println!("skipped: {e}"),
             Err(e) => panic!("{e}"),
         }
     }

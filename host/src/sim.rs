@@ -20,24 +20,20 @@
 //!   options leaves the trajectory and the IMU data unchanged.
 
 pub mod camera;
-pub mod camera_cli;
 mod clock;
 mod config;
 pub mod drive;
-pub mod drive_cli;
 pub mod drive_sim;
 #[cfg(test)]
 mod drive_tests;
 mod extrinsic;
 mod imu;
 pub mod joint;
-pub mod joint_cli;
 pub mod lidar;
 mod odometry;
 mod output;
 mod plate;
 pub mod prior_map;
-pub mod prior_map_cli;
 pub mod prior_map_scene;
 mod signal;
 mod trajectory;

@@ -10,7 +10,8 @@ use msreg_host::bag::wire::Dialect;
 use msreg_host::bag::{
     self, BagError, BagFormat, BagWarning, ConvertOptions, Role, TopicChoice, Topics,
 };
-use msreg_host::calibrate::pose_imu::{self, PoseImuCalibration, PoseImuInput, PoseImuOptions};
+use msreg_host::calibrate::driver::report::{PoseImuCalibration, PoseImuOptions};
+use msreg_host::calibrate::pose_imu::{self, PoseImuInput};
 use msreg_host::dataset::{
     read_imu_csv, read_pose_csv, ImuNoiseYaml, PoseSensorYaml, IMU_CSV, IMU_YAML, POSE_CSV,
     POSE_SENSOR_YAML,

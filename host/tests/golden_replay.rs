@@ -8,7 +8,7 @@ mod common;
 
 use std::path::PathBuf;
 
-use msreg_host::calibrate::pose_imu::PoseImuOptions;
+use msreg_host::calibrate::driver::report::PoseImuOptions;
 use msreg_host::sim::SimConfig;
 use serde_json::{json, Value};
 

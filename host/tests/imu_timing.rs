@@ -15,9 +15,9 @@ mod corners;
 
 use common::{chi_square_band, par_map};
 use msreg_host::calibrate::camera_imu::{self, CameraImuInput, CameraImuOptions};
+use msreg_host::calibrate::driver::report::PoseImuOptions;
 use msreg_host::calibrate::extrinsic::ImuExtrinsicCalibration;
 use msreg_host::calibrate::lidar_imu::{self, LidarImuInput, LidarImuOptions};
-use msreg_host::calibrate::pose_imu::PoseImuOptions;
 use msreg_host::dataset::ImuRecord;
 use msreg_host::sim::{
     simulate_camera_imu, simulate_lidar_imu, CameraImuSimConfig, LidarImuSimConfig, LidarSimConfig,

@@ -6,7 +6,7 @@ use std::path::Path;
 use std::process::Command;
 
 use msreg_host::calibrate::lidar_imu::{self, LidarImuInput, LidarImuOptions};
-use msreg_host::calibrate::pose_imu::PoseImuError;
+use msreg_host::calibrate::InputError;
 use msreg_host::lidar::ScanSource;
 use msreg_host::pointcloud::PointCloud;
 use msreg_host::sim::{simulate_lidar_imu, LidarImuSim, LidarImuSimConfig, LidarSimConfig};
@@ -70,7 +70,12 @@ fn an_imu_gap_is_an_error_naming_the_sample() -> TestResult {
         scans: &scans,
     };
     match lidar_imu::calibrate::<f64>(&input, &options(), &mut |_| {}) {
-        Err(PoseImuError::BadInput(m)) => assert!(m.contains("imu0/data.csv"), "{m}"),
+        Err(e @ InputError::ImuSample { sample, .. }) => {
+            // The first sample after the gap, 1-based.
+            assert_eq!(sample, 1201, "{e}");
+            assert!(e.to_string().contains("imu0/data.csv"), "{e}");
+        }
+        Err(e) => panic!("not the IMU-gap error: {e}"),
         Ok(_) => panic!("an IMU gap must be reported"),
     }
     Ok(())

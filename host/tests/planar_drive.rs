@@ -17,7 +17,7 @@ mod common;
 use std::process::Command;
 
 use common::*;
-use msreg_host::calibrate::pose_imu::{PoseImuCalibration, PoseImuOptions};
+use msreg_host::calibrate::driver::report::{PoseImuCalibration, PoseImuOptions};
 use msreg_host::sim::{self, SimConfig, SimDataset};
 use nalgebra::Vector3;
 

@@ -7,7 +7,7 @@
 mod common;
 
 use common::*;
-use msreg_host::calibrate::pose_imu::PoseImuOptions;
+use msreg_host::calibrate::driver::report::PoseImuOptions;
 use msreg_host::sim::SimConfig;
 
 const SEEDS: std::ops::Range<u64> = 100..120;

@@ -5,7 +5,7 @@
 mod common;
 
 use common::*;
-use msreg_host::calibrate::pose_imu::{HistoryPoint, PoseImuCalibration, PoseImuOptions};
+use msreg_host::calibrate::driver::report::{HistoryPoint, PoseImuCalibration, PoseImuOptions};
 use msreg_host::sim::{Knock, SimConfig};
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 

@@ -6,7 +6,7 @@
 mod common;
 
 use common::*;
-use msreg_host::calibrate::pose_imu::PoseImuOptions;
+use msreg_host::calibrate::driver::report::PoseImuOptions;
 use msreg_host::dataset::PoseRecord;
 use msreg_host::sim::SimConfig;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};

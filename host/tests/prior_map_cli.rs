@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::OnceLock;
 
-use msreg_host::mi::prior_map::cli::read_t_world_cam;
+use msreg_host::dataset::read_t_world_cam;
 use msreg_host::mi::prior_map::init::camera_yaw;
 
 fn msreg(args: &[&str]) -> Output {

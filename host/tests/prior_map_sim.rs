@@ -2,7 +2,7 @@
 //! map" reads back through the registration's reader; the ground truth, the survey
 //! points, the prior and the three renderings are mutually consistent.
 
-use msreg_host::mi::prior_map::cli::read_t_world_cam;
+use msreg_host::dataset::read_t_world_cam;
 use msreg_host::mi::prior_map::input::read_input;
 use msreg_host::mi::prior_map::survey_errors;
 use msreg_host::sim::prior_map::{simulate_prior_map, FisheyeModel, PriorMapSimConfig};

@@ -5,7 +5,8 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use msreg_hil_tests::Qemu;
-use msreg_host::calibrate::pose_imu::{self, PoseImuCalibration, PoseImuInput, PoseImuOptions};
+use msreg_host::calibrate::driver::report::{PoseImuCalibration, PoseImuOptions};
+use msreg_host::calibrate::pose_imu::{self, PoseImuInput};
 use msreg_host::dataset::Dataset;
 use msreg_host::link::stream::{build_stream, ReplayStream, StreamOptions};
 use msreg_host::link::{Client, ClientOptions, Collected};
@@ -494,7 +495,7 @@ pub fn host_reperrcal(dir: &Path) -> HostCameraRun {
     use msreg_host::vision::frames::CameraDataset;
     let data = Dataset::open(dir).expect("dataset opens");
     let camera = CameraDataset::open(dir).expect("camera dataset opens");
-    let (frames, _) = camera_imu::cli::detect_corner_frames(
+    let (frames, _) = camera_imu::detect_corner_frames(
         &camera,
         &msreg_host::vision::DetectorParams::default(),
         &|_| {},

@@ -9,8 +9,8 @@
 use std::time::{Duration, Instant};
 
 use msreg_hil_tests::Qemu;
-use msreg_host::link::cli::{replay, summary, ReplayOptions, ReplayOutcome};
-use msreg_host::monitor::cli::DriveFiles;
+use msreg_host::link::{replay, summary, ReplayOptions, ReplayOutcome};
+use msreg_host::monitor::DriveFiles;
 use msreg_host::monitor::{monitor, MonitorOptions, MonitorReport};
 use msreg_host::sim::{simulate_drive, DriveSimConfig, KnockTarget};
 use msreg_protocol::{AlarmKind, Estimate, HealthState, UpdateKind};

@@ -1,7 +1,7 @@
 //! A filter's convergence history as plot series (the 6 extrinsic DoF and the time offset),
 //! for `plot::write_convergence_png`.
 
-use super::pose_imu::HistoryPoint;
+use crate::calibrate::driver::report::HistoryPoint;
 use crate::plot::ConvergenceSeries;
 
 /// The 6 extrinsic DoF and the time offset of a filter's history. Rotation is drawn as the

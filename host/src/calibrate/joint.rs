@@ -14,7 +14,6 @@
 //! they come from. `T_cam_lidar` is derived with its covariance from the joint covariance,
 //! cross terms included.
 
-pub mod cli;
 mod consistency;
 mod plane;
 
@@ -30,7 +29,10 @@ use super::camera_imu::{
 use super::convert;
 use super::init;
 use super::lidar_imu::{rotation_init, LidarFeed, LidarImuOptions};
-use super::pose_imu::{drive_imu, finish, ImuHooks, PoseImuCalibration, PoseImuError, Timing};
+use super::InputError;
+use crate::calibrate::driver::report::{PoseImuCalibration, Timing};
+use crate::calibrate::driver::verdict::finish;
+use crate::calibrate::driver::{drive_imu, ImuHooks};
 use crate::camera_yaml::CheckerboardTarget;
 use crate::dataset::{ImuNoiseYaml, ImuRecord};
 use crate::lidar::ScanSource;
@@ -106,12 +108,10 @@ pub fn calibrate<T: Scalar>(
     input: &JointInput<'_>,
     options: &JointOptions,
     progress: &mut dyn FnMut(f64),
-) -> Result<JointCalibration, PoseImuError> {
+) -> Result<JointCalibration, InputError> {
     let imu = input.imu;
     let Some(first_imu) = imu.first() else {
-        return Err(PoseImuError::BadInput(
-            "imu0/data.csv: no IMU samples".into(),
-        ));
+        return Err(InputError::NoImuSamples);
     };
     let board = BoardExtent::of(input.target)?;
     let started = Instant::now();
@@ -199,7 +199,7 @@ pub fn calibrate<T: Scalar>(
 /// The joint filter at its start and what the report says of it.
 struct JointStart<T: Scalar> {
     ekf: JointEkf<T>,
-    camera_prior: super::pose_imu::PoseImuOptions,
+    camera_prior: crate::calibrate::driver::report::PoseImuOptions,
     camera_rotation_init: init::RotationInit,
     lidar_rotation: init::RotationInit,
 }
@@ -212,7 +212,7 @@ fn joint_start<T: Scalar>(
     camera_input: &CameraImuInput<'_>,
     start: &Start<'_>,
     standstill: Option<&init::Standstill>,
-) -> Result<JointStart<T>, PoseImuError> {
+) -> Result<JointStart<T>, InputError> {
     let camera_start = prior_from_motion::<T>(
         camera_input,
         &options.camera,
@@ -221,11 +221,9 @@ fn joint_start<T: Scalar>(
         ExtrinsicPrior::AroundStart,
     )?;
     let (lidar_rotation, _, _) = rotation_init(input.imu, input.scans, standstill, &options.lidar)?;
-    let lidar_rotation = lidar_rotation.map_err(|e| {
-        PoseImuError::BadInput(format!(
-            "lidar0/: hand-eye rotation initialisation failed ({e:?}): the recording needs \
-             rotation about at least two axes"
-        ))
+    let lidar_rotation = lidar_rotation.map_err(|error| InputError::HandEyeRotation {
+        sensor: "lidar0/",
+        error,
     })?;
     let camera_rotation_init = camera_start.rotation_init;
     let camera_prior = camera_start.prior;
@@ -243,7 +241,7 @@ fn joint_filter<T: Scalar>(
     camera: PriorFromMotion<T>,
     lidar_rotation: &init::RotationInit,
     options: &LidarImuOptions,
-) -> Result<JointEkf<T>, PoseImuError> {
+) -> Result<JointEkf<T>, InputError> {
     let prior = &options.filter;
     let lidar = SensorPrior {
         state: SensorState {
@@ -271,8 +269,7 @@ fn joint_filter<T: Scalar>(
         sigma_accel_bias: c.sigma_accel_bias,
         sensors: [lidar, c.sensors[0]],
     };
-    JointEkf::<T>::new(&camera.config, &initial)
-        .map_err(|e| PoseImuError::BadInput(format!("imu0/imu.yaml: invalid noise ({e})")))
+    JointEkf::<T>::new(&camera.config, &initial).map_err(|error| InputError::InvalidNoise { error })
 }
 
 /// `T_cam_lidar = T_imu_cam^-1 T_imu_lidar` and its covariance `[dtheta (right); dp]`
@@ -451,7 +448,7 @@ impl<T: Scalar> ImuHooks<T, JointEkf<T>> for JointFeed<'_, T> {
         ekf: &mut JointEkf<T>,
         index: usize,
         _rec: &ImuRecord,
-    ) -> Result<(), PoseImuError> {
+    ) -> Result<(), InputError> {
         loop {
             let imu_time =
                 |s: usize, stamp: Option<u64>| stamp.and_then(|t| ekf.imu_time(s, t).ok());

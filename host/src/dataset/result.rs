@@ -70,6 +70,26 @@ impl ExtrinsicEstimate {
     }
 }
 
+/// The pose `cam0.T_world_cam` of a result file (a static camera in a world frame, as
+/// `msreg calibrate prior-map` writes it and `groundtruth/extrinsics.yaml` gives it).
+pub fn read_t_world_cam(path: &Path) -> Result<Isometry3<f64>, DatasetError> {
+    #[derive(serde::Deserialize)]
+    struct Cam0 {
+        #[serde(rename = "T_world_cam")]
+        t: [[f64; 4]; 4],
+    }
+    #[derive(serde::Deserialize)]
+    struct File {
+        cam0: Cam0,
+    }
+    let f: File = super::yaml::read_yaml(path)?;
+    let m = Matrix4::from_fn(|i, j| f.cam0.t[i][j]);
+    isometry_from_matrix(&m).map_err(|message| DatasetError::InvalidValue {
+        path: path.to_path_buf(),
+        message: format!("cam0.T_world_cam: {message}"),
+    })
+}
+
 /// A homogeneous 4x4 matrix as a rigid transform: the bottom row must be
 /// `[0, 0, 0, 1]` and the rotation block orthonormal (within 1e-3, then
 /// projected onto SO(3)) with determinant +1.

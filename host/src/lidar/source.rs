@@ -6,12 +6,35 @@ use crate::pointcloud::{read_pcd, PcdError, PointCloud};
 /// Why a scan could not be read.
 #[derive(Debug, thiserror::Error)]
 pub enum ScanLoadError {
-    /// The scan holds no point: the pipeline skips it (documented, reported).
-    #[error("{0}")]
-    Empty(String),
-    /// Malformed or unreadable input: the pipeline stops (exit code 2), naming the file.
-    #[error("{0}")]
-    Bad(String),
+    /// The scan file holds no point: the pipeline skips it (documented, reported).
+    #[error(transparent)]
+    EmptyFile(PcdError),
+    /// An in-memory scan holds no point: skipped like an empty file.
+    #[error("in-memory scan {index}: zero points")]
+    EmptyInMemory {
+        /// Index of the scan.
+        index: usize,
+    },
+    /// The source has no scan at this index.
+    #[error("no scan {index}")]
+    NoScan {
+        /// The index asked for.
+        index: usize,
+    },
+    /// Malformed or unreadable file: the pipeline stops (exit code 2); the error names the
+    /// file and, where it applies, the line.
+    #[error(transparent)]
+    Pcd(PcdError),
+}
+
+impl ScanLoadError {
+    /// True for a scan without points (skipped, not an error of the run).
+    pub fn is_empty_scan(&self) -> bool {
+        matches!(
+            self,
+            ScanLoadError::EmptyFile(_) | ScanLoadError::EmptyInMemory { .. }
+        )
+    }
 }
 
 /// Sweeps in stamp order, loaded one at a time.
@@ -56,11 +79,11 @@ impl ScanSource for FileScans {
         let file = self
             .files
             .get(index)
-            .ok_or_else(|| ScanLoadError::Bad(format!("no scan {index}")))?;
+            .ok_or(ScanLoadError::NoScan { index })?;
         match read_pcd(&file.path) {
             Ok(cloud) => Ok(cloud),
-            Err(e @ PcdError::ZeroPoints { .. }) => Err(ScanLoadError::Empty(e.to_string())),
-            Err(e) => Err(ScanLoadError::Bad(e.to_string())),
+            Err(e @ PcdError::ZeroPoints { .. }) => Err(ScanLoadError::EmptyFile(e)),
+            Err(e) => Err(ScanLoadError::Pcd(e)),
         }
     }
 }
@@ -81,11 +104,9 @@ impl ScanSource for Vec<(u64, PointCloud)> {
 
     fn load(&self, index: usize) -> Result<PointCloud, ScanLoadError> {
         match self.get(index) {
-            Some((_, cloud)) if cloud.is_empty() => Err(ScanLoadError::Empty(format!(
-                "in-memory scan {index}: zero points"
-            ))),
+            Some((_, cloud)) if cloud.is_empty() => Err(ScanLoadError::EmptyInMemory { index }),
             Some((_, cloud)) => Ok(cloud.clone()),
-            None => Err(ScanLoadError::Bad(format!("no scan {index}"))),
+            None => Err(ScanLoadError::NoScan { index }),
         }
     }
 }

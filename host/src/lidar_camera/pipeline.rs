@@ -3,10 +3,8 @@
 //! never aborting the run), the closed-form start, PPC-Cal, edge association, PBPC-Cal,
 //! and the MLRE of the result per frame, per edge and overall.
 
-use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{anyhow, Context};
 use msreg_estimator::camera::Camera;
 use msreg_estimator::Pose;
 use nalgebra::{Matrix6, Vector3};
@@ -17,6 +15,7 @@ use super::board::Board;
 use super::camera_features::{
     extract_camera_board, CameraBoardFeatures, CameraFeatureParams, CameraQuality,
 };
+use super::dataset::{LidarCameraDataset, LidarCameraInputError};
 use super::lidar_features::{
     extract_lidar_board, LidarBoardFeatures, LidarFeatureParams, LidarQuality,
 };
@@ -25,10 +24,8 @@ use super::solver::{
     associate_edges, plane_alignment, EdgeObservation, PlaneObservation, PointToBackProjectedPlane,
     PointToPlane,
 };
-use crate::camera_yaml::{read_camera_yaml, read_target_yaml, Target};
-use crate::dataset::{list_scans, LIDAR_DIR};
 use crate::pointcloud::{read_pcd, PointCloud};
-use crate::solve::{solve_se3, LmOptions, LmSummary, Loss};
+use crate::solve::{solve_se3, LmError, LmOptions, LmSummary, Loss};
 use crate::vision::GrayImage;
 
 /// Which cost the result minimises.
@@ -40,6 +37,16 @@ pub enum Method {
     /// Point to plane, then point to back-projected plane (eq. 2.7).
     #[default]
     Pbpc,
+}
+
+impl Method {
+    /// The method's name in the thesis (PPC-Cal, PBPC-Cal).
+    pub fn label(self) -> &'static str {
+        match self {
+            Method::Ppc => "PPC-Cal",
+            Method::Pbpc => "PBPC-Cal",
+        }
+    }
 }
 
 /// Options of the whole calibration.
@@ -225,9 +232,14 @@ pub enum SolveError {
     /// The boards are (nearly) parallel: no closed-form start.
     #[error("the board normals do not span 3D (boards too similar in orientation)")]
     Degenerate,
-    /// The solver failed.
-    #[error("{0}")]
-    Solver(String),
+    /// The solver failed in one of the two stages.
+    #[error("{}: {error}", stage.label())]
+    Solver {
+        /// The stage (PPC-Cal first, then PBPC-Cal).
+        stage: Method,
+        /// The solver's reason.
+        error: LmError,
+    },
 }
 
 fn lm_options(loss: Loss) -> LmOptions {
@@ -274,7 +286,10 @@ pub fn solve(
         start,
         &lm_options(Loss::Huber(options.huber_sigmas)),
     )
-    .map_err(|e| SolveError::Solver(format!("PPC-Cal: {e}")))?;
+    .map_err(|error| SolveError::Solver {
+        stage: Method::Ppc,
+        error,
+    })?;
     let ppc_run = SolverRun::from(&ppc, clock.elapsed().as_secs_f64());
     let associations: Vec<[usize; 4]> = frames
         .iter()
@@ -308,7 +323,10 @@ pub fn solve(
                 ppc.pose,
                 &lm_options(Loss::Huber(options.huber_sigmas)),
             )
-            .map_err(|e| SolveError::Solver(format!("PBPC-Cal: {e}")))?;
+            .map_err(|error| SolveError::Solver {
+                stage: Method::Pbpc,
+                error,
+            })?;
             let run = SolverRun::from(&pbpc, clock.elapsed().as_secs_f64());
             (pbpc.pose, pbpc.covariance, Some(run))
         }
@@ -409,131 +427,15 @@ fn frame_reports(
         .collect()
 }
 
-/// A LiDAR-camera dataset on disk (CONVENTIONS.md layout).
-#[derive(Clone, Debug)]
-pub struct LidarCameraDataset {
-    /// The dataset directory.
-    pub root: PathBuf,
-    /// `cam0/camera.yaml`.
-    pub camera: Camera<f64>,
-    /// `target.yaml` (a plain board).
-    pub board: Board,
-    /// `(scan stamp, scan file)`, sorted.
-    pub scans: Vec<(u64, PathBuf)>,
-    /// `(image stamp, image file)` from `cam0/data.csv`, sorted.
-    pub images: Vec<(u64, PathBuf)>,
-}
-
-/// Reads `cam0/data.csv` (`timestamp [ns], filename`), naming file and line on errors.
-pub fn read_image_list(path: &Path) -> anyhow::Result<Vec<(u64, PathBuf)>> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("{}: cannot read", path.display()))?;
-    let dir = path.parent().map(|p| p.join("data")).unwrap_or_default();
-    let mut out: Vec<(u64, PathBuf)> = Vec::new();
-    for (i, line) in text.lines().enumerate() {
-        let line = line.trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
-        let mut parts = line.splitn(2, ',');
-        let (Some(stamp), Some(name)) = (parts.next(), parts.next()) else {
-            return Err(anyhow!(
-                "{}:{}: malformed line: expected `timestamp [ns],filename`",
-                path.display(),
-                i + 1
-            ));
-        };
-        let stamp: u64 = stamp.trim().parse().map_err(|_| {
-            anyhow!(
-                "{}:{}: timestamp `{}` is not an integer in ns",
-                path.display(),
-                i + 1,
-                stamp.trim()
-            )
-        })?;
-        if let Some((prev, _)) = out.last() {
-            if stamp <= *prev {
-                return Err(anyhow!(
-                    "{}:{}: timestamp {stamp} ns is not after the previous one ({prev} ns)",
-                    path.display(),
-                    i + 1
-                ));
-            }
-        }
-        out.push((stamp, dir.join(name.trim())));
-    }
-    if out.is_empty() {
-        return Err(anyhow!("{}: no images listed", path.display()));
-    }
-    Ok(out)
-}
-
-impl LidarCameraDataset {
-    /// Opens the dataset: camera, target, scan list and image list (contents are read
-    /// per frame later).
-    pub fn open(root: &Path) -> anyhow::Result<Self> {
-        if !root.is_dir() {
-            return Err(anyhow!(
-                "{}: dataset directory does not exist",
-                root.display()
-            ));
-        }
-        let camera = read_camera_yaml(&root.join("cam0/camera.yaml"))?;
-        let target_path = root.join("target.yaml");
-        let board = match read_target_yaml(&target_path)? {
-            Target::Board { width_m, height_m } => Board { width_m, height_m },
-            // A checkerboard's printed pattern breaks the uniform-region detector.
-            Target::Checkerboard(_) | Target::AprilGrid(_) => {
-                return Err(anyhow!(
-                    "{}: lidar-camera needs target_type 'board' (a plain rectangle), got a \
-                     checkerboard",
-                    target_path.display()
-                ))
-            }
-        };
-        let scans = list_scans(&root.join(LIDAR_DIR))?
-            .into_iter()
-            .map(|s| (s.stamp_ns, s.path))
-            .collect::<Vec<_>>();
-        if scans.is_empty() {
-            return Err(anyhow!("{}: no scans", root.join(LIDAR_DIR).display()));
-        }
-        let images = read_image_list(&root.join("cam0/data.csv"))?;
-        Ok(Self {
-            root: root.to_path_buf(),
-            camera,
-            board,
-            scans,
-            images,
-        })
-    }
-
-    /// Image index nearest to each scan (by stamp).
-    pub fn pairs(&self) -> Vec<(usize, usize, u64)> {
-        self.scans
-            .iter()
-            .enumerate()
-            .filter_map(|(k, (s, _))| {
-                let (i, gap) = self
-                    .images
-                    .iter()
-                    .enumerate()
-                    .map(|(i, (t, _))| (i, s.abs_diff(*t)))
-                    .min_by_key(|&(_, g)| g)?;
-                Some((k, i, gap))
-            })
-            .collect()
-    }
-}
-
 /// Every frame of a dataset: accepted features and rejected frames. Unreadable files are
 /// bad input (the error names the file).
 pub fn extract_dataset(
     data: &LidarCameraDataset,
     options: &CalibrationOptions,
     progress: &(dyn Fn() + Sync),
-) -> anyhow::Result<(Vec<FrameFeatures>, Vec<RejectedFrame>)> {
-    let results: Vec<anyhow::Result<Result<FrameFeatures, RejectedFrame>>> = data
+) -> Result<(Vec<FrameFeatures>, Vec<RejectedFrame>), LidarCameraInputError> {
+    type FrameResult = Result<Result<FrameFeatures, RejectedFrame>, LidarCameraInputError>;
+    let results: Vec<FrameResult> = data
         .pairs()
         .into_par_iter()
         .map(|(k, i, gap)| {
@@ -551,10 +453,15 @@ pub fn extract_dataset(
                     ),
                 })
             } else {
-                let cloud = read_pcd(scan_path)
-                    .with_context(|| format!("{}: cannot read scan", scan_path.display()))?;
-                let image = GrayImage::load(image_path)
-                    .with_context(|| format!("{}: cannot read image", image_path.display()))?;
+                let cloud = read_pcd(scan_path).map_err(|source| LidarCameraInputError::Scan {
+                    path: scan_path.clone(),
+                    source,
+                })?;
+                let image =
+                    GrayImage::load(image_path).map_err(|source| LidarCameraInputError::Image {
+                        path: image_path.clone(),
+                        source,
+                    })?;
                 match extract_frame(&cloud, &image, &data.camera, &data.board, options) {
                     Ok((lidar, camera)) => Ok(FrameFeatures {
                         frame: k,

@@ -90,7 +90,7 @@ pub struct Client {
     pub collected: Collected,
     /// Frames and bytes sent.
     pub sent: (u64, u64),
-    closed: Option<String>,
+    closed: Option<super::port::CloseReason>,
 }
 
 impl Client {
@@ -168,11 +168,11 @@ impl Client {
                 }
             }
         }
-        Err(LinkError::Timeout(format!(
-            "{}: no Hello within {:.1} s (is the firmware running?)",
-            self.port.name(),
-            timeout.as_secs_f64()
-        )))
+        Err(LinkError::Timeout {
+            port: self.port.name().to_string(),
+            awaited: super::Awaited::Hello,
+            waited_s: timeout.as_secs_f64(),
+        })
     }
 
     fn saw_ack_for_hello(&self) -> bool {
@@ -309,11 +309,11 @@ impl Client {
                 self.send(&HostMsg::GetStatus)?;
             }
         }
-        Err(LinkError::Timeout(format!(
-            "{}: no Status within {:.1} s",
-            self.port.name(),
-            timeout.as_secs_f64()
-        )))
+        Err(LinkError::Timeout {
+            port: self.port.name().to_string(),
+            awaited: super::Awaited::Status,
+            waited_s: timeout.as_secs_f64(),
+        })
     }
 
     /// Processes what arrived, waiting up to `wait` for the first item.
@@ -323,10 +323,10 @@ impl Client {
             wait = Duration::ZERO;
             self.on_incoming(item)?;
         }
-        if let Some(why) = &self.closed {
-            return Err(LinkError::Port {
+        if let Some(reason) = &self.closed {
+            return Err(LinkError::Closed {
                 port: self.port.name().to_string(),
-                message: format!("closed: {why}"),
+                reason: reason.clone(),
             });
         }
         Ok(())

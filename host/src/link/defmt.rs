@@ -122,7 +122,60 @@ pub enum Decoded {
     /// Not defmt but readable text (QEMU's own messages before the firmware starts).
     Text(String),
     /// A frame that did not decode, and why.
-    Bad(String),
+    Bad(DecodeError),
+}
+
+/// Why a frame did not decode.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DecodeError {
+    /// Not valid rzCOBS.
+    #[error("{0}")]
+    Rzcobs(&'static str),
+    /// The frame is shorter than a log index.
+    #[error("frame shorter than an index")]
+    NoIndex,
+    /// The ELF has no statement with this index.
+    #[error("unknown log index {index}")]
+    UnknownIndex {
+        /// The index read.
+        index: u16,
+    },
+    /// The statement's format string cannot be decoded.
+    #[error(transparent)]
+    Format(#[from] FormatError),
+    /// The frame ends before the statement's arguments do.
+    #[error("log index {index} ({format:?}): arguments cut short")]
+    CutShort {
+        /// The statement's index.
+        index: u16,
+        /// Its format string.
+        format: String,
+    },
+    /// The frame exceeds the decoder's buffer.
+    #[error("frame over {max} bytes")]
+    Oversize {
+        /// The buffer size, bytes.
+        max: usize,
+    },
+}
+
+/// Why a defmt format string cannot be decoded.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FormatError {
+    /// A `{` without its `}`.
+    #[error("unterminated parameter in {format:?}")]
+    Unterminated {
+        /// The format string.
+        format: String,
+    },
+    /// A parameter of a type this decoder does not read.
+    #[error("unsupported parameter {{{spec}}} in {format:?}")]
+    Unsupported {
+        /// The parameter's text between the braces.
+        spec: String,
+        /// The format string.
+        format: String,
+    },
 }
 
 /// Primitive argument types the decoder reads.
@@ -171,7 +224,7 @@ enum Piece {
     Param(Ty),
 }
 
-fn parse_format(format: &str) -> Result<Vec<Piece>, String> {
+fn parse_format(format: &str) -> Result<Vec<Piece>, FormatError> {
     let mut pieces = Vec::new();
     let mut literal = String::new();
     let mut chars = format.chars().peekable();
@@ -191,7 +244,11 @@ fn parse_format(format: &str) -> Result<Vec<Piece>, String> {
                     match chars.next() {
                         Some('}') => break,
                         Some(c) => spec.push(c),
-                        None => return Err(format!("unterminated parameter in {format:?}")),
+                        None => {
+                            return Err(FormatError::Unterminated {
+                                format: format.to_string(),
+                            })
+                        }
                     }
                 }
                 // `{=type}` or `{=type:hint}`; the hint only changes the display.
@@ -199,7 +256,10 @@ fn parse_format(format: &str) -> Result<Vec<Piece>, String> {
                     .strip_prefix('=')
                     .map(|s| s.split(':').next().unwrap_or(s))
                     .and_then(Ty::parse)
-                    .ok_or_else(|| format!("unsupported parameter {{{spec}}} in {format:?}"))?;
+                    .ok_or_else(|| FormatError::Unsupported {
+                        spec: spec.clone(),
+                        format: format.to_string(),
+                    })?;
                 if !literal.is_empty() {
                     pieces.push(Piece::Literal(std::mem::take(&mut literal)));
                 }
@@ -220,7 +280,7 @@ struct Statement {
     level: Level,
     format: String,
     /// The parsed format, or why it cannot be decoded.
-    pieces: Result<Vec<Piece>, String>,
+    pieces: Result<Vec<Piece>, FormatError>,
 }
 
 /// The log statements of one firmware ELF, by index.
@@ -273,20 +333,20 @@ impl Table {
 
     /// Decodes one frame (between two `0x00`, delimiters excluded).
     pub fn decode_frame(&self, encoded: &[u8]) -> Decoded {
-        let bad = |why: String| Decoded::Bad(why);
+        let bad = Decoded::Bad;
         let raw = match rzcobs_decode(encoded) {
             Ok(raw) => raw,
-            Err(why) => return text_or(encoded, bad(why.into())),
+            Err(why) => return text_or(encoded, bad(DecodeError::Rzcobs(why))),
         };
         let Some(index) = raw.get(..2).map(|b| u16::from_le_bytes([b[0], b[1]])) else {
-            return text_or(encoded, bad("frame shorter than an index".into()));
+            return text_or(encoded, bad(DecodeError::NoIndex));
         };
         let Some(statement) = self.statements.get(&index) else {
-            return text_or(encoded, bad(format!("unknown log index {index}")));
+            return text_or(encoded, bad(DecodeError::UnknownIndex { index }));
         };
         let pieces = match &statement.pieces {
             Ok(p) => p,
-            Err(why) => return bad(why.clone()),
+            Err(why) => return bad(why.clone().into()),
         };
         let mut reader = Reader {
             bytes: &raw[2..],
@@ -303,10 +363,10 @@ impl Table {
                         args.push(arg);
                     }
                     None => {
-                        return bad(format!(
-                            "log index {index} ({:?}): arguments cut short",
-                            statement.format
-                        ))
+                        return bad(DecodeError::CutShort {
+                            index,
+                            format: statement.format.clone(),
+                        })
                     }
                 },
             }
@@ -338,11 +398,16 @@ impl Statement {
 /// A non-defmt frame that is plain text (QEMU's "char device redirected ..." line) is shown
 /// as text rather than as an error.
 fn text_or(encoded: &[u8], otherwise: Decoded) -> Decoded {
+    as_text(encoded).map_or(otherwise, Decoded::Text)
+}
+
+/// The frame as a text line, when it is one.
+fn as_text(encoded: &[u8]) -> Option<String> {
     match std::str::from_utf8(encoded) {
         Ok(s) if s.ends_with('\n') && !s.chars().any(|c| c.is_control() && c != '\n') => {
-            Decoded::Text(s.trim_end().to_string())
+            Some(s.trim_end().to_string())
         }
-        _ => otherwise,
+        _ => None,
     }
 }
 
@@ -483,7 +548,7 @@ impl Stream {
                 continue;
             }
             if self.overflowed {
-                out.push(Decoded::Bad(format!("frame over {MAX_FRAME} bytes")));
+                out.push(Decoded::Bad(DecodeError::Oversize { max: MAX_FRAME }));
             } else if !self.pending.is_empty() {
                 out.push(self.table.decode_frame(&self.pending));
             }
@@ -492,7 +557,7 @@ impl Stream {
         }
         // QEMU's text lines end in a newline, not in 0x00: show them as they come.
         if self.pending.ends_with(b"\n") {
-            if let Decoded::Text(t) = text_or(&self.pending, Decoded::Bad(String::new())) {
+            if let Some(t) = as_text(&self.pending) {
                 out.push(Decoded::Text(t));
                 self.pending.clear();
             }

@@ -90,9 +90,7 @@ fn untransmitted_tuning_is_default(c: &FilterConfig<f64>) -> bool {
 pub fn monitor_config(prior: &FilterPrior, estimate_period_ns: u32) -> Result<Config, LinkError> {
     let c = &prior.config;
     if !untransmitted_tuning_is_default(c) {
-        return Err(LinkError::Dataset(
-            "the monitor's filter tuning has a field the protocol does not carry".into(),
-        ));
+        return Err(LinkError::UntransmittedTuning);
     }
     let n = &c.imu_noise;
     Ok(Config {
@@ -145,12 +143,9 @@ pub fn build_monitor_stream(
     monitor: &MonitorOptions,
     options: &StreamOptions,
 ) -> Result<ReplayStream, LinkError> {
-    let (_, prior) =
-        monitor_prior(input, monitor).map_err(|e| LinkError::Dataset(e.to_string()))?;
+    let (_, prior) = monitor_prior(input, monitor)?;
     let config = monitor_config(&prior, options.estimate_period_ns)?;
-    let ekf: MonitorEkf<f64> = prior
-        .filter()
-        .map_err(|e| LinkError::Dataset(e.to_string()))?;
+    let ekf: MonitorEkf<f64> = prior.filter()?;
     let start_ns = input.imu[0].stamp_ns;
     let mut measurements = Vec::new();
     let mut skipped = 0;
@@ -174,7 +169,7 @@ pub fn build_monitor_stream(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::monitor::cli::DriveFiles;
+    use crate::monitor::DriveFiles;
     use crate::sim::{simulate_drive, DriveSimConfig, KnockTarget};
 
     fn close(a: f32, b: f64) -> bool {

@@ -20,7 +20,23 @@ pub enum Incoming {
     /// A frame that failed to decode.
     Bad(Instant, FrameError),
     /// The device closed or failed; the reader stopped.
-    Closed(String),
+    Closed(CloseReason),
+}
+
+/// Why the reader thread stopped.
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum CloseReason {
+    /// The thread ended (its channel is gone).
+    #[error("reader thread ended")]
+    ReaderEnded,
+    /// A read failed.
+    #[error("{message}")]
+    Read {
+        /// The kind of the I/O error.
+        kind: std::io::ErrorKind,
+        /// The I/O error's text (from the OS).
+        message: String,
+    },
 }
 
 /// An open serial device.
@@ -85,10 +101,11 @@ impl Port {
                 }
             }
             if Instant::now() > deadline {
-                return Err(LinkError::Timeout(format!(
-                    "{}: write blocked for 10 s",
-                    self.name
-                )));
+                return Err(LinkError::Timeout {
+                    port: self.name.clone(),
+                    awaited: super::Awaited::Write,
+                    waited_s: 10.0,
+                });
             }
         }
         Ok(())
@@ -100,7 +117,7 @@ impl Port {
             Ok(i) => Some(i),
             Err(mpsc::RecvTimeoutError::Timeout) => None,
             Err(mpsc::RecvTimeoutError::Disconnected) => {
-                Some(Incoming::Closed("reader thread ended".into()))
+                Some(Incoming::Closed(CloseReason::ReaderEnded))
             }
         }
     }
@@ -133,7 +150,10 @@ fn read_loop(mut port: serialport::TTYPort, tx: &Sender<Incoming>, stop: &Atomic
                 continue
             }
             Err(e) => {
-                let _ = tx.send(Incoming::Closed(e.to_string()));
+                let _ = tx.send(Incoming::Closed(CloseReason::Read {
+                    kind: e.kind(),
+                    message: e.to_string(),
+                }));
                 return;
             }
         };

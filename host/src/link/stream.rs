@@ -31,8 +31,10 @@ use super::LinkError;
 use crate::calibrate::camera_imu::{
     self, pnp_of, CameraImuInput, CameraImuOptions, CornerFrame, ReprojectionStart, MIN_CORNERS,
 };
-use crate::calibrate::init;
-use crate::calibrate::pose_imu::{PoseImuInput, PoseImuOptions};
+use crate::calibrate::driver::report::PoseImuOptions;
+use crate::calibrate::driver::{nominal_period_ns, time_offset_sigma_s, ImuStartPrior};
+use crate::calibrate::pose_imu::PoseImuInput;
+use crate::calibrate::{init, InputError};
 use crate::dataset::{ImuNoiseYaml, ImuRecord};
 
 /// Options of the stream.
@@ -110,35 +112,29 @@ fn wire_pose(iso: &Isometry3<f64>) -> Pose {
     }
 }
 
-/// Median spacing of the odometry, ns (as the pipeline).
-fn nominal_period_ns(input: &PoseImuInput<'_>) -> u64 {
-    let mut d: Vec<u64> = input
-        .poses
-        .windows(2)
-        .map(|w| w[1].stamp_ns.saturating_sub(w[0].stamp_ns))
-        .collect();
-    d.sort_unstable();
-    d.get(d.len() / 2).copied().unwrap_or(100_000_000)
-}
-
 /// The configuration the pipeline would start from.
 pub fn config(input: &PoseImuInput<'_>, options: &StreamOptions) -> Result<Config, LinkError> {
     let imu = input.imu;
-    if imu.is_empty() || input.poses.len() < 3 {
-        return Err(LinkError::Dataset(
-            "the dataset needs IMU samples and at least 3 poses".into(),
-        ));
+    if imu.is_empty() {
+        return Err(InputError::NoImuSamples.into());
+    }
+    if input.poses.len() < 3 {
+        return Err(InputError::TooFew {
+            file: "pose0/data.csv",
+            what: "poses",
+            found: input.poses.len(),
+            needed: 3,
+        }
+        .into());
     }
     let p = &options.pipeline;
     let standstill = init::detect_standstill(imu, p.min_standstill_s);
-    let gyro_bias = standstill.map_or_else(Vector3::zeros, |s| s.gyro_mean);
-    let period_ns = nominal_period_ns(input);
+    let gyro_bias = ImuStartPrior::of(imu, standstill.as_ref()).gyro_bias;
+    let period_ns = nominal_period_ns(input.poses);
     let rotation = init::hand_eye_rotation(imu, input.poses, &gyro_bias, period_ns * 3 / 2)
-        .map_err(|e| {
-            LinkError::Dataset(format!(
-                "hand-eye rotation initialisation failed ({e:?}): the recording needs rotation \
-                 about at least two axes"
-            ))
+        .map_err(|error| InputError::HandEyeRotation {
+            sensor: "pose0/",
+            error,
         })?;
     let base = imu_config(imu, input.imu_noise, options);
     Ok(Config {
@@ -159,19 +155,8 @@ pub fn config(input: &PoseImuInput<'_>, options: &StreamOptions) -> Result<Confi
 fn imu_config(imu: &[ImuRecord], imu_noise: &ImuNoiseYaml, options: &StreamOptions) -> Config {
     let p = &options.pipeline;
     let standstill = init::detect_standstill(imu, p.min_standstill_s);
-    let gyro_bias = standstill.map_or_else(Vector3::zeros, |s| s.gyro_mean);
-    let accel_mean = standstill.map_or_else(
-        || {
-            let n = imu.len().min(400);
-            imu[..n].iter().map(|r| r.accel).sum::<Vector3<f64>>() / n as f64
-        },
-        |s| s.accel_mean,
-    );
-    let (sigma_orientation_rad, sigma_velocity_m_s) = if standstill.is_some() {
-        (0.0, 0.0)
-    } else {
-        (0.1, 1.0)
-    };
+    let prior = ImuStartPrior::of(imu, standstill.as_ref());
+    let (sigma_orientation_rad, sigma_velocity_m_s) = prior.moving_sigmas.unwrap_or((0.0, 0.0));
     let noise = crate::calibrate::convert::imu_noise::<f32>(imu_noise);
     Config {
         sensors: SensorSet::PoseImu,
@@ -184,10 +169,10 @@ fn imu_config(imu: &[ImuRecord], imu_noise: &ImuNoiseYaml, options: &StreamOptio
         gate: Gate::P999,
         max_imu_gap_ns: 50_000_000,
         imu_prior: ImuPrior::AtRest(RestPrior {
-            accel_mean: f32x3(&accel_mean),
-            gyro_bias: f32x3(&gyro_bias),
-            sigma_orientation_rad,
-            sigma_velocity_m_s,
+            accel_mean: f32x3(&prior.accel_mean),
+            gyro_bias: f32x3(&prior.gyro_bias),
+            sigma_orientation_rad: sigma_orientation_rad as f32,
+            sigma_velocity_m_s: sigma_velocity_m_s as f32,
         }),
         sensor: SensorPrior {
             extrinsic: Pose {
@@ -197,11 +182,7 @@ fn imu_config(imu: &[ImuRecord], imu_noise: &ImuNoiseYaml, options: &StreamOptio
             sigma_rotation_rad: p.rotation_sigma_rad as f32,
             sigma_translation_m: p.translation_sigma_m as f32,
             time_offset_s: 0.0,
-            sigma_time_offset_s: if p.estimate_time_offset {
-                p.time_offset_sigma_s as f32
-            } else {
-                0.0
-            },
+            sigma_time_offset_s: time_offset_sigma_s(p) as f32,
         },
         zero_velocity_until_ns: standstill.map_or(0, |s| s.until_ns),
         zero_velocity_every: 20,
@@ -215,7 +196,7 @@ pub fn build_stream(
     options: &StreamOptions,
 ) -> Result<ReplayStream, LinkError> {
     let config = config(input, options)?;
-    let period_ns = nominal_period_ns(input);
+    let period_ns = nominal_period_ns(input.poses);
     let max_interval_ns = period_ns.saturating_mul(10);
     let (sigma_r, sigma_t) = (
         input.pose_noise.rotation_noise_rad,
@@ -384,10 +365,9 @@ pub fn build_camera_stream(
     options: &StreamOptions,
 ) -> Result<ReplayStream, LinkError> {
     let Some(first_imu) = input.imu.first() else {
-        return Err(LinkError::Dataset("imu0/data.csv: no IMU samples".into()));
+        return Err(InputError::NoImuSamples.into());
     };
-    let start = camera_imu::reprojection_start::<f64>(input, camera_options, &mut |_| {})
-        .map_err(|crate::calibrate::pose_imu::PoseImuError::BadInput(m)| LinkError::Dataset(m))?;
+    let start = camera_imu::reprojection_start::<f64>(input, camera_options, &mut |_| {})?;
     let config = camera_config(input, &start, options);
     let start_ns = first_imu.stamp_ns;
     let td_ns = (f64::from(config.sensor.time_offset_s) * 1e9) as i128;

@@ -10,7 +10,7 @@ use std::collections::{BTreeMap, VecDeque};
 use std::io::IsTerminal;
 
 use msreg_protocol::{
-    AlarmKind, ErrorKind, Estimate, HealthState, NisState, UpdateDiagnostic, UpdateKind,
+    AlarmKind, ErrorKind, Estimate, HealthState, NisState, Status, UpdateDiagnostic, UpdateKind,
 };
 use nalgebra::{Quaternion, UnitQuaternion};
 
@@ -94,7 +94,7 @@ impl LiveView {
                     return None;
                 }
                 self.shown = events;
-                Some(format!("{}\n", super::cli::live_view(c)))
+                Some(format!("{}\n", live_view(c)))
             }
             Mode::Screen => {
                 if self
@@ -338,6 +338,112 @@ fn push_link_rows(rows: &mut Vec<String>, c: &Collected, rx_per_s: f64, color: b
         c.ack_timeouts,
         c.bad_frames
     ));
+}
+
+/// A few lines a person can read at a glance: estimate, sigmas, NIS, health, faults.
+pub fn live_view(c: &Collected) -> String {
+    match c.estimates.last() {
+        Some((t, e)) => estimate_line(c, *t, e),
+        None => format!(
+            "t {:>7.2} s | waiting for estimates | errors {}",
+            c.errors.last().map_or(0.0, |x| x.0),
+            c.errors.len()
+        ),
+    }
+}
+
+/// The last estimate of every sensor that sent one, a line each (one sensor: as
+/// [`live_view`]).
+pub fn final_estimates(c: &Collected) -> String {
+    let mut sensors: Vec<u8> = c.estimates.iter().map(|(_, e)| e.sensor).collect();
+    sensors.sort_unstable();
+    sensors.dedup();
+    if sensors.len() < 2 {
+        return live_view(c);
+    }
+    sensors
+        .iter()
+        .filter_map(|s| c.estimates.iter().rev().find(|(_, e)| e.sensor == *s))
+        .map(|(t, e)| format!("pose{}: {}", e.sensor, estimate_line(c, *t, e)))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+fn estimate_line(c: &Collected, t: f64, e: &msreg_protocol::Estimate) -> String {
+    let mut out = String::new();
+    let r = rpy_deg(e);
+    let sr = e.sigma_rotation_rad.map(|s| f64::from(s).to_degrees());
+    let health = match e.health {
+        HealthState::Alarm => "ALARM",
+        HealthState::Nominal => "ok",
+        HealthState::Idle => "idle",
+    };
+    out.push_str(&format!(
+        "t {t:>7.2} s | rpy {:>8.3} {:>8.3} {:>8.3} deg (+-{:.3} {:.3} {:.3}) | xyz {:>7.4} {:>7.4} {:>7.4} m (+-{:.4} {:.4} {:.4}) | td {:>6.2} ms (+-{:.2}) | NIS/dof {:.2} {:?} | health {health} ({} alarms) | upd {}/{} | errors {}",
+        r[0], r[1], r[2], sr[0], sr[1], sr[2],
+        e.extrinsic.translation_m[0], e.extrinsic.translation_m[1], e.extrinsic.translation_m[2],
+        e.sigma_translation_m[0], e.sigma_translation_m[1], e.sigma_translation_m[2],
+        e.time_offset_s * 1e3, e.sigma_time_offset_s * 1e3,
+        e.nis_per_dof, e.nis_state, e.alarms,
+        e.updates_accepted, e.updates_accepted + e.updates_rejected,
+        c.errors.len(),
+    ));
+    out
+}
+
+fn percentile(v: &[f64], q: f64) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    s[((s.len() - 1) as f64 * q).round() as usize]
+}
+
+/// Multi-line summary of a session.
+pub fn summary(c: &Collected, status: Option<&Status>) -> String {
+    let mut out = String::new();
+    out.push_str(&format!("{}\n", final_estimates(c)));
+    out.push_str(&format!(
+        "device: {} estimates, {} update diagnostics, {} alarms, {} error reports; acks ok/dup/rejected {}/{}/{}, ack timeouts {}, bad frames {}\n",
+        c.estimates.len(), c.diagnostics.len(), c.alarms.len(), c.errors.len(),
+        c.acks[0], c.acks[1], c.acks[2], c.ack_timeouts, c.bad_frames
+    ));
+    for (t, a) in &c.alarms {
+        out.push_str(&format!(
+            "alarm at host t {t:.2} s: {:?} of sensor {} at stamp {} ns, statistic {:.1}\n",
+            a.kind, a.sensor, a.stamp_ns, a.statistic
+        ));
+    }
+    if let Some(s) = status {
+        out.push_str(&format!(
+            "status: configured {}, {} frames, {} IMU samples, {} anchors, {} updates, {} zero-velocity\n",
+            s.configured, s.frames_ok, s.imu_samples, s.anchors, s.updates, s.zero_velocity_updates
+        ));
+        let faults: Vec<String> = ErrorKind::ALL
+            .iter()
+            .filter(|k| s.errors[k.index()] > 0)
+            .map(|k| format!("{} {}", k.name(), s.errors[k.index()]))
+            .collect();
+        out.push_str(&format!(
+            "fault counters: {}\n",
+            if faults.is_empty() {
+                "none".to_string()
+            } else {
+                faults.join(", ")
+            }
+        ));
+    }
+    if !c.ack_latency_s.is_empty() {
+        out.push_str(&format!(
+            "ack round trip: median {:.2} ms, p95 {:.2} ms; estimate latency: median {:.2} ms, p95 {:.2} ms\n",
+            percentile(&c.ack_latency_s, 0.5) * 1e3,
+            percentile(&c.ack_latency_s, 0.95) * 1e3,
+            percentile(&c.estimate_latency_s, 0.5) * 1e3,
+            percentile(&c.estimate_latency_s, 0.95) * 1e3
+        ));
+    }
+    out
 }
 
 #[cfg(test)]

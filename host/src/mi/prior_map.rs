@@ -10,7 +10,6 @@
 //!   MI with curvature sigmas and per-DoF observability.
 //! - [`cli`]: `msreg calibrate prior-map`.
 
-pub mod cli;
 pub mod grid;
 pub mod init;
 pub mod input;

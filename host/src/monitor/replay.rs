@@ -14,8 +14,8 @@ use super::{
     SENSOR_NAMES,
 };
 use crate::calibrate::convert;
+use crate::calibrate::driver::nominal_period_ns;
 use crate::calibrate::observability::{self, HeldDirection};
-use crate::calibrate::pose_imu::nominal_period_ns;
 use crate::dataset::{ExtrinsicEstimate, PoseRecord};
 
 /// Options of [`monitor`].
@@ -228,12 +228,10 @@ fn run(
     let mut feeds = feeds(ekf, input, t0);
     for (i, rec) in input.imu.iter().enumerate() {
         ekf.propagate(&convert::imu_sample::<f64>(rec))
-            .map_err(|e| {
-                MonitorError::BadInput(format!(
-                    "imu0/data.csv: {e:?} at the sample stamped {} ns (sample {} of the file)",
-                    rec.stamp_ns,
-                    i + 1
-                ))
+            .map_err(|error| MonitorError::ImuSample {
+                error,
+                stamp_ns: rec.stamp_ns,
+                sample: i + 1,
             })?;
         let at_rest = prior
             .zero_velocity_until_ns
@@ -488,16 +486,13 @@ fn observability_run(
 /// Enough data to run, with messages naming the file.
 fn validate(input: &MonitorInput) -> Result<(), MonitorError> {
     if input.imu.len() < 2 {
-        return Err(MonitorError::BadInput(
-            "imu0/data.csv: fewer than two IMU samples".into(),
-        ));
+        return Err(MonitorError::TooFewImuSamples);
     }
     for (s, poses) in input.poses.iter().enumerate() {
         if poses.len() < 2 {
-            return Err(MonitorError::BadInput(format!(
-                "{}/data.csv: fewer than two poses",
-                SENSOR_NAMES[s]
-            )));
+            return Err(MonitorError::TooFewPoses {
+                sensor: SENSOR_NAMES[s],
+            });
         }
     }
     Ok(())

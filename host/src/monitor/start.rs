@@ -8,10 +8,10 @@ use nalgebra::{Isometry3, Vector3};
 
 use super::{MonitorError, MonitorInput};
 use crate::calibrate::convert;
+use crate::calibrate::driver::{moving_start, nominal_period_ns, MovingStart};
 use crate::calibrate::gyro_bias::{self, GyroBiasEstimate};
 use crate::calibrate::init::{self, RotationIncrement, Standstill};
 use crate::calibrate::planar::{self, PlanarMotion};
-use crate::calibrate::pose_imu::{moving_start, nominal_period_ns};
 
 /// Shortest stationary start used for the IMU prior, s.
 const MIN_STANDSTILL_S: f64 = 1.0;
@@ -85,12 +85,10 @@ pub fn start(input: &MonitorInput) -> Result<Start, MonitorError> {
 }
 
 fn at_rest(s: &Standstill) -> Result<(InitialState<f64, 2>, String), MonitorError> {
-    let mut state = InitialState::<f64, 2>::at_rest(s.accel_mean).ok_or_else(|| {
-        MonitorError::BadInput(format!(
-            "imu0/data.csv: mean accelerometer reading {:.2} m/s^2 at rest is not gravity",
-            s.accel_mean.norm()
-        ))
-    })?;
+    let mut state =
+        InitialState::<f64, 2>::at_rest(s.accel_mean).ok_or(MonitorError::NotGravity {
+            accel_norm: s.accel_mean.norm(),
+        })?;
     state.imu.gyro_bias = s.gyro_mean;
     let words = format!("standstill of {} samples: gravity and gyro bias", s.samples);
     Ok((state, words))
@@ -108,11 +106,14 @@ fn moving(
         (fit, input.prior[0].timeshift_s),
         input.imu_noise,
     )
-    .map_err(|e| MonitorError::NoStart(format!("dynamic alignment with pose0 failed: {e:?}")))?;
+    .map_err(|e| match e {
+        MovingStart::Failed(reason) => MonitorError::NoAlignment { reason },
+        MovingStart::NotNeeded => MonitorError::NoImuPrior,
+    })?;
     let accel = input.imu[0].accel;
     let mut state = InitialState::<f64, 2>::at_rest(accel)
         .or_else(|| InitialState::<f64, 2>::at_rest(Vector3::new(0.0, 0.0, 9.81)))
-        .ok_or_else(|| MonitorError::NoStart("no IMU prior".into()))?;
+        .ok_or(MonitorError::NoImuPrior)?;
     state.imu.rotation =
         convert::pose::<f64>(&Isometry3::from_parts(Default::default(), prior.rotation)).rotation;
     state.imu.velocity = prior.velocity;
@@ -154,11 +155,11 @@ impl FilterPrior {
     /// The filter at this prior.
     pub fn filter(&self) -> Result<MonitorEkf<f64>, MonitorError> {
         let mut ekf = MonitorEkf::<f64>::new(&self.config, &self.init)
-            .map_err(|e| MonitorError::BadInput(format!("imu0/imu.yaml or prior: {e}")))?;
+            .map_err(|error| MonitorError::InvalidPrior { error })?;
         if let Some(axis) = self.hold_axis {
             for s in 0..2 {
                 ekf.hold_translation_axis(s, Some(axis))
-                    .map_err(|e| MonitorError::NoStart(format!("planar axis: {e}")))?;
+                    .map_err(|error| MonitorError::PlanarAxis { error })?;
             }
         }
         Ok(ekf)

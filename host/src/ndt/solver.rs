@@ -9,7 +9,7 @@ use nalgebra::{
 use super::degeneracy::analyse;
 use super::map::{NdtMap, NdtTarget};
 use super::score::{evaluate, gradient_scatter, Evaluation, GaussFit, PoseMat};
-use super::{NdtError, NdtParams, NdtResult};
+use super::{InvalidParam, NdtError, NdtParams, NdtResult};
 use crate::pointcloud::PointCloud;
 
 /// Armijo constant of the sufficient-decrease test.
@@ -69,7 +69,7 @@ pub fn align(
         last = Some((map, level.gauss));
     }
     let Some((map, gauss)) = last else {
-        return Err(NdtError::InvalidParams("the target has no level".into()));
+        return Err(NdtError::InvalidParams(InvalidParam::NoLevel));
     };
     let final_eval = evaluate(map, source, &pose, gauss, params.neighbourhood, true);
     let rotation = pose.rotation;

@@ -284,7 +284,7 @@ fn bad_input_is_an_error_not_a_panic() {
     };
     assert!(matches!(
         NdtTarget::build(&far, &bad),
-        Err(NdtError::InvalidParams(_))
+        Err(NdtError::InvalidParams(InvalidParam::Resolutions))
     ));
 }
 

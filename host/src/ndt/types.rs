@@ -157,35 +157,61 @@ pub enum NdtError {
     },
     /// Inconsistent options.
     #[error("NDT: invalid parameter: {0}")]
-    InvalidParams(String),
+    InvalidParams(InvalidParam),
+}
+
+/// Which NDT option is out of its range.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum InvalidParam {
+    /// `resolutions` is empty or holds a non-positive or non-finite value.
+    #[error("resolutions must be non-empty, positive and finite")]
+    Resolutions,
+    /// `outlier_ratio` outside (0, 1).
+    #[error("outlier_ratio must be in (0, 1)")]
+    OutlierRatio,
+    /// `min_points_per_cell` below 3.
+    #[error("min_points_per_cell must be at least 3")]
+    MinPointsPerCell,
+    /// `eigenvalue_ratio` outside (0, 1].
+    #[error("eigenvalue_ratio must be in (0, 1]")]
+    EigenvalueRatio,
+    /// `max_iterations` is zero.
+    #[error("max_iterations must be positive")]
+    MaxIterations,
+    /// A non-positive step limit.
+    #[error("step limits must be positive")]
+    StepLimits,
+    /// The target map has no resolution level.
+    #[error("the target has no level")]
+    NoLevel,
 }
 
 impl NdtParams {
     /// Checks the options.
     pub fn validate(&self) -> Result<(), NdtError> {
-        let bad = |m: &str| Err(NdtError::InvalidParams(m.to_string()));
+        let bad = |p| Err(NdtError::InvalidParams(p));
         if self.resolutions.is_empty()
             || self
                 .resolutions
                 .iter()
                 .any(|r| !(r.is_finite() && *r > 0.0))
         {
-            return bad("resolutions must be non-empty, positive and finite");
+            return bad(InvalidParam::Resolutions);
         }
         if !(self.outlier_ratio > 0.0 && self.outlier_ratio < 1.0) {
-            return bad("outlier_ratio must be in (0, 1)");
+            return bad(InvalidParam::OutlierRatio);
         }
         if self.min_points_per_cell < 3 {
-            return bad("min_points_per_cell must be at least 3");
+            return bad(InvalidParam::MinPointsPerCell);
         }
         if !(self.eigenvalue_ratio > 0.0 && self.eigenvalue_ratio <= 1.0) {
-            return bad("eigenvalue_ratio must be in (0, 1]");
+            return bad(InvalidParam::EigenvalueRatio);
         }
         if self.max_iterations == 0 {
-            return bad("max_iterations must be positive");
+            return bad(InvalidParam::MaxIterations);
         }
         if !(self.max_step_fraction > 0.0 && self.max_rotation_step > 0.0) {
-            return bad("step limits must be positive");
+            return bad(InvalidParam::StepLimits);
         }
         Ok(())
     }

@@ -2,7 +2,8 @@
 #![allow(dead_code)]
 
 use msreg_estimator::Scalar;
-use msreg_host::calibrate::pose_imu::{self, PoseImuCalibration, PoseImuInput, PoseImuOptions};
+use msreg_host::calibrate::driver::report::{PoseImuCalibration, PoseImuOptions};
+use msreg_host::calibrate::pose_imu::{self, PoseImuInput};
 use msreg_host::sim::{self, SimConfig, SimDataset};
 use nalgebra::{Isometry3, Vector6};
 

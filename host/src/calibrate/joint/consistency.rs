@@ -15,7 +15,7 @@ use serde::Serialize;
 use super::{compose_cam_lidar, JointCalibration, JointInput, JointOptions};
 use crate::calibrate::camera_imu::{self, CameraImuCalibration, CameraImuInput};
 use crate::calibrate::lidar_imu::{self, LidarImuCalibration, LidarImuInput};
-use crate::calibrate::pose_imu::PoseImuError;
+use crate::calibrate::InputError;
 
 /// The two pairwise runs on the joint recording.
 #[derive(Debug, Clone)]
@@ -48,7 +48,7 @@ pub fn chained_pairwise(
     input: &JointInput<'_>,
     options: &JointOptions,
     progress: &mut dyn FnMut(f64),
-) -> Result<PairwiseRuns, PoseImuError> {
+) -> Result<PairwiseRuns, InputError> {
     let camera = camera_imu::calibrate::<f64>(
         &CameraImuInput {
             imu: input.imu,

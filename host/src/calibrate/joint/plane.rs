@@ -11,7 +11,7 @@ use serde::Serialize;
 
 use super::LIDAR;
 use crate::calibrate::convert;
-use crate::calibrate::pose_imu::PoseImuError;
+use crate::calibrate::InputError;
 use crate::camera_yaml::CheckerboardTarget;
 use crate::lidar::deskew::DeskewedScan;
 use crate::pointcloud::ray_plane::fit_ray_plane;
@@ -30,13 +30,9 @@ pub struct BoardExtent {
 
 impl BoardExtent {
     /// The board of `target.yaml`, which must give its `width_m` and `height_m`.
-    pub fn of(target: &CheckerboardTarget) -> Result<Self, PoseImuError> {
+    pub fn of(target: &CheckerboardTarget) -> Result<Self, InputError> {
         let (Some(w), Some(h)) = (target.width_m, target.height_m) else {
-            return Err(PoseImuError::BadInput(
-                "target.yaml: the joint calibration needs the board's width_m and height_m \
-                 (the physical board, centred on the pattern) to find it in the scans"
-                    .into(),
-            ));
+            return Err(InputError::BoardSizeMissing);
         };
         let centre = Vector3::new(
             (target.rows.saturating_sub(1)) as f64 * target.row_spacing_m / 2.0,

@@ -28,7 +28,7 @@
 //!    stamps (the last firings), so step 1 is repeated on them and the odometry rebuilt at
 //!    the new offset until it settles (the raw increments' offset is off by several ms:
 //!    where in the sweep a raw match refers to depends on the scene).
-//! 3. **Alignment** (`pose_imu::moving_start` on that odometry at that offset), and the
+//! 3. **Alignment** (`crate::calibrate::driver::moving_start` on that odometry at that offset), and the
 //!    filter starts from it with its time offset at the estimate (and the prior's sigma:
 //!    the estimate's own sigma is optimistic, docs/lidar_imu.md "Moving start"). The
 //!    filter's measurement floor then anneals no faster than the IMU velocity's sigma
@@ -36,20 +36,21 @@
 //!    within a second, before the aligned IMU state has settled, and the filter diverged
 //!    on some seeds (docs/lidar_imu.md, "Moving start: the floor and the IMU state").
 
+use crate::calibrate::InputError;
 use msreg_estimator::Scalar;
 use msreg_estimator::{FilterConfig, PoseImuEkf};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 use super::{last_firing_ns, load, LidarImuOptions};
 use crate::calibrate::convert;
+use crate::calibrate::driver::{
+    describe_moving_start, initial_state, moving_start, with_gyro_bias, with_moving_start,
+    FilterStart, MovingStart, MovingStartFailure, HAND_EYE_MIN_PAIRS,
+};
 use crate::calibrate::dynamic_init::{DynamicInitOptions, FilterPrior};
 use crate::calibrate::gyro_bias::{hand_eye_with_gyro_bias, GyroBiasEstimate};
 use crate::calibrate::init::{self, RotationIncrement, RotationInit};
 use crate::calibrate::planar::golden_section;
-use crate::calibrate::pose_imu::{
-    describe_moving_start, initial_state, moving_start, with_gyro_bias, with_moving_start,
-    FilterStart, MovingStart, PoseImuError, HAND_EYE_MIN_PAIRS,
-};
 use crate::dataset::{ImuNoiseYaml, ImuRecord, PoseRecord};
 use crate::lidar::{deskew_scan, PoseBuffer, ScanSource};
 use crate::ndt::{align, NdtTarget};
@@ -196,7 +197,7 @@ pub fn odometry(
     options: &LidarImuOptions,
     (r_i_l, gyro_bias, td_s): (&UnitQuaternion<f64>, &Vector3<f64>, f64),
     window_s: f64,
-) -> Result<InitOdometry, PoseImuError> {
+) -> Result<InitOdometry, InputError> {
     let (Some(first), Some(last)) = (imu.first(), imu.last()) else {
         return Ok(InitOdometry::default());
     };
@@ -337,7 +338,7 @@ fn deskewed_start(
     options: &LidarImuOptions,
     alignment: Alignment,
     window: f64,
-) -> Result<(Alignment, InitOdometry), PoseImuError> {
+) -> Result<(Alignment, InitOdometry), InputError> {
     let pass = |(rotation, gyro_bias, td): &Alignment| {
         let bias = gyro_bias.map_or_else(Vector3::zeros, |g| g.bias);
         let td = td.map_or(0.0, |t| t.offset_s);
@@ -411,7 +412,7 @@ pub(crate) fn start<T: Scalar>(
     options: &LidarImuOptions,
     (rotation, gyro_bias): (RotationInit, Option<GyroBiasEstimate>),
     increments: &[RotationIncrement],
-) -> Result<(FilterStart<T>, MovingStartReport), PoseImuError> {
+) -> Result<(FilterStart<T>, MovingStartReport), InputError> {
     let filter = &options.filter;
     let (rotation, gyro_bias, time_offset) = if filter.estimate_time_offset {
         at_time_offset(
@@ -441,9 +442,7 @@ pub(crate) fn start<T: Scalar>(
             imu_noise,
         )
     } else {
-        Err(MovingStart::Failed(
-            "no LiDAR odometry in the first seconds".into(),
-        ))
+        Err(MovingStart::Failed(MovingStartFailure::NoOdometry))
     };
     let initial = initial_state::<T>(imu, None, &rotation.rotation, filter)?;
     let (initial, gyro_bias_init) = with_gyro_bias(initial, None, gyro_bias.as_ref());
@@ -458,7 +457,7 @@ pub(crate) fn start<T: Scalar>(
     };
     let config = FilterConfig::new(convert::imu_noise::<T>(imu_noise));
     let ekf = PoseImuEkf::<T>::new(&config, &initial)
-        .map_err(|e| PoseImuError::BadInput(format!("imu0/imu.yaml: invalid noise ({e})")))?;
+        .map_err(|error| InputError::InvalidNoise { error })?;
     Ok((
         FilterStart {
             ekf,

@@ -12,15 +12,16 @@ use msreg_estimator::Pose;
 use nalgebra::{Isometry3, Translation3};
 use serde::Serialize;
 
-use super::pipeline::{
-    extract_dataset, solve, CalibrationOptions, FrameFeatures, FrameReport, LidarCameraDataset,
-    Method, RejectedFrame, Solution, SolveError, SolverRun,
+use super::outcome::{progress_bar, Outcome};
+use msreg_host::dataset::{CalibrationResult, ExtrinsicEstimate};
+use msreg_host::lidar_camera::pipeline::{
+    extract_dataset, solve, CalibrationOptions, FrameFeatures, FrameReport, Method, RejectedFrame,
+    Solution, SolveError, SolverRun,
 };
-use super::sim::{simulate_lidar_camera, LidarCameraSimConfig, LidarModel};
-use crate::command::{progress_bar, Outcome};
-use crate::dataset::{CalibrationResult, ExtrinsicEstimate};
-use crate::vision::overlay::Canvas;
-use crate::vision::GrayImage;
+use msreg_host::lidar_camera::sim::{simulate_lidar_camera, LidarCameraSimConfig, LidarModel};
+use msreg_host::lidar_camera::LidarCameraDataset;
+use msreg_host::vision::overlay::Canvas;
+use msreg_host::vision::GrayImage;
 
 /// LiDAR variant on the command line.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -153,7 +154,7 @@ fn isometry(p: &Pose<f64>) -> Isometry3<f64> {
 /// Runs the calibration on a dataset directory; `Err` is bad input (exit code 2).
 pub fn calibrate(args: &CalibrateLidarCamera) -> anyhow::Result<Outcome> {
     if args.targetless {
-        return crate::mi::cli::calibrate(&crate::mi::cli::TargetlessArgs {
+        return super::mi::calibrate(&super::mi::TargetlessArgs {
             dataset: &args.dataset,
             initial: args.initial.as_deref(),
             output: &args.output,
@@ -216,7 +217,7 @@ pub fn calibrate(args: &CalibrateLidarCamera) -> anyhow::Result<Outcome> {
     };
     if let Some(path) = &args.report {
         let overlay = args.overlay.clone().unwrap_or(path.with_extension("png"));
-        crate::report::write_report_with_images(path, &report, &[overlay])?;
+        msreg_host::report::write_report_with_images(path, &report, &[overlay])?;
     }
     Ok(result)
 }

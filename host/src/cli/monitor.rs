@@ -1,19 +1,15 @@
-//! `msreg monitor <dataset>`: the command-line face of [`super::monitor`].
+//! `msreg monitor <dataset>`: the command-line face of [`msreg_host::monitor::monitor`].
 //!
 //! Exit codes: 0 when the replay ran, alarms or not (finding a knock is the monitor doing its
 //! job; the alarms are printed and in the report); with `--fail-on-alarm`, 1 when an alarm
 //! was raised; 1 when the filter could not be started; 2 on bad input.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{anyhow, Context};
 use clap::Args;
 
-use super::{monitor, MonitorError, MonitorInput, MonitorOptions, MonitorReport};
-use crate::dataset::{
-    read_pose_csv, Dataset, ExtrinsicEstimate, PosePairCalibration, PoseRecord, PoseSensorYaml,
-    CALIBRATION_OF_RECORD_YAML,
-};
+use msreg_host::monitor::{monitor, DriveFiles, MonitorOptions, MonitorReport};
 
 /// `msreg monitor`.
 #[derive(Debug, Args)]
@@ -44,73 +40,14 @@ pub enum MonitorOutcome {
     Failed(String),
 }
 
-fn pose1(dataset: &Dataset) -> anyhow::Result<(Vec<PoseRecord>, PoseSensorYaml)> {
-    let csv = dataset.path("pose1/data.csv");
-    let yaml = dataset.path("pose1/sensor.yaml");
-    for p in [&csv, &yaml] {
-        if !p.is_file() {
-            return Err(anyhow!(
-                "{}: missing (the monitor needs a second pose sensor)",
-                p.display()
-            ));
-        }
-    }
-    Ok((read_pose_csv(&csv)?, PoseSensorYaml::read(&yaml)?))
-}
-
-/// A drive's files as `msreg monitor` (and `msreg link replay` of a drive) reads them.
-pub struct DriveFiles {
-    dataset: Dataset,
-    poses1: Vec<PoseRecord>,
-    noise1: PoseSensorYaml,
-    prior: [ExtrinsicEstimate; 2],
-}
-
-impl DriveFiles {
-    /// Reads `dir` and the calibration of record (`initial`, default
-    /// `<dir>/calibration.yaml`); errors name the file.
-    pub fn read(dir: &Path, initial: Option<&Path>) -> anyhow::Result<Self> {
-        let dataset = Dataset::open(dir)?;
-        let (poses1, noise1) = pose1(&dataset)?;
-        let prior_path = initial.map_or_else(
-            || dataset.path(CALIBRATION_OF_RECORD_YAML),
-            Path::to_path_buf,
-        );
-        let prior = PosePairCalibration::read(&prior_path)?;
-        let missing = |k: &str| anyhow!("{}: no `{k}` section", prior_path.display());
-        let prior = [
-            prior.pose0.ok_or_else(|| missing("pose0"))?,
-            prior.pose1.ok_or_else(|| missing("pose1"))?,
-        ];
-        Ok(Self {
-            dataset,
-            poses1,
-            noise1,
-            prior,
-        })
-    }
-
-    /// The monitor's input.
-    pub fn input(&self) -> anyhow::Result<MonitorInput<'_>> {
-        let d = &self.dataset;
-        Ok(MonitorInput {
-            imu: d.require_imu()?,
-            imu_noise: d.require_imu_noise()?,
-            poses: [d.require_pose0()?, &self.poses1],
-            pose_noise: [d.require_pose0_sensor()?, &self.noise1],
-            prior: self.prior,
-        })
-    }
-}
-
 /// Runs the command; bad input is an `Err` (exit 2).
 pub fn run(args: &MonitorArgs) -> anyhow::Result<MonitorOutcome> {
     let files = DriveFiles::read(&args.dataset, args.initial.as_deref())?;
     let input = files.input()?;
     let report = match monitor(&input, &MonitorOptions::default()) {
         Ok(r) => r,
-        Err(MonitorError::BadInput(m)) => return Err(anyhow!("{}: {m}", args.dataset.display())),
-        Err(e @ MonitorError::NoStart(_)) => return Ok(MonitorOutcome::Failed(e.to_string())),
+        Err(e) if e.is_no_start() => return Ok(MonitorOutcome::Failed(e.to_string())),
+        Err(e) => return Err(anyhow!("{}: {e}", args.dataset.display())),
     };
     print_report(&report);
     write_outputs(args, &report)?;
@@ -128,7 +65,7 @@ fn write_outputs(args: &MonitorArgs, report: &MonitorReport) -> anyhow::Result<(
         eprintln!("msreg: wrote {}", path.display());
     }
     if let Some(path) = &args.plot {
-        super::timeline::write_timeline_svg(path, report)?;
+        msreg_host::monitor::timeline::write_timeline_svg(path, report)?;
         eprintln!("msreg: wrote {}", path.display());
     }
     Ok(())

@@ -11,12 +11,14 @@ use clap::Args;
 use nalgebra::Isometry3;
 use serde::Serialize;
 
-use super::init::{InitError, Initialisation};
-use super::input::{read_input, PriorMapInput};
-use super::{median, register, survey_errors, t_world_cam_yaml, RegisterError, RegisterOptions};
-use crate::command::Outcome;
-use crate::dataset::{isometry_from_matrix, ExtrinsicEstimate};
-use crate::mi::cli::{mi_section, outcome_of, write_overlay, RefinedSummary};
+use super::mi::{mi_section, outcome_of, write_overlay, RefinedSummary};
+use super::outcome::Outcome;
+use msreg_host::dataset::ExtrinsicEstimate;
+use msreg_host::mi::prior_map::init::{InitError, Initialisation};
+use msreg_host::mi::prior_map::input::{read_input, PriorMapInput};
+use msreg_host::mi::prior_map::{
+    median, register, survey_errors, t_world_cam_yaml, RegisterError, RegisterOptions,
+};
 
 /// `msreg calibrate prior-map`.
 #[derive(Debug, Args)]
@@ -33,26 +35,6 @@ pub struct CalibratePriorMap {
     /// overlay of the initial pose is written beside it as `<stem>_initial.png`).
     #[arg(long)]
     pub overlay: Option<PathBuf>,
-}
-
-/// Pose of a result file (`cam0.T_world_cam`).
-pub fn read_t_world_cam(path: &Path) -> anyhow::Result<Isometry3<f64>> {
-    #[derive(serde::Deserialize)]
-    struct Cam0 {
-        #[serde(rename = "T_world_cam")]
-        t: [[f64; 4]; 4],
-    }
-    #[derive(serde::Deserialize)]
-    struct File {
-        cam0: Cam0,
-    }
-    let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
-    let f: File = serde_yaml::from_str(&text).map_err(|e| {
-        let line = e.location().map(|l| l.line()).unwrap_or(0);
-        anyhow::anyhow!("{}:{line}: {e}", path.display())
-    })?;
-    let m = nalgebra::Matrix4::from_fn(|i, j| f.cam0.t[i][j]);
-    isometry_from_matrix(&m).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
 }
 
 /// Errors against `groundtruth/extrinsics.yaml` when present.
@@ -80,7 +62,7 @@ struct Report {
     t_world_cam: [[f64; 4]; 4],
     truth_errors: Option<TruthErrors>,
     /// MI along each DoF through the optimum, with the refinement's parabola.
-    mi_slices: Vec<super::slices::MiSlice>,
+    mi_slices: Vec<msreg_host::mi::prior_map::slices::MiSlice>,
     seconds: f64,
 }
 
@@ -90,13 +72,14 @@ fn rows(t: &Isometry3<f64>) -> [[f64; 4]; 4] {
 }
 
 fn truth_errors(dataset: &Path, estimate: &Isometry3<f64>) -> Option<TruthErrors> {
-    let truth = read_t_world_cam(&dataset.join("groundtruth/extrinsics.yaml")).ok()?;
+    let truth =
+        msreg_host::dataset::read_t_world_cam(&dataset.join("groundtruth/extrinsics.yaml")).ok()?;
     let dp = estimate.translation.vector - truth.translation.vector;
     let dr = (truth.rotation.inverse() * estimate.rotation).scaled_axis();
     Some(TruthErrors {
         position_m: dp.into(),
         rotation_deg: dr.map(f64::to_degrees).into(),
-        yaw_deg: super::yaw_error(estimate, &truth).to_degrees(),
+        yaw_deg: msreg_host::mi::prior_map::yaw_error(estimate, &truth).to_degrees(),
     })
 }
 
@@ -177,7 +160,7 @@ pub fn calibrate(args: &CalibratePriorMap) -> anyhow::Result<Outcome> {
         seconds
     );
     if let Some(path) = &args.report {
-        crate::report::write_report_with_images(path, &report, &[before, overlay])?;
+        msreg_host::report::write_report_with_images(path, &report, &[before, overlay])?;
     }
     Ok(outcome_of(r))
 }
@@ -185,7 +168,7 @@ pub fn calibrate(args: &CalibratePriorMap) -> anyhow::Result<Outcome> {
 fn make_report(
     args: &CalibratePriorMap,
     input: &PriorMapInput,
-    reg: &super::Registration,
+    reg: &msreg_host::mi::prior_map::Registration,
     seconds: f64,
 ) -> Report {
     let r = &reg.refined;

@@ -12,20 +12,21 @@ use clap::Args;
 use msreg_estimator::CornerObservation;
 use serde::Serialize;
 
-use super::{
+use super::outcome::{progress_bar, Outcome};
+use msreg_estimator::camera::Camera;
+use msreg_host::calibrate::camera_imu::{
     calibrate, CameraImuCalibration, CameraImuInput, CameraImuOptions, CameraImuReport,
     CameraUpdate, CornerFrame, ReprojectionSample,
 };
-use crate::calibrate::pose_imu::PoseImuError;
-use crate::camera_yaml::{read_camera_yaml, read_target_yaml, Target};
-use crate::command::{progress_bar, Outcome};
-use crate::dataset::{
+use msreg_host::calibrate::camera_imu::{detect_corner_frames, DetectionSummary};
+use msreg_host::calibrate::InputError;
+use msreg_host::camera_yaml::{read_camera_yaml, read_target_yaml, Target};
+use msreg_host::dataset::{
     read_observed_corners, CalibrationResult, Dataset, ObservedCorner, ObservedImage, CAMERA_YAML,
     OBSERVED_CORNERS_CSV, TARGET_YAML,
 };
-use crate::vision::frames::{CameraDataset, CameraInputError};
-use crate::vision::{DetectorParams, GrayImage};
-use msreg_estimator::camera::Camera;
+use msreg_host::vision::frames::CameraDataset;
+use msreg_host::vision::{DetectorParams, GrayImage};
 
 /// `msreg calibrate camera-imu`.
 #[derive(Args, Debug)]
@@ -33,8 +34,8 @@ pub struct CalibrateCameraImu {
     /// Dataset directory (imu0/, cam0/ with camera.yaml, target.yaml).
     pub dataset: PathBuf,
     /// Measurement model: corner reprojection (RepErrCal) or PnP relative poses (MoCal).
-    #[arg(long, value_enum, default_value_t = CameraUpdate::Reprojection)]
-    pub update: CameraUpdate,
+    #[arg(long, value_enum, default_value_t = UpdateArg::Reprojection)]
+    pub update: UpdateArg,
     /// Result YAML.
     #[arg(short, long, default_value = "result.yaml")]
     pub output: PathBuf,
@@ -63,17 +64,22 @@ pub struct CalibrateCameraImu {
     pub opencv_window: bool,
 }
 
-/// What the detector found over the dataset.
-#[derive(Debug, Clone, Serialize)]
-pub struct DetectionSummary {
-    /// Images listed in `cam0/data.csv`.
-    pub images: usize,
-    /// Images with the full board.
-    pub detected: usize,
-    /// Rejected images per reason.
-    pub rejected: BTreeMap<String, usize>,
-    /// Wall time of detection, s.
-    pub time_s: f64,
+/// `--update`: the library's [`CameraUpdate`] as a command-line value.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum UpdateArg {
+    /// Corner reprojection (RepErrCal).
+    Reprojection,
+    /// Relative poses of PnP (MoCal).
+    Motion,
+}
+
+impl From<UpdateArg> for CameraUpdate {
+    fn from(u: UpdateArg) -> Self {
+        match u {
+            UpdateArg::Reprojection => CameraUpdate::Reprojection,
+            UpdateArg::Motion => CameraUpdate::Motion,
+        }
+    }
 }
 
 /// The JSON report of the command.
@@ -108,7 +114,7 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
         camera_data,
     } = load_corner_frames(&args.dataset, args.opencv_window)?;
     let mut options = CameraImuOptions {
-        update: args.update,
+        update: args.update.into(),
         pixel_sigma: args.pixel_sigma,
         ..CameraImuOptions::default()
     };
@@ -128,7 +134,7 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
     };
     filtering.finish_and_clear();
     let calibration =
-        outcome.map_err(|PoseImuError::BadInput(m)| anyhow!("{}: {m}", args.dataset.display()))?;
+        outcome.map_err(|e: InputError| anyhow!("{}: {e}", args.dataset.display()))?;
     CalibrationResult {
         cam0: Some(calibration.cam_imu_estimate()),
         ..CalibrationResult::default()
@@ -149,7 +155,7 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
             detection,
             calibration: calibration.report.clone(),
         };
-        crate::report::write_report(path, &report)?;
+        msreg_host::report::write_report(path, &report)?;
     }
     if let Some(path) = &args.plot {
         write_plot(path, &dataset, &calibration, &args.dataset);
@@ -316,43 +322,6 @@ fn detect_for_calibration(
     Ok((frames, detection))
 }
 
-/// Detects the checkerboard in every image of the dataset: the corners as filter input,
-/// and the detection summary. `progress` receives the fraction of images done.
-pub fn detect_corner_frames(
-    data: &CameraDataset,
-    params: &DetectorParams,
-    progress: &(dyn Fn(f64) + Sync),
-) -> Result<(Vec<CornerFrame>, DetectionSummary), CameraInputError> {
-    let started = Instant::now();
-    let results = data.detect(params, progress)?;
-    let mut rejected = BTreeMap::new();
-    let mut frames = Vec::with_capacity(results.len());
-    for result in &results {
-        match &result.corners {
-            Ok(found) => frames.push(CornerFrame {
-                stamp_ns: result.stamp_ns,
-                corners: found
-                    .target_points(&data.target)
-                    .into_iter()
-                    .zip(&found.pixels)
-                    .map(|(point_in_target, pixel)| CornerObservation {
-                        point_in_target,
-                        pixel: *pixel,
-                    })
-                    .collect(),
-            }),
-            Err(why) => *rejected.entry(why.to_string()).or_insert(0) += 1,
-        }
-    }
-    let summary = DetectionSummary {
-        images: results.len(),
-        detected: frames.len(),
-        rejected,
-        time_s: started.elapsed().as_secs_f64(),
-    };
-    Ok((frames, summary))
-}
-
 /// The convergence plot of `T_imu_cam` (the filter's state), with the truth when the
 /// dataset has it. A plotting failure (no font) is a warning: the calibration succeeded.
 fn write_plot(path: &Path, dataset: &Dataset, calibration: &CameraImuCalibration, dir: &Path) {
@@ -368,11 +337,13 @@ fn write_plot(path: &Path, dataset: &Dataset, calibration: &CameraImuCalibration
                 cam0.timeshift_s,
             )
         });
-    let series =
-        crate::calibrate::convergence::extrinsic_series(&calibration.report.filter.history, truth);
+    let series = msreg_host::calibrate::convergence::extrinsic_series(
+        &calibration.report.filter.history,
+        truth,
+    );
     let name = std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf());
     let title = format!("T_imu_cam convergence: {}", name.display());
-    match crate::plot::write_convergence_png(path, &title, &series, (1500, 1100)) {
+    match msreg_host::plot::write_convergence_png(path, &title, &series, (1500, 1100)) {
         Ok(()) => eprintln!("msreg: wrote {}", path.display()),
         Err(e) => eprintln!("msreg: warning: {e}"),
     }

@@ -1,11 +1,11 @@
-//! `msreg simulate drive`: the command-line face of [`super::drive_sim`].
+//! `msreg simulate drive`: the command-line face of [`msreg_host::sim::drive_sim`].
 
 use std::path::PathBuf;
 
 use anyhow::anyhow;
 use clap::{Args, ValueEnum};
 
-use super::drive_sim::{simulate_drive, DriveSimConfig, KnockTarget};
+use msreg_host::sim::drive_sim::{simulate_drive, DriveSimConfig, KnockTarget};
 
 /// Which sensor the knock hits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]

@@ -1,4 +1,4 @@
-//! `msreg simulate joint`: the command-line face of [`super::joint`].
+//! `msreg simulate joint`: the command-line face of [`msreg_host::sim::joint`].
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -6,8 +6,8 @@ use std::time::Instant;
 use anyhow::anyhow;
 use clap::Args;
 
-use super::joint::{simulate_joint, JointSimConfig};
-use crate::command::progress_bar;
+use super::outcome::progress_bar;
+use msreg_host::sim::joint::{simulate_joint, JointSimConfig};
 
 /// `msreg simulate joint`.
 #[derive(Debug, Args)]

@@ -3,10 +3,10 @@
 
 use std::path::{Path, PathBuf};
 
+use super::outcome::progress_bar;
 use anyhow::Context;
 use clap::Args;
 use msreg_host::bag::{self, ConvertOptions, ConvertSummary, PointTime, TopicChoice, Topics};
-use msreg_host::command::progress_bar;
 use msreg_host::dataset::{ImuNoiseYaml, PoseSensorYaml};
 
 /// `msreg convert`.

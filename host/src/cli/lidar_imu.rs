@@ -7,12 +7,12 @@ use anyhow::anyhow;
 use clap::Args;
 use indicatif::ProgressBar;
 
-use crate::calibrate::lidar_imu::{self, LidarImuInput, LidarImuOptions};
-use crate::calibrate::pose_imu::PoseImuError;
-use crate::command::{progress_bar, Outcome};
-use crate::dataset::{CalibrationResult, Dataset};
-use crate::lidar::FileScans;
-use crate::sim::{simulate_lidar_imu, Environment, LidarImuSimConfig, LidarSimConfig};
+use super::outcome::{progress_bar, Outcome};
+use msreg_host::calibrate::lidar_imu::{self, LidarImuInput, LidarImuOptions};
+use msreg_host::calibrate::InputError;
+use msreg_host::dataset::{CalibrationResult, Dataset};
+use msreg_host::lidar::FileScans;
+use msreg_host::sim::{simulate_lidar_imu, Environment, LidarImuSimConfig, LidarSimConfig};
 
 /// `msreg simulate lidar-imu`.
 #[derive(Debug, Args)]
@@ -130,22 +130,22 @@ pub fn calibrate(args: &CalibrateLidarImu) -> anyhow::Result<Outcome> {
     });
     progress.finish_and_clear();
     let calibration =
-        outcome.map_err(|PoseImuError::BadInput(m)| anyhow!("{}: {m}", args.dataset.display()))?;
+        outcome.map_err(|e: InputError| anyhow!("{}: {e}", args.dataset.display()))?;
     CalibrationResult {
         lidar0: Some(calibration.imu_sensor_estimate()),
         ..CalibrationResult::default()
     }
     .write(&args.output)?;
     if let Some(path) = &args.report {
-        crate::report::write_report(path, &calibration.report)?;
+        msreg_host::report::write_report(path, &calibration.report)?;
     }
     if let Some(path) = &args.plot {
-        let series = crate::calibrate::convergence::extrinsic_series(
+        let series = msreg_host::calibrate::convergence::extrinsic_series(
             &calibration.report.filter.history,
             None,
         );
         let title = format!("T_imu_lidar convergence: {}", args.dataset.display());
-        match crate::plot::write_convergence_png(path, &title, &series, (1500, 1100)) {
+        match msreg_host::plot::write_convergence_png(path, &title, &series, (1500, 1100)) {
             Ok(()) => eprintln!("msreg: wrote {}", path.display()),
             // The calibration itself succeeded: a missing font is not bad input.
             Err(e) => eprintln!("msreg: warning: {e}"),

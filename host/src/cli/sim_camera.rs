@@ -1,13 +1,13 @@
-//! `msreg simulate camera-imu`: the command-line face of [`super::camera`].
+//! `msreg simulate camera-imu`: the command-line face of [`msreg_host::sim::camera`].
 
 use std::path::PathBuf;
 use std::time::Instant;
 
-use crate::command::progress_bar;
+use super::outcome::progress_bar;
 use anyhow::anyhow;
 use clap::{Args, ValueEnum};
 
-use super::camera::{simulate_camera_imu, CameraImuSimConfig, CameraModelChoice};
+use msreg_host::sim::camera::{simulate_camera_imu, CameraImuSimConfig, CameraModelChoice};
 
 /// The `--model` values.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]

@@ -1,10 +1,10 @@
-//! `msreg simulate prior-map`: the command-line face of [`super::prior_map`].
+//! `msreg simulate prior-map`: the command-line face of [`msreg_host::sim::prior_map`].
 
 use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
 
-use super::prior_map::{simulate_prior_map, FisheyeModel, PriorMapSimConfig};
+use msreg_host::sim::prior_map::{simulate_prior_map, FisheyeModel, PriorMapSimConfig};
 
 /// The `--model` values.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]

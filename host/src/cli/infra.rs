@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 
-use super::sim::{simulate as run_sim, InfraSimConfig};
+use msreg_host::infra::sim::{simulate as run_sim, InfraSimConfig};
 
 /// `msreg simulate infra`.
 #[derive(Args, Debug)]
@@ -68,14 +68,14 @@ pub struct CalibrateInfra {
 /// Runs `msreg calibrate infra`; `Ok(false)` when some camera could not be solved (the
 /// result holds the others).
 pub fn calibrate(args: &CalibrateInfra) -> anyhow::Result<bool> {
-    let data = super::dataset::InfraDataset::open(&args.dataset)?;
-    let cal =
-        super::pipeline::calibrate(&data).with_context(|| format!("{}", args.dataset.display()))?;
+    let data = msreg_host::infra::dataset::InfraDataset::open(&args.dataset)?;
+    let cal = msreg_host::infra::pipeline::calibrate(&data)
+        .with_context(|| format!("{}", args.dataset.display()))?;
     cal.result.write(&args.output)?;
     if let Some(path) = &args.report {
-        crate::report::write_report(path, &cal.report)?;
+        msreg_host::report::write_report(path, &cal.report)?;
     }
-    let failed: Vec<&super::pipeline::CameraReport> =
+    let failed: Vec<&msreg_host::infra::pipeline::CameraReport> =
         cal.report.cameras.iter().filter(|c| !c.solved).collect();
     for c in &failed {
         eprintln!(

@@ -12,20 +12,22 @@ use serde::Serialize;
 
 use nalgebra::{Isometry3, Point3};
 
-use super::{
+use super::camera_imu::{load_corner_frames, LoadedFrames};
+use super::outcome::{progress_bar, Outcome};
+use msreg_host::calibrate::camera_imu::invert_with_covariance;
+use msreg_host::calibrate::camera_imu::DetectionSummary;
+use msreg_host::calibrate::driver::report::PoseImuReport;
+use msreg_host::calibrate::joint::{
     calibrate, chained_pairwise, JointCalibration, JointInput, JointOptions, LoopConsistency,
     OverlaySample, PlaneStats,
 };
-use crate::calibrate::camera_imu::cli::{load_corner_frames, DetectionSummary, LoadedFrames};
-use crate::calibrate::camera_imu::invert_with_covariance;
-use crate::calibrate::pose_imu::{PoseImuError, PoseImuReport};
-use crate::camera_yaml::{read_target_yaml, Target};
-use crate::command::{progress_bar, Outcome};
-use crate::dataset::{CalibrationResult, Dataset, ExtrinsicEstimate, TARGET_YAML};
-use crate::lidar::FileScans;
-use crate::vision::frames::CameraDataset;
-use crate::vision::overlay::Canvas;
-use crate::vision::GrayImage;
+use msreg_host::calibrate::InputError;
+use msreg_host::camera_yaml::{read_target_yaml, Target};
+use msreg_host::dataset::{CalibrationResult, Dataset, ExtrinsicEstimate, TARGET_YAML};
+use msreg_host::lidar::FileScans;
+use msreg_host::vision::frames::CameraDataset;
+use msreg_host::vision::overlay::Canvas;
+use msreg_host::vision::GrayImage;
 
 /// `msreg calibrate joint`.
 #[derive(Args, Debug)]
@@ -97,7 +99,7 @@ pub fn run(args: &CalibrateJoint) -> anyhow::Result<Outcome> {
         target: &target,
     };
     let options = JointOptions::default();
-    let bad_input = |PoseImuError::BadInput(m)| anyhow!("{}: {m}", args.dataset.display());
+    let bad_input = |e: InputError| anyhow!("{}: {e}", args.dataset.display());
     let bar = progress_bar(
         1000,
         "{spinner} joint filter [{bar:40}] {percent}% {elapsed}",
@@ -146,7 +148,7 @@ pub fn run(args: &CalibrateJoint) -> anyhow::Result<Outcome> {
             lidar: joint.lidar.report.clone(),
             loop_consistency,
         };
-        crate::report::write_report(path, &report)?;
+        msreg_host::report::write_report(path, &report)?;
     }
     let mut reasons = Vec::new();
     for (name, report) in [

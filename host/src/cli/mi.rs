@@ -1,6 +1,6 @@
 //! `msreg calibrate lidar-camera <dataset> --targetless --initial guess.yaml` (routed here
 //! by `lidar_camera::cli` with [`TargetlessArgs`]): loads the
-//! first image and the scan nearest to it, runs [`super::targetless`], writes the result
+//! first image and the scan nearest to it, runs [`msreg_host::mi::targetless`], writes the result
 //! (`cam0_lidar0` with sigmas, plus a `cam0_lidar0_mi` section), an optional JSON report
 //! and overlays before / after.
 
@@ -11,14 +11,14 @@ use msreg_estimator::camera::Camera;
 use nalgebra::Isometry3;
 use serde::Serialize;
 
-use super::scene::rank_normalize;
-use super::search::{Observability, Refined};
-use super::targetless::{calibrate_targetless, TargetlessOptions, TargetlessResult};
-use crate::camera_yaml::read_camera_yaml;
-use crate::command::Outcome;
-use crate::dataset::{list_scans, read_camera_csv, CalibrationResult, ExtrinsicEstimate};
-use crate::pointcloud::{read_pcd, PointCloud};
-use crate::vision::GrayImage;
+use super::outcome::Outcome;
+use msreg_host::camera_yaml::read_camera_yaml;
+use msreg_host::dataset::{list_scans, read_camera_csv, CalibrationResult, ExtrinsicEstimate};
+use msreg_host::mi::scene::rank_normalize;
+use msreg_host::mi::search::{Observability, Refined};
+use msreg_host::mi::targetless::{calibrate_targetless, TargetlessOptions, TargetlessResult};
+use msreg_host::pointcloud::{read_pcd, PointCloud};
+use msreg_host::vision::GrayImage;
 
 /// Names of the six DoF of `delta`.
 pub const DOF_NAMES: [&str; 6] = ["rot_x", "rot_y", "rot_z", "x", "y", "z"];
@@ -184,7 +184,11 @@ pub fn calibrate(args: &TargetlessArgs<'_>) -> anyhow::Result<Outcome> {
     write_overlay(&before, &image, &cloud, &camera, &initial)?;
     if let Some(path) = args.report {
         let report = make_report(args, &image_path, &scan_path, &result, seconds);
-        crate::report::write_report_with_images(path, &report, &[before.clone(), overlay.clone()])?;
+        msreg_host::report::write_report_with_images(
+            path,
+            &report,
+            &[before.clone(), overlay.clone()],
+        )?;
     }
     Ok(outcome_of(refined))
 }
