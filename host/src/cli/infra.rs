@@ -22,6 +22,10 @@ pub struct SimulateInfra {
     /// Number of infrastructure cameras.
     #[arg(long, default_value_t = 40)]
     pub cameras: usize,
+    /// Render images (each camera's frames of the marker, F's keyframes with the lights)
+    /// instead of writing the detections as CSV: `calibrate infra` then detects them.
+    #[arg(long)]
+    pub images: bool,
 }
 
 /// Runs `msreg simulate infra`.
@@ -33,16 +37,23 @@ pub fn simulate(args: &SimulateInfra) -> anyhow::Result<()> {
     };
     config.scene.cameras = args.cameras;
     let sim = run_sim(&config);
-    sim.write(&args.out_dir)
-        .with_context(|| format!("writing {}", args.out_dir.display()))?;
+    if args.images {
+        eprintln!("msreg: rendering the marker and keyframe images ...");
+        sim.write_with_images(&args.out_dir, args.seed)
+    } else {
+        sim.write(&args.out_dir)
+    }
+    .with_context(|| format!("writing {}", args.out_dir.display()))?;
     let n_det: usize = sim.detections.iter().map(Vec::len).sum();
     let n_obs: usize = sim.vo.images.iter().map(|i| i.keypoints.len()).sum();
     eprintln!(
-        "msreg: wrote {} ({} cameras, {} marker detections, {} blobs, {} keyframes, {} points, {} observations, VO drift {:.2} % of distance)",
+        "msreg: wrote {} ({} cameras, {} marker {}, {} blob{}, {} keyframes, {} points, {} observations, VO drift {:.2} % of distance)",
         args.out_dir.display(),
         sim.cameras.len(),
         n_det,
+        if args.images { "frames" } else { "detections" },
         sim.blobs.len(),
+        if args.images { "s drawn" } else { "s" },
         sim.vo.images.len(),
         sim.vo.points.len(),
         n_obs,
