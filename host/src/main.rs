@@ -392,12 +392,16 @@ fn calibrate_pose_imu(args: &CalibratePoseImu) -> Result<(), Failure> {
     Ok(())
 }
 
-/// One warning per DoF the calibration could not observe, naming it and why.
+/// One warning per DoF the calibration could not observe or cannot vouch for, naming it
+/// and why.
 fn warn_unobservable(rows: &[msreg_host::calibrate::observability::DofObservability]) {
-    for row in rows.iter().filter(|r| r.status == "not observable") {
+    for row in rows
+        .iter()
+        .filter(|r| r.status == "not observable" || r.status == "not trusted")
+    {
         eprintln!(
-            "msreg: warning: {} is not observable: {} (sigma {:.3}, prior {:.3})",
-            row.dof, row.reason, row.sigma, row.prior_sigma
+            "msreg: warning: {} is {}: {} (sigma {:.3}, prior {:.3})",
+            row.dof, row.status, row.reason, row.sigma, row.prior_sigma
         );
     }
 }

@@ -19,7 +19,8 @@ pub struct DofObservability {
     pub sigma: f64,
     /// Prior 1-sigma in the same unit.
     pub prior_sigma: f64,
-    /// `observed`, `weak`, or `not observable`.
+    /// `observed`, `weak`, `not observable`, or `not trusted` (an input contradicts
+    /// another, e.g. the pose sensor's rotation the gyro's).
     pub status: &'static str,
     /// Why, when not observed.
     pub reason: String,

@@ -120,6 +120,7 @@ pub fn calibrate<T: Scalar>(
         calibration.report.converged = false;
     }
     if let Some(problem) = scale_problem {
+        distrust_rotation(&mut calibration.report.observability);
         calibration.report.reasons.insert(0, problem);
         calibration.report.converged = false;
     }
@@ -127,6 +128,16 @@ pub fn calibrate<T: Scalar>(
     calibration.report.gyro_bias_init = gyro_bias_init;
     calibration.report.planar = planar.as_ref().map_or_else(String::new, |p| p.describe());
     Ok(calibration)
+}
+
+/// Marks the rotation rows `not trusted`: when the pose sensor and the gyro disagree on
+/// how much the body turned, the filter's rotation sigmas measure agreement with a wrong
+/// input, not accuracy, and must not read as `observed`.
+fn distrust_rotation(rows: &mut [super::observability::DofObservability]) {
+    for row in rows.iter_mut().filter(|r| r.dof.starts_with("rotation")) {
+        row.status = "not trusted";
+        row.reason = "the pose sensor's rotation disagrees with the gyro's".into();
+    }
 }
 
 /// Largest factor by which the pose sensor's and the gyro's total rotation may differ: a few
