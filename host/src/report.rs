@@ -53,6 +53,27 @@ pub fn write_report_with_images<R: Serialize + ?Sized>(
     report: &R,
     images: &[PathBuf],
 ) -> Result<(), ReportError> {
+    write_report_with_figures(path, report, images, &[])
+}
+
+/// An inline SVG figure a command draws itself (e.g. the monitor's timeline), for the HTML
+/// page.
+pub struct SvgFigure {
+    /// Element id of the figure.
+    pub id: String,
+    /// Caption under it.
+    pub caption: String,
+    /// The `<svg>` element.
+    pub svg: String,
+}
+
+/// [`write_report_with_images`], with inline SVG `figures` in the HTML page too.
+pub fn write_report_with_figures<R: Serialize + ?Sized>(
+    path: &Path,
+    report: &R,
+    images: &[PathBuf],
+    figures: &[SvgFigure],
+) -> Result<(), ReportError> {
     let serialize = |source| ReportError::Serialize {
         path: path.to_path_buf(),
         source,
@@ -74,7 +95,7 @@ pub fn write_report_with_images<R: Serialize + ?Sized>(
                 png,
             })
             .collect();
-        html::page(&value, &embedded)
+        html::page(&value, &embedded, figures)
     } else {
         serde_json::to_string_pretty(report).map_err(serialize)?
     };
@@ -86,7 +107,7 @@ pub fn write_report_with_images<R: Serialize + ?Sized>(
 
 /// The HTML page of a JSON report (as [`write_report`] writes it for `*.html`).
 pub fn render_html(report: &serde_json::Value) -> String {
-    html::page(report, &[])
+    html::page(report, &[], &[])
 }
 
 /// Whether `path` asks for the HTML page.

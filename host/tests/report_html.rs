@@ -287,3 +287,20 @@ fn prior_map_report_renders_with_mi_slices_and_overlays() {
     }
     assert_renders("prior-map", tmp.path(), &ids);
 }
+
+#[test]
+fn monitor_report_renders_with_its_timeline() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let ds = tmp.path().join("ds").to_string_lossy().into_owned();
+    run_ok(&["simulate", "drive", &ds, "--duration", "40"]);
+    let html = tmp.path().join("r.html");
+    let o = msreg(&["monitor", &ds, "--report", &html.to_string_lossy()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let page = std::fs::read_to_string(&html).expect("html");
+    let ids = ["fig-monitor-timeline", "alarms", "summary", "report-json"];
+    assert_ids("monitor", &page, &ids);
+    assert!(page.contains("msreg: on-vehicle calibration monitoring"));
+    // The knocked camera's alarm is in the page, as a table row and in the timeline.
+    assert!(page.contains("rotation_step"), "no alarm in the page");
+    assert_renders("monitor", tmp.path(), &ids);
+}

@@ -6,7 +6,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{anyhow, Context};
+use anyhow::anyhow;
 use clap::Args;
 
 use msreg_host::monitor::{monitor, DriveFiles, MonitorOptions, MonitorReport};
@@ -60,8 +60,12 @@ pub fn run(args: &MonitorArgs) -> anyhow::Result<MonitorOutcome> {
 
 fn write_outputs(args: &MonitorArgs, report: &MonitorReport) -> anyhow::Result<()> {
     if let Some(path) = &args.report {
-        let text = serde_json::to_string_pretty(report)?;
-        std::fs::write(path, text).with_context(|| path.display().to_string())?;
+        let timeline = msreg_host::report::SvgFigure {
+            id: "fig-monitor-timeline".into(),
+            caption: "Timeline: NIS per sensor, alarms, per-DoF excitation".into(),
+            svg: msreg_host::monitor::timeline::timeline_svg(report),
+        };
+        msreg_host::report::write_report_with_figures(path, report, &[], &[timeline])?;
         eprintln!("msreg: wrote {}", path.display());
     }
     if let Some(path) = &args.plot {

@@ -23,6 +23,8 @@ pub enum Kind {
     Infra,
     /// `calibrate prior-map` (a static camera in a prior map, mutual information).
     PriorMap,
+    /// `monitor` (the health monitor replayed over a drive).
+    Monitor,
     /// Anything else: only the generic tables.
     Other,
 }
@@ -37,6 +39,8 @@ impl Kind {
             Kind::CameraImu
         } else if has("history") {
             Kind::PoseImu
+        } else if has("sensors") && has("alarms") {
+            Kind::Monitor
         } else if has("mi_slices") && has("t_world_cam") {
             Kind::PriorMap
         } else if has("nmi") && has("t_cam_lidar") {
@@ -60,6 +64,7 @@ impl Kind {
             Kind::Targetless => "LiDAR-camera calibration (targetless, mutual information)",
             Kind::Infra => "infrastructure-camera calibration",
             Kind::PriorMap => "camera in a prior map (mutual information)",
+            Kind::Monitor => "on-vehicle calibration monitoring",
             Kind::Other => "msreg report",
         }
     }
@@ -72,7 +77,7 @@ impl Kind {
             Kind::CameraImu => "T_imu_cam",
             Kind::LidarCamera | Kind::Targetless => "T_cam_lidar",
             Kind::PriorMap => "T_world_cam",
-            Kind::Infra | Kind::Other => "",
+            Kind::Infra | Kind::Monitor | Kind::Other => "",
         }
     }
 }

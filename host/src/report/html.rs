@@ -24,12 +24,21 @@ text-align:right;font-size:13px}th{background:#f4f4f4}td.k{text-align:left}\
 img.overlay{max-width:100%}section{margin-top:1.5em}";
 
 /// Arrays drawn as figures or too long for a table; they stay in the embedded JSON.
-const NOT_TABULATED: [&str; 5] = ["history", "scans", "excitation", "sample", "mi_slices"];
+/// (`sensors`: the monitor's per-sensor series, drawn by its timeline.)
+const NOT_TABULATED: [&str; 6] = [
+    "history",
+    "scans",
+    "excitation",
+    "sample",
+    "mi_slices",
+    "sensors",
+];
 /// Longest array shown as a table.
 const MAX_TABLE_ROWS: usize = 200;
 
-/// Renders the page of `report` (the pipeline's JSON report) with `images` embedded.
-pub fn page(report: &Value, images: &[Image<'_>]) -> String {
+/// Renders the page of `report` (the pipeline's JSON report) with `images` and `figures`
+/// embedded.
+pub fn page(report: &Value, images: &[Image<'_>], figures: &[super::SvgFigure]) -> String {
     let kind = Kind::of(report);
     let history = History::read(report);
     let rows = data::result_rows(report, history.as_ref());
@@ -66,6 +75,15 @@ pub fn page(report: &Value, images: &[Image<'_>]) -> String {
         "MI slices through the estimate (Fig. 7.8 / 7.9)",
         super::slices::mi_slices(report),
     );
+    for f in figures {
+        let body = format!(
+            "<figure id=\"{}\">{}<figcaption>{}</figcaption></figure>",
+            escape(&f.id),
+            f.svg,
+            escape(&f.caption)
+        );
+        section(&f.caption, Some(body));
+    }
     section("Overlays", overlays(images));
     section("Health events", events(report, history.is_some()));
     section("Details", Some(details(report)));
