@@ -130,7 +130,11 @@ fn assert_nis_dofs_match(name: &str, report: &Value) {
     let (mut nis, mut dof) = (0.0, 0.0);
     for h in history {
         nis += h["nis"].as_f64().expect("nis");
-        dof += if reprojection {
+        // Every history point stores its dof; the inference below is the renderer's
+        // fallback for older reports, checked against the stored value.
+        let stored = h["dof"].as_f64().expect("dof");
+        dof += stored;
+        let inferred = if reprojection {
             let t = h["t_s"].as_f64().expect("t");
             let f = frames
                 .iter()
@@ -143,6 +147,7 @@ fn assert_nis_dofs_match(name: &str, report: &Value) {
         } else {
             6.0
         };
+        assert_eq!(stored, inferred, "{name}: stored and inferred dof");
     }
     let mean = report["mean_nis_per_dof"].as_f64().expect("mean");
     assert!(
@@ -303,4 +308,49 @@ fn monitor_report_renders_with_its_timeline() {
     // The knocked camera's alarm is in the page, as a table row and in the timeline.
     assert!(page.contains("rotation_step"), "no alarm in the page");
     assert_renders("monitor", tmp.path(), &ids);
+}
+
+#[test]
+fn joint_report_renders_both_sensors() {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let ds = tmp.path().join("ds").to_string_lossy().into_owned();
+    run_ok(&[
+        "simulate",
+        "joint",
+        &ds,
+        "--duration",
+        "12",
+        "--rings",
+        "16",
+        "--columns",
+        "512",
+    ]);
+    let (json, html) = reports(tmp.path(), &["calibrate", "joint", &ds]);
+    let ids = [
+        "result-cam0",
+        "result-lidar0",
+        "fig-convergence-cam0",
+        "fig-nis-cam0",
+        "fig-convergence-lidar0",
+        "fig-nis-lidar0",
+        "summary",
+    ];
+    assert_ids("joint", &html, &ids);
+    assert!(html.contains("msreg: joint LiDAR-IMU-camera calibration"));
+    // The camera's updates are images of corners: their dof is twice the corners, stored
+    // per history point, and reproduces the filter's mean NIS per dof.
+    for sensor in ["camera", "lidar"] {
+        let r = &json[sensor];
+        let history = r["history"].as_array().expect("history");
+        let (nis, dof) = history.iter().fold((0.0, 0.0), |(n, d), h| {
+            (
+                n + h["nis"].as_f64().expect("nis"),
+                d + h["dof"].as_f64().expect("dof"),
+            )
+        });
+        let mean = r["mean_nis_per_dof"].as_f64().expect("mean");
+        assert!((nis / dof - mean).abs() <= 1e-9 * mean.max(1.0), "{sensor}");
+    }
+    assert!(json["camera"]["history"][0]["dof"].as_u64().expect("dof") > 6);
+    assert_renders("joint", tmp.path(), &ids);
 }

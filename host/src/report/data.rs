@@ -25,6 +25,8 @@ pub enum Kind {
     PriorMap,
     /// `monitor` (the health monitor replayed over a drive).
     Monitor,
+    /// `calibrate joint` (LiDAR, camera and IMU in one filter).
+    Joint,
     /// Anything else: only the generic tables.
     Other,
 }
@@ -39,6 +41,8 @@ impl Kind {
             Kind::CameraImu
         } else if has("history") {
             Kind::PoseImu
+        } else if has("camera") && has("lidar") && has("planes") {
+            Kind::Joint
         } else if has("sensors") && has("alarms") {
             Kind::Monitor
         } else if has("mi_slices") && has("t_world_cam") {
@@ -65,6 +69,7 @@ impl Kind {
             Kind::Infra => "infrastructure-camera calibration",
             Kind::PriorMap => "camera in a prior map (mutual information)",
             Kind::Monitor => "on-vehicle calibration monitoring",
+            Kind::Joint => "joint LiDAR-IMU-camera calibration",
             Kind::Other => "msreg report",
         }
     }
@@ -77,7 +82,7 @@ impl Kind {
             Kind::CameraImu => "T_imu_cam",
             Kind::LidarCamera | Kind::Targetless => "T_cam_lidar",
             Kind::PriorMap => "T_world_cam",
-            Kind::Infra | Kind::Monitor | Kind::Other => "",
+            Kind::Infra | Kind::Monitor | Kind::Joint | Kind::Other => "",
         }
     }
 }
@@ -116,6 +121,8 @@ pub struct History {
     pub nis: Vec<f64>,
     /// Whether the gate accepted it.
     pub accepted: Vec<bool>,
+    /// Its degrees of freedom (0 where the report does not say).
+    pub dof: Vec<usize>,
 }
 
 impl History {
@@ -157,6 +164,8 @@ impl History {
             h.nis.push(num(row.get("nis")));
             h.accepted
                 .push(row.get("accepted").and_then(Value::as_bool) == Some(true));
+            h.dof
+                .push(row.get("dof").and_then(Value::as_u64).unwrap_or(0) as usize);
         }
         Some(h)
     }
@@ -198,9 +207,13 @@ pub fn result_rows(report: &Value, history: Option<&History>) -> Vec<ResultRow> 
         .collect()
 }
 
-/// Degrees of freedom of each history update: twice the corners of the image for
-/// camera-IMU's corner reprojection (matched by time in `frames`), six for relative poses.
+/// Degrees of freedom of each history update: the `dof` each history point stores; in
+/// reports without it, twice the corners of the image for camera-IMU's corner reprojection
+/// (matched by time in `frames`), six for relative poses.
 pub fn update_dofs(report: &Value, history: &History) -> Vec<usize> {
+    if history.dof.len() == history.t.len() && history.dof.iter().all(|&d| d > 0) {
+        return history.dof.clone();
+    }
     let reprojection = report.get("update").and_then(Value::as_str) == Some("reprojection");
     let frames: Vec<(f64, usize)> = report
         .get("frames")

@@ -13,13 +13,15 @@ const RED: &str = "#d62728";
 const GREY: &str = "#777";
 const BAND: &str = "rgba(31,119,180,0.22)";
 
-/// Estimate after each update with its +-3 sigma band, one panel per DoF (`fig-convergence`).
-pub fn convergence(h: &History) -> Option<String> {
+/// Estimate after each update with its +-3 sigma band, one panel per DoF
+/// (`fig-convergence`, then `scope`: element ids stay unique when a page shows several
+/// filters).
+pub fn convergence(h: &History, scope: &str) -> Option<String> {
     let (w, ph) = (440.0, 170.0);
     let mut out = String::new();
     svg::open(
         &mut out,
-        "fig-convergence",
+        &format!("fig-convergence{scope}"),
         2.0 * w,
         4.0 * ph,
         "convergence",
@@ -27,7 +29,7 @@ pub fn convergence(h: &History) -> Option<String> {
     for (i, (name, unit)) in DOF.iter().enumerate() {
         let panel = convergence_panel(h, i, (w * (i % 2) as f64, ph * (i / 2) as f64), (w, ph))?;
         let (lo, hi) = band(&h.value[i], &h.sigma[i]);
-        panel.open_clip(&mut out, &format!("clip-conv-{i}"));
+        panel.open_clip(&mut out, &format!("clip-conv{scope}-{i}"));
         panel.band(&mut out, &h.t, &lo, &hi, BAND);
         let points: Vec<(f64, f64)> = h.t.iter().copied().zip(h.value[i].clone()).collect();
         panel.line(&mut out, &points, BLUE, 1.5);
@@ -73,8 +75,8 @@ fn convergence_panel(
 }
 
 /// NIS per DoF of every update (log scale) with the two-sided 99 % chi-square bounds of its
-/// DoF (`fig-nis`); health events as vertical lines.
-pub fn nis(report: &Value, h: &History) -> Option<String> {
+/// DoF (`fig-nis`, then `scope`); health events as vertical lines.
+pub fn nis(report: &Value, h: &History, scope: &str) -> Option<String> {
     let dofs = update_dofs(report, h);
     let log = |v: f64| v.max(1e-12).log10();
     let scaled: Vec<f64> = h
@@ -105,8 +107,14 @@ pub fn nis(report: &Value, h: &History) -> Option<String> {
         y,
     };
     let mut out = String::new();
-    svg::open(&mut out, "fig-nis", 880.0, 260.0, "NIS over time");
-    panel.open_clip(&mut out, "clip-nis");
+    svg::open(
+        &mut out,
+        &format!("fig-nis{scope}"),
+        880.0,
+        260.0,
+        "NIS over time",
+    );
+    panel.open_clip(&mut out, &format!("clip-nis{scope}"));
     for t in super::data::column(report, "events", "t_s") {
         panel.line(&mut out, &[(t, y.0), (t, y.1)], "#f0a000", 1.5);
     }

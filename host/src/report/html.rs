@@ -50,7 +50,10 @@ pub fn page(report: &Value, images: &[Image<'_>], figures: &[super::SvgFigure]) 
         escape(kind.title())
     );
     status(&mut out, report);
-    result_table(&mut out, kind, &rows);
+    result_table(&mut out, kind.transform(), "result", &rows);
+    if kind == Kind::Joint {
+        joint_sensors(&mut out, report);
+    }
     let mut section = |title: &str, body: Option<String>| {
         if let Some(body) = body {
             let _ = write!(out, "<section><h2>{}</h2>{body}</section>", escape(title));
@@ -59,9 +62,9 @@ pub fn page(report: &Value, images: &[Image<'_>], figures: &[super::SvgFigure]) 
     if let Some(h) = &history {
         section(
             "Convergence (estimate and 3-sigma band)",
-            figures::convergence(h),
+            figures::convergence(h, ""),
         );
-        section("NIS over time", figures::nis(report, h));
+        section("NIS over time", figures::nis(report, h, ""));
     }
     let residuals = data::residuals(report, kind, history.as_ref());
     section("Residual histograms", figures::histograms(&residuals));
@@ -118,15 +121,50 @@ fn strings(v: Option<&Value>) -> Vec<String> {
     }
 }
 
-fn result_table(out: &mut String, kind: Kind, rows: &[data::ResultRow]) {
+/// The joint filter's two sensors, each with its status, result, convergence and NIS
+/// (element ids suffixed `-cam0` / `-lidar0`).
+fn joint_sensors(out: &mut String, report: &Value) {
+    for (key, scope, transform) in [
+        ("camera", "-cam0", "cam0: T_imu_cam"),
+        ("lidar", "-lidar0", "lidar0: T_imu_lidar"),
+    ] {
+        let Some(sensor) = report.get(key) else {
+            continue;
+        };
+        let Some(h) = History::read(sensor) else {
+            continue;
+        };
+        status(out, sensor);
+        result_table(
+            out,
+            transform,
+            &format!("result{scope}"),
+            &data::result_rows(sensor, Some(&h)),
+        );
+        for (title, body) in [
+            ("convergence", figures::convergence(&h, scope)),
+            ("NIS over time", figures::nis(sensor, &h, scope)),
+        ] {
+            if let Some(body) = body {
+                let _ = write!(
+                    out,
+                    "<section><h2>{transform}: {title}</h2>{body}</section>"
+                );
+            }
+        }
+    }
+}
+
+fn result_table(out: &mut String, transform: &str, id: &str, rows: &[data::ResultRow]) {
     if rows.is_empty() {
         return;
     }
     let _ = write!(
         out,
-        "<section><h2>Result: {}</h2><table id=\"result\"><tr><th>DoF</th><th>value</th>\
+        "<section><h2>Result: {}</h2><table id=\"{}\"><tr><th>DoF</th><th>value</th>\
          <th>1-sigma</th><th>3-sigma</th><th>unit</th></tr>",
-        escape(kind.transform())
+        escape(transform),
+        escape(id)
     );
     for (name, value, sigma, unit) in rows {
         let _ = write!(

@@ -51,6 +51,9 @@ pub struct HistoryPoint {
     pub sigma_time_offset_s: f64,
     /// NIS of the update.
     pub nis: f64,
+    /// Degrees of freedom of the update (6 for a relative pose, twice the corners of an
+    /// image): the chi-square NIS is judged against.
+    pub dof: usize,
     /// Whether the gate accepted it.
     pub accepted: bool,
 }

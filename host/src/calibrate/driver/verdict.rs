@@ -142,7 +142,7 @@ impl Run {
             ekf,
             self.sensor,
             self.seconds(stamp_ns),
-            report.nis.to_f64(),
+            (report.nis.to_f64(), report.dof),
             report.accepted,
         ));
     }
@@ -185,7 +185,7 @@ pub(crate) fn history_point<
     ekf: &Ekf<T, S, C, N, F>,
     s: usize,
     t_s: f64,
-    nis: f64,
+    (nis, dof): (f64, usize),
     accepted: bool,
 ) -> HistoryPoint {
     let x = convert::isometry(&ekf.extrinsic(s));
@@ -200,6 +200,7 @@ pub(crate) fn history_point<
         time_offset_s: ekf.time_offset(s).to_f64(),
         sigma_time_offset_s: ekf.time_offset_sigma(s).to_f64(),
         nis,
+        dof,
         accepted,
     }
 }
