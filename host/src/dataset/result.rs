@@ -84,30 +84,54 @@ pub fn read_t_world_cam(path: &Path) -> Result<Isometry3<f64>, DatasetError> {
     }
     let f: File = super::yaml::read_yaml(path)?;
     let m = Matrix4::from_fn(|i, j| f.cam0.t[i][j]);
-    isometry_from_matrix(&m).map_err(|message| DatasetError::InvalidValue {
+    isometry_from_matrix(&m).map_err(|e| DatasetError::InvalidValue {
         path: path.to_path_buf(),
-        message: format!("cam0.T_world_cam: {message}"),
+        message: format!("cam0.T_world_cam: {e}"),
     })
+}
+
+/// Why a 4x4 matrix is not a rigid transform.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum NotRigid {
+    /// An entry is NaN or infinite.
+    #[error("matrix has a non-finite entry")]
+    NonFinite,
+    /// The bottom row is not `[0, 0, 0, 1]`.
+    #[error("bottom row is [{}, {}, {}, {}], not [0, 0, 0, 1]", .0[0], .0[1], .0[2], .0[3])]
+    BottomRow([f64; 4]),
+    /// The 3x3 block is not orthonormal with determinant +1.
+    #[error("rotation block is not a rotation (|R^T R - I|max = {deviation:.3e}, det = {determinant:.6})")]
+    NotRotation {
+        /// Largest entry of `R^T R - I`.
+        deviation: f64,
+        /// `det R`.
+        determinant: f64,
+    },
 }
 
 /// A homogeneous 4x4 matrix as a rigid transform: the bottom row must be
 /// `[0, 0, 0, 1]` and the rotation block orthonormal (within 1e-3, then
 /// projected onto SO(3)) with determinant +1.
-pub fn isometry_from_matrix(m: &Matrix4<f64>) -> Result<Isometry3<f64>, String> {
+pub fn isometry_from_matrix(m: &Matrix4<f64>) -> Result<Isometry3<f64>, NotRigid> {
     if m.iter().any(|v| !v.is_finite()) {
-        return Err("matrix has a non-finite entry".into());
+        return Err(NotRigid::NonFinite);
     }
     let bottom = m.fixed_view::<1, 4>(3, 0) - nalgebra::RowVector4::new(0.0, 0.0, 0.0, 1.0);
     if bottom.amax() > BOTTOM_ROW_TOLERANCE {
-        return Err(format!("bottom row is {}, not [0, 0, 0, 1]", m.row(3)));
+        return Err(NotRigid::BottomRow([
+            m[(3, 0)],
+            m[(3, 1)],
+            m[(3, 2)],
+            m[(3, 3)],
+        ]));
     }
     let r: Matrix3<f64> = m.fixed_view::<3, 3>(0, 0).into_owned();
     let deviation = (r.transpose() * r - Matrix3::identity()).amax();
     if deviation > ORTHONORMAL_TOLERANCE || r.determinant() <= 0.0 {
-        return Err(format!(
-            "rotation block is not a rotation (|R^T R - I|max = {deviation:.3e}, det = {:.6})",
-            r.determinant()
-        ));
+        return Err(NotRigid::NotRotation {
+            deviation,
+            determinant: r.determinant(),
+        });
     }
     let guess = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
     let rotation = UnitQuaternion::from_matrix_eps(&r, 1e-15, 20, guess);
@@ -262,9 +286,9 @@ impl RawSection {
         path: &Path,
         section: &Section,
     ) -> Result<ExtrinsicEstimate, DatasetError> {
-        let invalid = |message: String| DatasetError::InvalidValue {
+        let invalid = |e: NotRigid| DatasetError::InvalidValue {
             path: path.to_path_buf(),
-            message: format!("{}.{}: {message}", section.name, section.transform_key),
+            message: format!("{}.{}: {e}", section.name, section.transform_key),
         };
         let m = Matrix4::from_fn(|r, c| self.matrix[r][c]);
         let transform = isometry_from_matrix(&m).map_err(invalid)?;

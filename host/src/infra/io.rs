@@ -301,7 +301,7 @@ pub fn matrix_rows(t: &Isometry3<f64>) -> [[f64; 4]; 4] {
 /// A pose of row-major rows (validated).
 pub fn pose_of_rows(path: &Path, rows: &[[f64; 4]; 4]) -> Result<Isometry3<f64>, InfraError> {
     let m = Matrix4::from_fn(|r, c| rows[r][c]);
-    isometry_from_matrix(&m).map_err(|e| parse_err(path, 0, e))
+    isometry_from_matrix(&m).map_err(|e| parse_err(path, 0, e.to_string()))
 }
 
 impl InfraResultFile {
