@@ -132,7 +132,7 @@ fn assert_nis_dofs_match(name: &str, report: &Value) {
         nis += h["nis"].as_f64().expect("nis");
         // Every history point stores its dof; the inference below is the renderer's
         // fallback for older reports, checked against the stored value.
-        let stored = h["dof"].as_f64().expect("dof");
+        let stored = h["dof"].as_u64().expect("dof") as f64;
         dof += stored;
         let inferred = if reprojection {
             let t = h["t_s"].as_f64().expect("t");
@@ -147,7 +147,10 @@ fn assert_nis_dofs_match(name: &str, report: &Value) {
         } else {
             6.0
         };
-        assert_eq!(stored, inferred, "{name}: stored and inferred dof");
+        assert!(
+            (stored - inferred).abs() < 0.5,
+            "{name}: stored {stored}, inferred {inferred} dof"
+        );
     }
     let mean = report["mean_nis_per_dof"].as_f64().expect("mean");
     assert!(
