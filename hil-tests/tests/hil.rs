@@ -79,7 +79,11 @@ fn firmware_estimate_matches_host_f64_pipeline_and_ground_truth() {
         assert!(lines.len() >= at_least, "log lines {prefix:?}: {lines:?}");
     }
     assert!(qemu.wait_for_log("fault", 0, Duration::ZERO).is_empty());
-    assert_eq!(qemu.undecodable_log_frames(), Vec::<String>::new());
+    assert!(
+        qemu.undecodable_log_frames().is_empty(),
+        "{:?}",
+        qemu.undecodable_log_frames()
+    );
     // and the whole session fit in 64 KiB of RAM (statics + painted stack peak)
     let (statics, stack, total) = ram_after_session(&qemu);
     assert_eq!(total, statics + stack);
@@ -218,7 +222,11 @@ fn faults_are_typed_counted_and_the_session_recovers() {
         faults.iter().any(|l| l.text.starts_with("fault crc")),
         "{faults:?}"
     );
-    assert_eq!(qemu.undecodable_log_frames(), Vec::<String>::new());
+    assert!(
+        qemu.undecodable_log_frames().is_empty(),
+        "{:?}",
+        qemu.undecodable_log_frames()
+    );
     let (_, _, total) = ram_after_session(&qemu);
     assert!(
         total < RAM_TARGET_BYTES,

@@ -116,18 +116,21 @@ fn read_marker_detections(
     let csv = camera_dir.join("markers.csv");
     let images = camera_dir.join("data.csv");
     if !csv.exists() && images.exists() {
-        let dictionary =
-            marker
-                .dictionary
-                .parse::<Dictionary>()
-                .map_err(|e| InfraError::Parse {
-                    path: dir.join("marker.yaml"),
-                    line: 0,
-                    message: e.to_string(),
-                })?;
-        return markers_from_images(&images, dictionary, marker.id);
+        return markers_from_images(&images, dictionary_of(dir, marker)?, marker.id);
     }
     read_markers_csv(&csv).map(|d| d.into_iter().filter(|m| m.marker_id == marker.id).collect())
+}
+
+/// The ArUco dictionary `marker.yaml` of the dataset in `dir` names.
+fn dictionary_of(dir: &Path, marker: &MarkerSpec) -> Result<Dictionary, InfraError> {
+    marker
+        .dictionary
+        .parse::<Dictionary>()
+        .map_err(|e| InfraError::Parse {
+            path: dir.join("marker.yaml"),
+            line: 0,
+            message: e.to_string(),
+        })
 }
 
 /// The COLMAP camera must be `cam0/`'s F (resolution and projection of a few rays).
@@ -184,15 +187,7 @@ impl InfraSim {
     pub fn write_with_images(&self, dir: &Path, seed: u64) -> Result<(), InfraError> {
         self.write_common(dir)?;
         let look = RenderLook::default();
-        let dictionary =
-            self.marker
-                .dictionary
-                .parse::<Dictionary>()
-                .map_err(|e| InfraError::Parse {
-                    path: dir.join("marker.yaml"),
-                    line: 0,
-                    message: e.to_string(),
-                })?;
+        let dictionary = dictionary_of(dir, &self.marker)?;
         for (k, (cam, views)) in self.cameras.iter().zip(&self.marker_views).enumerate() {
             let frames: Vec<(u64, &Isometry3<f64>)> = views.iter().map(|(s, t)| (*s, t)).collect();
             write_frames(
