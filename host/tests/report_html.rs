@@ -330,6 +330,8 @@ fn joint_report_renders_both_sensors() {
     ]);
     let (json, html) = reports(tmp.path(), &["calibrate", "joint", &ds]);
     let ids = [
+        "status-cam0",
+        "status-lidar0",
         "result-cam0",
         "result-lidar0",
         "fig-convergence-cam0",
@@ -340,6 +342,10 @@ fn joint_report_renders_both_sensors() {
     ];
     assert_ids("joint", &html, &ids);
     assert!(html.contains("msreg: joint LiDAR-IMU-camera calibration"));
+    // Each element id once: the two sensors' sections are scoped.
+    for id in ids {
+        assert_eq!(html.matches(&format!("id=\"{id}\"")).count(), 1, "{id}");
+    }
     // The camera's updates are images of corners: their dof is twice the corners, stored
     // per history point, and reproduces the filter's mean NIS per dof.
     for sensor in ["camera", "lidar"] {

@@ -49,7 +49,7 @@ pub fn page(report: &Value, images: &[Image<'_>], figures: &[super::SvgFigure]) 
          <title>msreg: {0}</title><style>{STYLE}</style></head><body><h1>msreg: {0}</h1>",
         escape(kind.title())
     );
-    status(&mut out, report);
+    status(&mut out, report, "status");
     result_table(&mut out, kind.transform(), "result", &rows);
     if kind == Kind::Joint {
         joint_sensors(&mut out, report);
@@ -95,7 +95,8 @@ pub fn page(report: &Value, images: &[Image<'_>], figures: &[super::SvgFigure]) 
     out
 }
 
-fn status(out: &mut String, report: &Value) {
+/// The converged / NOT converged line with its reasons, as element `id`.
+fn status(out: &mut String, report: &Value, id: &str) {
     let Some(converged) = report.get("converged").and_then(Value::as_bool) else {
         return;
     };
@@ -104,7 +105,11 @@ fn status(out: &mut String, report: &Value) {
     } else {
         ("bad", "NOT converged")
     };
-    let _ = write!(out, "<p id=\"status\" class=\"{class}\"><b>{text}</b>");
+    let _ = write!(
+        out,
+        "<p id=\"{}\" class=\"{class}\"><b>{text}</b>",
+        escape(id)
+    );
     for key in ["reasons", "reason"] {
         for r in strings(report.get(key)) {
             let _ = write!(out, "<br>{}", escape(&r));
@@ -134,7 +139,7 @@ fn joint_sensors(out: &mut String, report: &Value) {
         let Some(h) = History::read(sensor) else {
             continue;
         };
-        status(out, sensor);
+        status(out, sensor, &format!("status{scope}"));
         result_table(
             out,
             transform,
