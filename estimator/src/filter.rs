@@ -11,7 +11,7 @@
 use crate::chi2::Confidence;
 use crate::health::{HealthConfig, HealthMonitor};
 use crate::lie::Pose;
-use crate::propagate::{self, ImuNoise, ImuSample};
+use crate::propagate::{self, ImuNoise, ImuSample, ImuSignal};
 use crate::scalar::Scalar;
 use crate::state::{imu, Block, CloneState, ImuState, InitialState, Layout, SensorState};
 use crate::Error;
@@ -83,6 +83,9 @@ pub struct Ekf<T: Scalar, const S: usize, const C: usize, const N: usize, const 
     /// up to its stamp, so measurements up to there can be fused. `None` until a second
     /// sample has arrived.
     imu_ahead: Option<ImuSample<T>>,
+    /// The last two samples received before `imu_ahead`, older first: the interval under way
+    /// starts at the second; the first gives the signal's curvature ([`ImuSignal`]).
+    imu_base: [Option<ImuSample<T>>; 2],
     /// Spacing of the last two samples received, ns (0 before the second): the period one
     /// reading's white noise refers to.
     imu_period_ns: u64,
@@ -144,6 +147,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
             time_ns: 0,
             imu_now: None,
             imu_ahead: None,
+            imu_base: [None; 2],
             imu_period_ns: 0,
             imu: init.imu,
             sensors: core::array::from_fn(|s| init.sensors[s].state),
@@ -282,8 +286,8 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     // ----- propagation -------------------------------------------------------------------
 
     /// Feeds one IMU sample (an instantaneous reading at its stamp). The filter keeps it as its
-    /// look-ahead and propagates to the previous sample's stamp, over the straight line
-    /// between the two readings: after sample `k + 1` the filter stands at `t_k` and any
+    /// look-ahead and propagates to the previous sample's stamp, over the signal through the
+    /// last three readings ([`ImuSignal`]): after sample `k + 1` the filter stands at `t_k` and any
     /// measurement with an IMU time up to `t_k+1` can be fused ([`Ekf::is_due`]). The first
     /// sample only sets the filter time.
     pub fn propagate(&mut self, sample: &ImuSample<T>) -> Result<(), Error> {
@@ -291,6 +295,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         let Some(now) = self.imu_now else {
             self.time_ns = sample.stamp_ns;
             self.imu_now = Some(*sample);
+            self.imu_base = [None, Some(*sample)];
             return Ok(());
         };
         let newest = self.imu_ahead.unwrap_or(now);
@@ -306,6 +311,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         }
         if let Some(ahead) = self.imu_ahead {
             self.advance_to(ahead.stamp_ns)?;
+            self.imu_base = [self.imu_base[1], Some(ahead)];
         }
         self.imu_ahead = Some(*sample);
         self.imu_period_ns = gap;
@@ -374,11 +380,11 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
                 imu_time_ns: t_ns,
                 horizon_ns: self.imu_horizon_ns().unwrap_or(self.time_ns),
             })?;
-        let end = now.lerp(&ahead, t_ns);
-        let (gyro, accel) = now.mean(&end);
-        let dt = T::lit((t_ns - self.time_ns) as f64 * 1e-9);
-        let step = propagate::step(&self.imu, &gyro, &accel, dt, &self.config.imu_noise);
-        Ok((step, end))
+        let start = self.imu_base[1].unwrap_or(now);
+        let signal = ImuSignal::new(self.imu_base[0].as_ref(), &start, &ahead);
+        let interval = signal.interval(self.time_ns, t_ns);
+        let step = propagate::step(&self.imu, &interval, &self.config.imu_noise);
+        Ok((step, signal.at(t_ns)))
     }
 
     /// Propagates state and covariance to `t_ns` (at most the newest sample's stamp) over the
