@@ -62,6 +62,11 @@ pub struct HealthConfig<T: Scalar> {
     /// information across it). Infinite (the default) tests every direction; the vehicle
     /// monitor (`msreg monitor`) uses 1: a detector claims only steps it can resolve.
     pub resolvable_step_factor: T,
+    /// After the filter reacts to a step of a sensor, that sensor's detectors stay disarmed
+    /// until its extrinsic sigmas are back within this factor of their values before the
+    /// step: the re-convergence is the reaction itself (the rest of the same knock, which the
+    /// opened covariance absorbs), not another knock, as for the first arming.
+    pub rearm_factor: T,
 }
 
 impl<T: Scalar> Default for HealthConfig<T> {
@@ -82,6 +87,7 @@ impl<T: Scalar> Default for HealthConfig<T> {
             min_rotation_step: T::lit(0.25f64.to_radians()),
             min_translation_step: T::lit(0.005),
             resolvable_step_factor: T::lit(f64::INFINITY),
+            rearm_factor: T::lit(2.0),
         }
     }
 }
@@ -240,6 +246,9 @@ pub struct SensorHealth<T: Scalar> {
     pub steps_detected: u32,
     /// The latest event.
     pub last_event: Option<HealthEvent<T>>,
+    /// Rotation and translation sigma (largest axis) the extrinsic must come back under
+    /// before the detectors re-arm after a reaction.
+    rearm_below: Option<(T, T)>,
 }
 
 impl<T: Scalar> Default for SensorHealth<T> {
@@ -254,6 +263,7 @@ impl<T: Scalar> Default for SensorHealth<T> {
             rejected: 0,
             steps_detected: 0,
             last_event: None,
+            rearm_below: None,
         }
     }
 }
@@ -334,6 +344,34 @@ impl<T: Scalar, const S: usize> HealthMonitor<T, S> {
         self.sensors.get(s)
     }
 
+    /// Whether sensor `s`'s step detectors may see its innovations, given the largest
+    /// rotation and translation sigma of its extrinsic now: once it has converged (below the
+    /// arm thresholds) and, after a reaction to a step, re-converged (see
+    /// [`HealthConfig::rearm_factor`]).
+    pub fn armed(&mut self, s: usize, sigma_rotation: T, sigma_translation: T) -> bool {
+        let config = self.config;
+        let Some(health) = self.sensors.get_mut(s) else {
+            return false;
+        };
+        if let Some((r, t)) = health.rearm_below {
+            if sigma_rotation >= r || sigma_translation >= t {
+                return false;
+            }
+            health.rearm_below = None;
+        }
+        sigma_rotation < config.arm_sigma_rotation
+            && sigma_translation < config.arm_sigma_translation
+    }
+
+    /// Holds sensor `s`'s detectors until its extrinsic sigmas are back within
+    /// `rearm_factor` of the given values (its sigmas before the filter reacted to a step).
+    pub fn hold_until_reconverged(&mut self, s: usize, sigma_rotation: T, sigma_translation: T) {
+        let factor = self.config.rearm_factor;
+        if let Some(health) = self.sensors.get_mut(s) {
+            health.rearm_below = Some((sigma_rotation * factor, sigma_translation * factor));
+        }
+    }
+
     /// Records one update of sensor `s`; returns a step event when one is detected (the
     /// caller then inflates the extrinsic covariance).
     pub fn record(
@@ -410,6 +448,23 @@ impl<T: Scalar, const S: usize> HealthMonitor<T, S> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn detectors_rearm_only_after_the_reaction_has_reconverged() {
+        let mut m = HealthMonitor::<f64, 2>::new(HealthConfig::default());
+        assert!(m.armed(0, 1e-4, 1e-3));
+        // Not converged yet: the first arming.
+        assert!(!m.armed(0, 1e-2, 1e-3));
+        m.hold_until_reconverged(0, 1e-4, 1e-3);
+        // Within the arm thresholds but not back within 2x of the sigmas before the step.
+        assert!(!m.armed(0, 3e-4, 5e-4));
+        assert!(!m.armed(0, 1e-4, 2.5e-3));
+        // The other sensor is not held.
+        assert!(m.armed(1, 3e-4, 5e-4));
+        assert!(m.armed(0, 1.5e-4, 1.5e-3));
+        // Once re-converged the hold is gone: the ordinary arming applies again.
+        assert!(m.armed(0, 3e-4, 5e-4));
+    }
 
     /// Information per update and axis: a 1-sigma of 0.18 deg per update.
     const INFO: f64 = 1e5;

@@ -192,13 +192,18 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         innovation: Option<&ExtrinsicInnovation<T>>,
     ) -> UpdateReport<T> {
         let event = sensor.and_then(|s| {
-            // The step detectors see innovations only once the extrinsic has converged.
+            // The step detectors see innovations only once the extrinsic has converged, and
+            // after a reaction only once it has re-converged.
             let (sr, st) = self.extrinsic_sigma(s);
-            let h = self.config.health;
-            let armed = sr.max() < h.arm_sigma_rotation && st.max() < h.arm_sigma_translation;
+            let armed = self.health.armed(s, sr.max(), st.max());
             let innovation = innovation.filter(|_| armed);
-            self.health
-                .record(s, stamp_ns, nis, dof, accepted, innovation)
+            let event = self
+                .health
+                .record(s, stamp_ns, nis, dof, accepted, innovation);
+            if event.is_some() {
+                self.health.hold_until_reconverged(s, sr.max(), st.max());
+            }
+            event
         });
         if let Some(event) = event {
             self.react_to(&event);
