@@ -21,7 +21,7 @@ use msreg_estimator::Pose;
 use nalgebra::{Matrix3, SymmetricEigen, Vector2, Vector3};
 use serde::Serialize;
 
-use super::board::Board;
+use crate::camera_yaml::Board;
 use crate::vision::{solve_pnp, GrayImage};
 
 /// Thresholds of the camera side.

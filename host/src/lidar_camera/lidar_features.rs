@@ -17,7 +17,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
-use super::board::Board;
+use crate::camera_yaml::Board;
 use crate::pointcloud::PointCloud;
 
 /// Thresholds of the LiDAR side.
