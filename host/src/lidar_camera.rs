@@ -10,8 +10,9 @@
 //! - [`camera_features`]: the four edge lines, corners and board plane in an image.
 //! - [`solver`]: the two cost functions on the SE(3) Levenberg-Marquardt of
 //!   [`crate::solve`]; [`mlre`]: the independent metric.
-//! - [`pipeline`]: dataset to result (pairing, feature extraction, rejection with reasons,
-//!   solve, report); [`cli`]: the `msreg` subcommands.
+//! - [`dataset`]: the dataset's files and their typed error; [`pipeline`]: dataset to result
+//!   (pairing, feature extraction, rejection with reasons, solve, report). The `msreg`
+//!   commands are the binary's `cli/lidar_camera.rs`.
 
 pub mod camera_features;
 pub mod dataset;
