@@ -19,12 +19,12 @@
 //!   (trajectory, mounting, IMU, odometry), so changing e.g. the odometry
 //!   options leaves the trajectory and the IMU data unchanged; per-frame draws
 //!   (a scan's range noise, an image's noise) start at their own block of the
-//!   stream ([`frame_rng`]). Every simulator draws through [`seeded_rng`].
+//!   stream (`frame_rng`). Every simulator draws through `seeded_rng`.
 //!
 //! The other scenarios: [`camera`] (camera-IMU), [`lidar`] (LiDAR-IMU in a [`BoxWorld`]),
 //! [`joint`], [`drive`] / [`drive_sim`] (on-vehicle monitoring), [`lidar_camera`] (a static
 //! LiDAR-camera suite and a plain board, chapter 2) and [`prior_map`] (chapter 7); the
-//! dataset writers share [`write`].
+//! dataset writers share [`mod@write`].
 
 mod box_world;
 pub mod camera;
@@ -98,7 +98,7 @@ fn rng_for(seed: u64, stream: Stream) -> ChaCha8Rng {
 }
 
 /// ChaCha8 seeded with `seed`, on its stream `stream`: the random source of every simulator
-/// (each numbers its own streams: [`Stream`] here, its own enum in [`lidar_camera`], 100 and
+/// (each numbers its own streams: `Stream` here, its own enum in [`lidar_camera`], 100 and
 /// up in [`prior_map`]).
 pub(crate) fn seeded_rng(seed: u64, stream: u64) -> ChaCha8Rng {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -106,7 +106,7 @@ pub(crate) fn seeded_rng(seed: u64, stream: u64) -> ChaCha8Rng {
     rng
 }
 
-/// [`seeded_rng`] positioned at the block of frame `frame` (word `frame << 40`), so that each
+/// `seeded_rng` positioned at the block of frame `frame` (word `frame << 40`), so that each
 /// scan's or image's draws do not depend on how many the others took.
 pub(crate) fn frame_rng(seed: u64, stream: u64, frame: usize) -> ChaCha8Rng {
     let mut rng = seeded_rng(seed, stream);

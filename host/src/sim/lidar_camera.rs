@@ -19,8 +19,8 @@
 //!   the mean of their corners; then a 0.6 px Gaussian blur and 2 grey levels of noise.
 //! - Bad frames (option): board out of view, board cut by the image border, board seen
 //!   almost edge-on (84 deg) — the calibration must reject each with a reason.
-//! - Randomness: [`super::seeded_rng`] seeded with `seed`, one stream per component
-//!   ([`Stream`]), each scan's and image's draws from their own block ([`super::frame_rng`]).
+//! - Randomness: `super::seeded_rng` seeded with `seed`, one stream per component
+//!   (`Stream`), each scan's and image's draws from their own block (`super::frame_rng`).
 
 use std::path::Path;
 
@@ -178,7 +178,7 @@ impl Default for LidarCameraSimConfig {
 }
 
 /// Random stream of each component (this scenario's own numbering: its datasets do not
-/// share draws with the pose-IMU family's [`super::Stream`]).
+/// share draws with the pose-IMU family's `super::Stream`).
 #[derive(Clone, Copy)]
 enum Stream {
     Mounting = 1,
