@@ -23,8 +23,9 @@ from pathlib import Path
 # Lower layers first. A module may import its own layer and the ones below.
 # `report` and `plot` are generic writers (tables, series, images in, files out): every
 # layer may write through them, so they sit at the bottom. `sim` renders through the sensor
-# models of the algorithm layer (vision's cameras, lidar's scan source, ndt's box world,
-# mi's scenes), so it sits above it; the pipelines simulate in their studies and tests.
+# models of the algorithm layer (vision's cameras and noise, lidar's scan source, mi's ground
+# ray caster), so it sits above it; the pipelines simulate in their studies and tests, and an
+# algorithm's own tests that need a simulated scene are integration tests (host/tests/).
 LAYERS = [
     ("foundation", ["dataset", "pointcloud", "camera_yaml", "shared_data", "solve", "eval",
                     "report", "plot"]),

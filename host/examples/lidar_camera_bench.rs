@@ -8,7 +8,7 @@
 use std::time::Instant;
 
 use msreg_host::lidar_camera::pipeline::{extract_simulation, solve, CalibrationOptions};
-use msreg_host::lidar_camera::{simulate_lidar_camera, LidarCameraSimConfig, LidarModel};
+use msreg_host::sim::{simulate_lidar_camera, LidarCameraSimConfig, LidarModel};
 
 fn main() {
     println!("| LiDAR | seed | frames | PPC residuals | PBPC residuals | PPC [ms] | PBPC [ms] | whole solve [ms] |");

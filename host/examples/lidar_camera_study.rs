@@ -11,9 +11,7 @@ use msreg_estimator::Pose;
 use msreg_host::lidar_camera::pipeline::{
     extract_simulation, solve, CalibrationOptions, FrameFeatures,
 };
-use msreg_host::lidar_camera::{
-    simulate_lidar_camera, LidarCameraSim, LidarCameraSimConfig, LidarModel,
-};
+use msreg_host::sim::{simulate_lidar_camera, LidarCameraSim, LidarCameraSimConfig, LidarModel};
 use nalgebra::{UnitQuaternion, Vector3};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};

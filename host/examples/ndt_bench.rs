@@ -15,9 +15,9 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use msreg_host::ndt::synthetic::BoxWorld;
 use msreg_host::ndt::{align_scans, NdtParams};
 use msreg_host::pointcloud::{read_pcd, voxel_downsample, write_pcd, PcdWriteOptions, PointCloud};
+use msreg_host::sim::BoxWorld;
 use nalgebra::{Isometry3, Matrix4, Translation3, UnitQuaternion, Vector3};
 
 const INPUT_VOXEL_M: f64 = 0.2;

@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use msreg_estimator::camera::{
     equidistant::Equidistant, radtan::RadTan, Camera, Distortion, Intrinsics, Projection,
 };
+use nalgebra::Vector3;
 use serde_yaml::{Mapping, Value};
 
 /// Why a camera or target file could not be read.
@@ -49,14 +50,44 @@ pub enum Target {
     /// `target_type: 'checkerboard'`.
     Checkerboard(CheckerboardTarget),
     /// `target_type: 'board'`: a plain rectangle, origin at its centre.
-    Board {
-        /// Extent along x, metres.
-        width_m: f64,
-        /// Extent along y, metres.
-        height_m: f64,
-    },
+    Board(Board),
     /// Kalibr's `target_type: 'aprilgrid'`.
     AprilGrid(AprilGridTarget),
+}
+
+/// The plain rectangular board of `target.yaml` (`target_type: board`): origin at its
+/// centre, x along `width_m`, y along `height_m`, z towards the viewer (CONVENTIONS.md).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Board {
+    /// Extent along target x, m.
+    pub width_m: f64,
+    /// Extent along target y, m.
+    pub height_m: f64,
+}
+
+impl Board {
+    /// Corners in the target frame, counter-clockwise seen from +z:
+    /// `(-w/2, -h/2), (w/2, -h/2), (w/2, h/2), (-w/2, h/2)`. Edge `j` runs from corner `j`
+    /// to corner `j + 1 (mod 4)`.
+    pub fn corners(&self) -> [Vector3<f64>; 4] {
+        let (x, y) = (0.5 * self.width_m, 0.5 * self.height_m);
+        [
+            Vector3::new(-x, -y, 0.0),
+            Vector3::new(x, -y, 0.0),
+            Vector3::new(x, y, 0.0),
+            Vector3::new(-x, y, 0.0),
+        ]
+    }
+
+    /// True when `(x, y)` of the board plane is on the board.
+    pub fn contains(&self, x: f64, y: f64) -> bool {
+        x.abs() <= 0.5 * self.width_m && y.abs() <= 0.5 * self.height_m
+    }
+
+    /// Length of the diagonal, m.
+    pub fn diagonal(&self) -> f64 {
+        self.width_m.hypot(self.height_m)
+    }
 }
 
 /// A Kalibr AprilGrid: `tag_cols x tag_rows` tags of side `tag_size_m`, `tag_spacing` (a
@@ -398,10 +429,10 @@ fn target_from_doc(doc: &Doc) -> Result<Target, YamlError> {
                 height_m: optional("height_m")?,
             }))
         }
-        "board" => Ok(Target::Board {
+        "board" => Ok(Target::Board(Board {
             width_m: positive("width_m")?,
             height_m: positive("height_m")?,
-        }),
+        })),
         "aprilgrid" => {
             let grid = || -> Result<AprilGridTarget, YamlError> {
                 Ok(AprilGridTarget {
@@ -503,4 +534,12 @@ pub fn checkerboard_yaml_string(target: &CheckerboardTarget) -> String {
         }
     }
     text
+}
+
+/// Kalibr-style `target.yaml` text of a plain board, as [`read_target_yaml`] reads it back.
+pub fn board_yaml_string(board: &Board) -> String {
+    format!(
+        "target_type: 'board'\nwidth_m: {}\nheight_m: {}\n",
+        board.width_m, board.height_m
+    )
 }

@@ -35,14 +35,14 @@
 //! - **Local map** ([`LocalMap`]): sliding window of the last K scans already
 //!   in a common frame, voxel-downsampled, with per-cell sums added on
 //!   insertion and subtracted on eviction.
-//! - [`synthetic`]: box-world scenes and ray-cast scans for tests and benchmarks.
+//! - The box-world scenes of its tests and benchmarks are [`crate::sim::BoxWorld`]
+//!   (`host/tests/ndt_box_world.rs`, `examples/ndt_bench.rs`).
 
 mod degeneracy;
 mod local_map;
 mod map;
 mod score;
 pub mod solver;
-pub mod synthetic;
 mod types;
 
 #[cfg(test)]

@@ -17,8 +17,16 @@
 //!   seconds after the start, converted after the integer subtraction.
 //! - Randomness: ChaCha8 seeded with `seed`, one stream per component
 //!   (trajectory, mounting, IMU, odometry), so changing e.g. the odometry
-//!   options leaves the trajectory and the IMU data unchanged.
+//!   options leaves the trajectory and the IMU data unchanged; per-frame draws
+//!   (a scan's range noise, an image's noise) start at their own block of the
+//!   stream (`frame_rng`). Every simulator draws through `seeded_rng`.
+//!
+//! The other scenarios: [`camera`] (camera-IMU), [`lidar`] (LiDAR-IMU in a [`BoxWorld`]),
+//! [`joint`], [`drive`] / [`drive_sim`] (on-vehicle monitoring), [`lidar_camera`] (a static
+//! LiDAR-camera suite and a plain board, chapter 2) and [`prior_map`] (chapter 7); the
+//! dataset writers share [`mod@write`].
 
+mod box_world;
 pub mod camera;
 mod clock;
 mod config;
@@ -30,6 +38,7 @@ mod extrinsic;
 mod imu;
 pub mod joint;
 pub mod lidar;
+pub mod lidar_camera;
 mod odometry;
 mod output;
 mod plate;
@@ -37,6 +46,7 @@ pub mod prior_map;
 pub mod prior_map_scene;
 mod signal;
 mod trajectory;
+pub mod write;
 
 #[cfg(test)]
 mod tests;
@@ -44,6 +54,7 @@ mod tests;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
+pub use box_world::BoxWorld;
 pub use camera::{simulate_camera_imu, CameraImuSim, CameraImuSimConfig, CameraModelChoice};
 pub use clock::Clock;
 pub use config::{ImuSimConfig, Knock, PoseSimConfig, SimConfig, SimError, DEFAULT_START_STAMP_NS};
@@ -53,6 +64,9 @@ pub use extrinsic::{random_mounting, random_pose};
 pub use imu::{imu_noise_yaml, synthesize_imu, ImuSynthesis};
 pub use joint::{simulate_joint, JointSim, JointSimConfig};
 pub use lidar::{simulate_lidar_imu, Environment, LidarImuSim, LidarImuSimConfig, LidarSimConfig};
+pub use lidar_camera::{
+    simulate_lidar_camera, FrameKind, LidarCameraSim, LidarCameraSimConfig, LidarModel, SimFrame,
+};
 pub use odometry::{pose_sensor_yaml, synthesize_odometry};
 pub use output::SimDataset;
 pub use plate::Plate;
@@ -80,8 +94,23 @@ enum Stream {
 }
 
 fn rng_for(seed: u64, stream: Stream) -> ChaCha8Rng {
+    seeded_rng(seed, stream as u64)
+}
+
+/// ChaCha8 seeded with `seed`, on its stream `stream`: the random source of every simulator
+/// (each numbers its own streams: `Stream` here, its own enum in [`lidar_camera`], 100 and
+/// up in [`prior_map`]).
+pub(crate) fn seeded_rng(seed: u64, stream: u64) -> ChaCha8Rng {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    rng.set_stream(stream as u64);
+    rng.set_stream(stream);
+    rng
+}
+
+/// `seeded_rng` positioned at the block of frame `frame` (word `frame << 40`), so that each
+/// scan's or image's draws do not depend on how many the others took.
+pub(crate) fn frame_rng(seed: u64, stream: u64, frame: usize) -> ChaCha8Rng {
+    let mut rng = seeded_rng(seed, stream);
+    rng.set_word_pos((frame as u128) << 40);
     rng
 }
 

@@ -9,7 +9,8 @@ use std::path::Path;
 
 use msreg_estimator::camera::{Distortion, Projection};
 use msreg_host::camera_yaml::{
-    parse_camera_yaml, parse_target_yaml, read_camera_yaml, read_target_yaml, Target, YamlError,
+    parse_camera_yaml, parse_target_yaml, read_camera_yaml, read_target_yaml, Board, Target,
+    YamlError,
 };
 use nalgebra::{Vector2, Vector3};
 
@@ -121,10 +122,10 @@ fn kalibr_checkerboard_and_board_targets_are_read() {
     let board = "target_type: board\nwidth_m: 1.0\nheight_m: 0.8\n";
     assert_eq!(
         parse_target_yaml(Path::new("t.yaml"), board).unwrap(),
-        Target::Board {
+        Target::Board(Board {
             width_m: 1.0,
             height_m: 0.8
-        }
+        })
     );
 }
 

@@ -74,16 +74,13 @@ pub struct LidarImuInput<'a> {
 /// The outcome: `T_imu_lidar` with its covariance, the time offset, and the report.
 pub type LidarImuCalibration = ImuExtrinsicCalibration<LidarImuReport>;
 
-/// Runs the calibration with the filter in scalar type `T`.
-pub fn calibrate<T: Scalar>(
-    input: &LidarImuInput<'_>,
+/// The first IMU sample, once the input and the options are usable: IMU samples, at least
+/// three scans, valid NDT parameters, and the sandwich covariances computed if chosen.
+fn check_input<'a>(
+    input: &LidarImuInput<'a>,
     options: &LidarImuOptions,
-    progress: &mut dyn FnMut(f64),
-) -> Result<LidarImuCalibration, InputError> {
-    let imu = input.imu;
-    let Some(first_imu) = imu.first() else {
-        return Err(InputError::NoImuSamples);
-    };
+) -> Result<&'a ImuRecord, InputError> {
+    let first_imu = input.imu.first().ok_or(InputError::NoImuSamples)?;
     if input.scans.len() < 3 {
         return Err(InputError::TooFew {
             file: "lidar0/",
@@ -96,6 +93,17 @@ pub fn calibrate<T: Scalar>(
     if options.ndt_covariance != NdtCovariance::Hessian && !options.ndt.sandwich_covariance {
         return Err(InputError::SandwichWithoutCovariance);
     }
+    Ok(first_imu)
+}
+
+/// Runs the calibration with the filter in scalar type `T`.
+pub fn calibrate<T: Scalar>(
+    input: &LidarImuInput<'_>,
+    options: &LidarImuOptions,
+    progress: &mut dyn FnMut(f64),
+) -> Result<LidarImuCalibration, InputError> {
+    let imu = input.imu;
+    let first_imu = check_input(input, options)?;
     let started = Instant::now();
     let standstill = init::detect_standstill(imu, options.filter.min_standstill_s);
     let raw = rotation_start(imu, input.scans, standstill.as_ref(), options)?;

@@ -18,8 +18,8 @@ use msreg_host::lidar_camera::pipeline::{
     extract_dataset, solve, CalibrationOptions, FrameFeatures, FrameReport, Method, RejectedFrame,
     Solution, SolveError, SolverRun,
 };
-use msreg_host::lidar_camera::sim::{simulate_lidar_camera, LidarCameraSimConfig, LidarModel};
 use msreg_host::lidar_camera::LidarCameraDataset;
+use msreg_host::sim::lidar_camera::{simulate_lidar_camera, LidarCameraSimConfig, LidarModel};
 use msreg_host::vision::overlay::Canvas;
 use msreg_host::vision::GrayImage;
 
@@ -283,7 +283,12 @@ pub fn write_overlay(
     camera: &Camera<f64>,
     t_cam_lidar: &Pose<f64>,
 ) -> anyhow::Result<()> {
-    let Some((_, image_path)) = data.images.iter().find(|(s, _)| *s == frame.image_stamp_ns) else {
+    let Some(image_path) = data
+        .images
+        .iter()
+        .find(|f| f.stamp_ns == frame.image_stamp_ns)
+        .map(|f| &f.path)
+    else {
         return Ok(());
     };
     let image = GrayImage::load(image_path)

@@ -13,7 +13,9 @@ use serde::Serialize;
 
 use super::outcome::Outcome;
 use msreg_host::camera_yaml::read_camera_yaml;
-use msreg_host::dataset::{list_scans, read_camera_csv, CalibrationResult, ExtrinsicEstimate};
+use msreg_host::dataset::{
+    list_scans, read_camera_csv, CalibrationResult, ExtrinsicEstimate, CAMERA_CSV, CAMERA_YAML,
+};
 use msreg_host::mi::scene::rank_normalize;
 use msreg_host::mi::search::{Observability, Refined};
 use msreg_host::mi::targetless::{calibrate_targetless, TargetlessOptions, TargetlessResult};
@@ -138,12 +140,12 @@ fn read_initial(path: Option<&Path>) -> anyhow::Result<Isometry3<f64>> {
 pub fn calibrate(args: &TargetlessArgs<'_>) -> anyhow::Result<Outcome> {
     let initial = read_initial(args.initial)?;
     let root = args.dataset;
-    let camera = read_camera_yaml(&root.join("cam0/camera.yaml"))?;
-    let images = read_camera_csv(root.join("cam0/data.csv"))?;
+    let camera = read_camera_yaml(&root.join(CAMERA_YAML))?;
+    let images = read_camera_csv(root.join(CAMERA_CSV))?;
     let (stamp, image_path) = images
         .first()
         .map(|f| (f.stamp_ns, f.path.clone()))
-        .ok_or_else(|| anyhow!("{}: no image listed", root.join("cam0/data.csv").display()))?;
+        .ok_or_else(|| anyhow!("{}: no image listed", root.join(CAMERA_CSV).display()))?;
     let image = GrayImage::load(&image_path)?;
     let scan_path = nearest_scan(root, stamp)?;
     let cloud = read_pcd(&scan_path)?;

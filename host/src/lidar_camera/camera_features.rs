@@ -21,7 +21,7 @@ use msreg_estimator::Pose;
 use nalgebra::{Matrix3, SymmetricEigen, Vector2, Vector3};
 use serde::Serialize;
 
-use super::board::Board;
+use crate::camera_yaml::Board;
 use crate::vision::{solve_pnp, GrayImage};
 
 /// Thresholds of the camera side.
@@ -493,6 +493,54 @@ fn project_normalised(camera: &Camera<f64>, m: &Vector2<f64>) -> Option<Vector2<
         .map(|p| p.pixel)
 }
 
+/// Normalised-image corners of four edge lines: corner `j` joins edges `j - 1` and `j`.
+fn corners_of(lines: &[Vector3<f64>]) -> Option<[Vector2<f64>; 4]> {
+    let c: Vec<Vector2<f64>> = (0..4)
+        .filter_map(|j| intersect(&lines[(j + 3) % 4], &lines[j]))
+        .collect();
+    (c.len() == 4).then(|| [c[0], c[1], c[2], c[3]])
+}
+
+/// The four edges of the board region with corners `rough` in the (smoothed) image, in two
+/// passes: straight sides between the rough corners, then along the (curved) image of the
+/// pass-1 lines between their intersections. `fill` is the region's fill ratio (for the
+/// rejection).
+fn board_edges(
+    smooth: &GrayImage,
+    camera: &Camera<f64>,
+    rough: &[Vector2<f64>; 4],
+    params: &CameraFeatureParams,
+    fill: f64,
+) -> Result<Vec<ImageEdge>, CameraReject> {
+    let centre = rough.iter().sum::<Vector2<f64>>() / 4.0;
+    let mut lines: Vec<Vector3<f64>> = Vec::with_capacity(4);
+    for j in 0..4 {
+        let (a, b) = (rough[j], rough[(j + 1) % 4]);
+        let inward = centre - 0.5 * (a + b);
+        let along = |t: f64| Some(a + (b - a) * t);
+        let (l, _, _) = checked_edge(smooth, camera, &along, (b - a).norm(), &inward, params, j)?;
+        lines.push(l);
+    }
+    let corners = corners_of(&lines).ok_or(CameraReject::NotQuadrilateral { fill })?;
+    let mut edges = Vec::with_capacity(4);
+    for j in 0..4 {
+        let (a, b) = (corners[j], corners[(j + 1) % 4]);
+        let along = |t: f64| project_normalised(camera, &(a + (b - a) * t));
+        let (Some(pa), Some(pb)) = (along(0.0), along(1.0)) else {
+            return Err(CameraReject::NotQuadrilateral { fill });
+        };
+        let inward = centre - 0.5 * (pa + pb);
+        let (l, samples, rms) =
+            checked_edge(smooth, camera, &along, (pb - pa).norm(), &inward, params, j)?;
+        edges.push(ImageEdge {
+            normal: l.normalize(),
+            samples,
+            rms_px: rms,
+        });
+    }
+    Ok(edges)
+}
+
 /// Extracts the board from an image (see the module docs).
 pub fn extract_camera_board(
     img: &GrayImage,
@@ -517,51 +565,9 @@ pub fn extract_camera_board(
     if !(params.min_fill..=1.0 / params.min_fill).contains(&fill) {
         return Err(CameraReject::NotQuadrilateral { fill });
     }
-    let smooth = img.gaussian_blur(0.8);
-    let centre = rough.iter().sum::<Vector2<f64>>() / 4.0;
-    // Pass 1: straight sides between the rough corners.
-    let mut lines: Vec<Vector3<f64>> = Vec::with_capacity(4);
-    for j in 0..4 {
-        let (a, b) = (rough[j], rough[(j + 1) % 4]);
-        let inward = centre - 0.5 * (a + b);
-        let along = |t: f64| Some(a + (b - a) * t);
-        let (l, _, _) = checked_edge(&smooth, camera, &along, (b - a).norm(), &inward, params, j)?;
-        lines.push(l);
-    }
-    // Pass 2: along the (curved) image of the pass-1 lines between their intersections.
-    let corner_norm = |lines: &[Vector3<f64>]| -> Option<[Vector2<f64>; 4]> {
-        let c: Vec<Vector2<f64>> = (0..4)
-            .filter_map(|j| intersect(&lines[(j + 3) % 4], &lines[j]))
-            .collect();
-        (c.len() == 4).then(|| [c[0], c[1], c[2], c[3]])
-    };
-    let corners = corner_norm(&lines).ok_or(CameraReject::NotQuadrilateral { fill })?;
-    let mut edges = Vec::with_capacity(4);
-    for j in 0..4 {
-        let (a, b) = (corners[j], corners[(j + 1) % 4]);
-        let along = |t: f64| project_normalised(camera, &(a + (b - a) * t));
-        let (pa, pb) = (along(0.0), along(1.0));
-        let (Some(pa), Some(pb)) = (pa, pb) else {
-            return Err(CameraReject::NotQuadrilateral { fill });
-        };
-        let inward = centre - 0.5 * (pa + pb);
-        let (l, samples, rms) = checked_edge(
-            &smooth,
-            camera,
-            &along,
-            (pb - pa).norm(),
-            &inward,
-            params,
-            j,
-        )?;
-        edges.push(ImageEdge {
-            normal: l.normalize(),
-            samples,
-            rms_px: rms,
-        });
-    }
+    let edges = board_edges(&img.gaussian_blur(0.8), camera, &rough, params, fill)?;
     let lines: Vec<Vector3<f64>> = edges.iter().map(|e| e.normal).collect();
-    let corners = corner_norm(&lines).ok_or(CameraReject::NotQuadrilateral { fill })?;
+    let corners = corners_of(&lines).ok_or(CameraReject::NotQuadrilateral { fill })?;
     let corners_px: Vec<Vector2<f64>> = corners
         .iter()
         .filter_map(|m| project_normalised(camera, m))

@@ -1,13 +1,17 @@
 //! The files of a LiDAR-camera dataset: `cam0/camera.yaml`, `target.yaml` (a plain board),
-//! `lidar0/*.pcd` and `cam0/data.csv`, and the typed error of reading them.
+//! `lidar0/*.pcd` and `cam0/data.csv` (each read by its one reader in [`crate::dataset`] or
+//! [`crate::camera_yaml`]), and the typed error of reading them.
 
 use std::path::{Path, PathBuf};
 
 use msreg_estimator::camera::Camera;
 
-use super::board::Board;
+use crate::camera_yaml::Board;
 use crate::camera_yaml::{read_camera_yaml, read_target_yaml, Target, YamlError};
-use crate::dataset::{list_scans, DatasetError, LIDAR_DIR};
+use crate::dataset::{
+    list_scans, read_camera_csv, CameraFrame, DatasetError, CAMERA_CSV, CAMERA_YAML, LIDAR_DIR,
+    TARGET_YAML,
+};
 use crate::pointcloud::PcdError;
 use crate::vision::ImageLoadError;
 
@@ -21,16 +25,6 @@ pub enum LidarCameraInputError {
     /// `cam0/camera.yaml` or `target.yaml` is malformed.
     #[error(transparent)]
     Yaml(#[from] YamlError),
-    /// A timestamp of `cam0/data.csv` is not an integer.
-    #[error("{}:{line}: timestamp `{text}` is not an integer in ns", path.display())]
-    BadStamp {
-        /// The file.
-        path: PathBuf,
-        /// 1-based line.
-        line: usize,
-        /// The text found.
-        text: String,
-    },
     /// `target.yaml` is not a plain board.
     #[error(
         "{}: lidar-camera needs target_type 'board' (a plain rectangle), got a checkerboard",
@@ -69,60 +63,8 @@ pub struct LidarCameraDataset {
     pub board: Board,
     /// `(scan stamp, scan file)`, sorted.
     pub scans: Vec<(u64, PathBuf)>,
-    /// `(image stamp, image file)` from `cam0/data.csv`, sorted.
-    pub images: Vec<(u64, PathBuf)>,
-}
-
-/// Reads `cam0/data.csv` (`timestamp [ns], filename`), naming file and line on errors.
-pub fn read_image_list(path: &Path) -> Result<Vec<(u64, PathBuf)>, LidarCameraInputError> {
-    let text = std::fs::read_to_string(path).map_err(|source| DatasetError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    let dir = path.parent().map(|p| p.join("data")).unwrap_or_default();
-    let mut out: Vec<(u64, PathBuf)> = Vec::new();
-    for (i, line) in text.lines().enumerate() {
-        let line = line.trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
-        let mut parts = line.splitn(2, ',');
-        let (Some(stamp), Some(name)) = (parts.next(), parts.next()) else {
-            return Err(DatasetError::MalformedLine {
-                path: path.to_path_buf(),
-                line: i + 1,
-                expected: "`timestamp [ns],filename`".into(),
-            }
-            .into());
-        };
-        let stamp: u64 = stamp
-            .trim()
-            .parse()
-            .map_err(|_| LidarCameraInputError::BadStamp {
-                path: path.to_path_buf(),
-                line: i + 1,
-                text: stamp.trim().to_string(),
-            })?;
-        if let Some((prev, _)) = out.last() {
-            if stamp <= *prev {
-                return Err(DatasetError::TimeNotIncreasing {
-                    path: path.to_path_buf(),
-                    line: i + 1,
-                    stamp_ns: stamp,
-                    previous_ns: *prev,
-                }
-                .into());
-            }
-        }
-        out.push((stamp, dir.join(name.trim())));
-    }
-    if out.is_empty() {
-        return Err(DatasetError::Empty {
-            path: path.to_path_buf(),
-        }
-        .into());
-    }
-    Ok(out)
+    /// The images of `cam0/data.csv`, sorted.
+    pub images: Vec<CameraFrame>,
 }
 
 impl LidarCameraDataset {
@@ -135,10 +77,10 @@ impl LidarCameraDataset {
             }
             .into());
         }
-        let camera = read_camera_yaml(&root.join("cam0/camera.yaml"))?;
-        let target_path = root.join("target.yaml");
+        let camera = read_camera_yaml(&root.join(CAMERA_YAML))?;
+        let target_path = root.join(TARGET_YAML);
         let board = match read_target_yaml(&target_path)? {
-            Target::Board { width_m, height_m } => Board { width_m, height_m },
+            Target::Board(board) => board,
             // A checkerboard's printed pattern breaks the uniform-region detector.
             Target::Checkerboard(_) | Target::AprilGrid(_) => {
                 return Err(LidarCameraInputError::NotABoard { path: target_path })
@@ -154,7 +96,7 @@ impl LidarCameraDataset {
             }
             .into());
         }
-        let images = read_image_list(&root.join("cam0/data.csv"))?;
+        let images = read_camera_csv(root.join(CAMERA_CSV))?;
         Ok(Self {
             root: root.to_path_buf(),
             camera,
@@ -174,7 +116,7 @@ impl LidarCameraDataset {
                     .images
                     .iter()
                     .enumerate()
-                    .map(|(i, (t, _))| (i, s.abs_diff(*t)))
+                    .map(|(i, image)| (i, s.abs_diff(image.stamp_ns)))
                     .min_by_key(|&(_, g)| g)?;
                 Some((k, i, gap))
             })

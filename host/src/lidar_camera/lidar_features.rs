@@ -17,7 +17,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
-use super::board::Board;
+use crate::camera_yaml::Board;
 use crate::pointcloud::PointCloud;
 
 /// Thresholds of the LiDAR side.
@@ -312,6 +312,47 @@ fn on_plane(p: &Vector3<f64>, normal: &Vector3<f64>, offset: f64) -> Option<Vect
     (denom.abs() > 1e-9).then(|| p * (offset / denom))
 }
 
+/// The board's points among `candidates`: planes are found by RANSAC one after the other
+/// (each removed before the next), and the first whose largest cluster has the board's size
+/// is the board.
+fn board_cluster(
+    points: &[Vector3<f64>],
+    candidates: Vec<usize>,
+    board: &Board,
+    params: &LidarFeatureParams,
+    rng: &mut ChaCha8Rng,
+) -> Result<Vec<usize>, LidarReject> {
+    let mut remaining = candidates;
+    for _ in 0..params.max_planes {
+        let inliers = ransac_plane(
+            points,
+            &remaining,
+            params.plane_threshold_m,
+            params.ransac_iterations,
+            rng,
+        );
+        if inliers.len() < params.min_plane_points {
+            break;
+        }
+        let cluster = largest_cluster(points, &inliers, params.cluster_radius_m);
+        let cluster_points: Vec<Vector3<f64>> = cluster.iter().map(|&i| points[i]).collect();
+        if let Some((normal, _, _)) = fit_plane(&cluster_points) {
+            let size = diameter(&cluster_points, &normal);
+            if cluster.len() >= params.min_plane_points
+                && size <= board.diagonal() + 0.15
+                && size >= 0.5 * board.width_m.min(board.height_m)
+            {
+                return Ok(cluster);
+            }
+        }
+        let drop: std::collections::HashSet<usize> = inliers.into_iter().collect();
+        remaining.retain(|i| !drop.contains(i));
+    }
+    Err(LidarReject::NoBoard {
+        planes: params.max_planes,
+    })
+}
+
 /// Extracts the board from a scan (see the module docs).
 pub fn extract_lidar_board(
     cloud: &PointCloud,
@@ -332,39 +373,7 @@ pub fn extract_lidar_board(
         return Err(LidarReject::Empty);
     }
     let mut rng = ChaCha8Rng::seed_from_u64(0x5EED);
-    let mut remaining = in_fov;
-    let mut found = None;
-    for _ in 0..params.max_planes {
-        let inliers = ransac_plane(
-            &points,
-            &remaining,
-            params.plane_threshold_m,
-            params.ransac_iterations,
-            &mut rng,
-        );
-        if inliers.len() < params.min_plane_points {
-            break;
-        }
-        let cluster = largest_cluster(&points, &inliers, params.cluster_radius_m);
-        let cluster_points: Vec<Vector3<f64>> = cluster.iter().map(|&i| points[i]).collect();
-        if let Some((normal, _, _)) = fit_plane(&cluster_points) {
-            let size = diameter(&cluster_points, &normal);
-            if cluster.len() >= params.min_plane_points
-                && size <= board.diagonal() + 0.15
-                && size >= 0.5 * board.width_m.min(board.height_m)
-            {
-                found = Some(cluster);
-                break;
-            }
-        }
-        let drop: std::collections::HashSet<usize> = inliers.into_iter().collect();
-        remaining.retain(|i| !drop.contains(i));
-    }
-    let Some(cluster) = found else {
-        return Err(LidarReject::NoBoard {
-            planes: params.max_planes,
-        });
-    };
+    let cluster = board_cluster(&points, in_fov, board, params, &mut rng)?;
     // Refit with a 3-sigma re-check of the cluster.
     let pts: Vec<Vector3<f64>> = cluster.iter().map(|&i| points[i]).collect();
     let (normal, offset, rms) = fit_plane(&pts).ok_or(LidarReject::NoBoard { planes: 1 })?;

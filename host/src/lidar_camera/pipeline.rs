@@ -11,7 +11,6 @@ use nalgebra::{Matrix6, Vector3};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::board::Board;
 use super::camera_features::{
     extract_camera_board, CameraBoardFeatures, CameraFeatureParams, CameraQuality,
 };
@@ -24,6 +23,7 @@ use super::solver::{
     associate_edges, plane_alignment, EdgeObservation, PlaneObservation, PointToBackProjectedPlane,
     PointToPlane,
 };
+use crate::camera_yaml::Board;
 use crate::pointcloud::{read_pcd, PointCloud};
 use crate::solve::{solve_se3, LmError, LmOptions, LmSummary, Loss};
 use crate::vision::GrayImage;
@@ -440,7 +440,7 @@ pub fn extract_dataset(
         .into_par_iter()
         .map(|(k, i, gap)| {
             let (scan_stamp_ns, scan_path) = &data.scans[k];
-            let (image_stamp_ns, image_path) = &data.images[i];
+            let (image_stamp_ns, image_path) = (&data.images[i].stamp_ns, &data.images[i].path);
             let out = if gap > options.max_pair_gap_ns {
                 Err(RejectedFrame {
                     frame: k,
@@ -496,7 +496,7 @@ pub fn extract_dataset(
 /// Every frame of a simulation, made and extracted in memory (no files): for tests and
 /// studies.
 pub fn extract_simulation(
-    sim: &super::sim::LidarCameraSim,
+    sim: &crate::sim::LidarCameraSim,
     options: &CalibrationOptions,
 ) -> (Vec<FrameFeatures>, Vec<RejectedFrame>) {
     let results: Vec<Result<FrameFeatures, RejectedFrame>> = (0..sim.frames.len())

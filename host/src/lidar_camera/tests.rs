@@ -4,7 +4,9 @@ use nalgebra::Vector3;
 
 use super::camera_features::{extract_camera_board, CameraFeatureParams, CameraReject};
 use super::lidar_features::{extract_lidar_board, LidarFeatureParams, LidarReject};
-use super::sim::{simulate_lidar_camera, FrameKind, LidarCameraSimConfig, LidarModel};
+use crate::sim::lidar_camera::{
+    simulate_lidar_camera, FrameKind, LidarCameraSimConfig, LidarModel,
+};
 
 #[test]
 fn features_of_a_good_frame_match_the_truth_and_bad_frames_are_rejected() {

@@ -27,8 +27,7 @@ use msreg_estimator::camera::{
 };
 use msreg_estimator::Pose;
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector2, Vector3};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+use rand::Rng;
 use rand_distr::StandardNormal;
 use rayon::prelude::*;
 
@@ -36,7 +35,8 @@ use super::clock::Clock;
 use super::config::{ImuSimConfig, SimError, DEFAULT_START_STAMP_NS};
 use super::imu::{imu_noise_yaml, synthesize_imu};
 use super::trajectory::{LookAtConfig, Mount, Trajectory, TrajectoryConfig};
-use super::{rng_for, Stream};
+use super::write::{create_dirs, write_png, write_text};
+use super::{frame_rng, rng_for, Stream};
 use crate::camera_yaml::{camera_yaml_string, checkerboard_yaml_string, CheckerboardTarget};
 use crate::dataset::{
     write_camera_csv, write_corners_csv, write_groundtruth_csv, write_imu_csv, write_pose_csv,
@@ -457,9 +457,7 @@ impl CameraImuSim {
             apply_lighting_gradient(&mut img, gu, gv);
         }
         if c.noise_sigma > 0.0 {
-            let mut rng = ChaCha8Rng::seed_from_u64(c.seed);
-            rng.set_stream(Stream::CameraNoise as u64);
-            rng.set_word_pos((k as u128) << 40);
+            let mut rng = frame_rng(c.seed, Stream::CameraNoise as u64, k);
             add_noise(&mut img, c.noise_sigma, &mut rng);
         }
         img
@@ -558,14 +556,8 @@ impl CameraImuSim {
         progress: &(dyn Fn(f64) + Sync),
     ) -> Result<(), DatasetError> {
         let dir = dir.as_ref();
-        for sub in ["imu0", CAMERA_DATA_DIR, "groundtruth"] {
-            let path = dir.join(sub);
-            std::fs::create_dir_all(&path).map_err(|source| DatasetError::Io { path, source })?;
-        }
-        let text = |relative: &str, content: String| {
-            let path = dir.join(relative);
-            std::fs::write(&path, content).map_err(|source| DatasetError::Io { path, source })
-        };
+        create_dirs(dir, &["imu0", CAMERA_DATA_DIR, "groundtruth"])?;
+        let text = |relative: &str, content: String| write_text(&dir.join(relative), &content);
         self.metadata().write(dir.join(DATASET_YAML))?;
         write_imu_csv(dir.join(IMU_CSV), &self.imu)?;
         self.imu_noise.write(dir.join(IMU_YAML))?;
@@ -603,34 +595,10 @@ impl CameraImuSim {
     }
 }
 
-/// An 8-bit grey PNG with fast compression (rendering, not zlib, should dominate).
-fn write_png(path: &Path, img: &GrayImage) -> Result<(), DatasetError> {
-    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
-    use image::ImageEncoder;
-    let io = |source: std::io::Error| DatasetError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let luma = img.to_luma8();
-    let file = std::fs::File::create(path).map_err(io)?;
-    let encoder = PngEncoder::new_with_quality(
-        std::io::BufWriter::new(file),
-        CompressionType::Fast,
-        FilterType::Sub,
-    );
-    encoder
-        .write_image(
-            luma.as_raw(),
-            luma.width(),
-            luma.height(),
-            image::ExtendedColorType::L8,
-        )
-        .map_err(|e| io(std::io::Error::other(e.to_string())))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::SeedableRng;
 
     fn short(seed: u64) -> CameraImuSimConfig {
         CameraImuSimConfig {
@@ -642,7 +610,7 @@ mod tests {
 
     #[test]
     fn mountings_are_rotations_near_an_axis_aligned_one() {
-        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
         for _ in 0..50 {
             let m = random_camera_mounting(&mut rng);
             let r = m.rotation.to_rotation_matrix();

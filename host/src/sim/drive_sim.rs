@@ -361,10 +361,7 @@ impl DriveSim {
     /// Writes the dataset under `dir`.
     pub fn write(&self, dir: impl AsRef<Path>) -> Result<(), DatasetError> {
         let dir = dir.as_ref();
-        for sub in ["imu0", "pose0", "pose1", "groundtruth"] {
-            let path = dir.join(sub);
-            std::fs::create_dir_all(&path).map_err(|source| DatasetError::Io { path, source })?;
-        }
+        super::write::create_dirs(dir, &["imu0", "pose0", "pose1", "groundtruth"])?;
         self.metadata().write(dir.join(DATASET_YAML))?;
         write_imu_csv(dir.join(IMU_CSV), &self.imu)?;
         imu_noise_yaml(&self.config.imu).write(dir.join(IMU_YAML))?;
@@ -376,7 +373,6 @@ impl DriveSim {
         write_groundtruth_csv(dir.join(GROUNDTRUTH_TRAJECTORY_CSV), &self.groundtruth)?;
         self.final_extrinsics()
             .write(dir.join(GROUNDTRUTH_EXTRINSICS_YAML))?;
-        let path = dir.join(GROUNDTRUTH_KNOCK_YAML);
-        std::fs::write(&path, self.knock_yaml()).map_err(|source| DatasetError::Io { path, source })
+        super::write::write_text(&dir.join(GROUNDTRUTH_KNOCK_YAML), &self.knock_yaml())
     }
 }

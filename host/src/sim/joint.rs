@@ -212,9 +212,10 @@ impl JointSim {
         let dir = dir.as_ref();
         self.camera.write(dir, &|f| progress(0.5 * f))?;
         self.metadata().write(dir.join(DATASET_YAML))?;
-        let path = dir.join(TARGET_YAML);
-        std::fs::write(&path, checkerboard_yaml_string(&self.target()))
-            .map_err(|source| DatasetError::Io { path, source })?;
+        super::write::write_text(
+            &dir.join(TARGET_YAML),
+            &checkerboard_yaml_string(&self.target()),
+        )?;
         self.extrinsics()
             .write(dir.join(GROUNDTRUTH_EXTRINSICS_YAML))?;
         self.lidar

@@ -23,17 +23,18 @@ use std::f64::consts::{PI, TAU};
 use std::path::Path;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+use rand::Rng;
 use rand_distr::StandardNormal;
 use rayon::prelude::*;
 
+use super::box_world::BoxWorld;
 use super::clock::Clock;
 use super::config::{ImuSimConfig, SimError, DEFAULT_START_STAMP_NS};
 use super::imu::imu_noise_yaml;
 use super::plate::Plate;
 use super::trajectory::{Trajectory, TrajectoryConfig};
-use super::{rng_for, simulate_motion, Stream};
+use super::write::{create_dirs, write_scan};
+use super::{frame_rng, rng_for, simulate_motion, Stream};
 use crate::dataset::{
     write_groundtruth_csv, write_imu_csv, CalibrationResult, DatasetError, DatasetYaml,
     ExtrinsicEstimate, GroundTruthRecord, ImuNoiseYaml, ImuRecord, LidarYaml, DATASET_YAML,
@@ -41,8 +42,7 @@ use crate::dataset::{
     LIDAR_YAML,
 };
 use crate::lidar::ScanSource;
-use crate::ndt::synthetic::BoxWorld;
-use crate::pointcloud::{write_pcd, PcdWriteOptions, Point, PointCloud};
+use crate::pointcloud::{Point, PointCloud};
 
 /// The scene the LiDAR sees.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -334,10 +334,13 @@ impl LidarImuSim {
     /// First hit of a unit ray from `origin` in G: range, reflectivity and the cosine of
     /// the incidence angle.
     fn first_hit(&self, origin: &Vector3<f64>, dir: &Vector3<f64>) -> Option<(f64, f32, f32)> {
-        let boxes = cast(&self.world, origin, dir).map(|(range, index, normal_axis)| {
-            let cos_incidence = dir[normal_axis].abs() as f32;
-            (range, Environment::reflectivity(index), cos_incidence)
-        });
+        let boxes = self
+            .world
+            .first_hit(origin, dir)
+            .map(|(range, index, normal_axis)| {
+                let cos_incidence = dir[normal_axis].abs() as f32;
+                (range, Environment::reflectivity(index), cos_incidence)
+            });
         self.plates
             .iter()
             .filter_map(|p| {
@@ -401,9 +404,7 @@ impl LidarImuSim {
                     .collect()
             })
             .collect();
-        let mut rng = ChaCha8Rng::seed_from_u64(self.config.seed);
-        rng.set_stream(Stream::LidarNoise as u64);
-        rng.set_word_pos((k as u128) << 40);
+        let mut rng = frame_rng(self.config.seed, Stream::LidarNoise as u64, k);
         let mut points = Vec::with_capacity(l.columns * l.rings);
         for (c, column) in hits.iter().enumerate() {
             let t_ns = self.column_offset_ns(c);
@@ -481,10 +482,7 @@ impl LidarImuSim {
         progress: &mut dyn FnMut(f64),
     ) -> Result<(), DatasetError> {
         let dir = dir.as_ref();
-        for sub in ["imu0", "groundtruth"] {
-            let path = dir.join(sub);
-            std::fs::create_dir_all(&path).map_err(|source| DatasetError::Io { path, source })?;
-        }
+        create_dirs(dir, &["imu0", "groundtruth"])?;
         self.metadata().write(dir.join(DATASET_YAML))?;
         write_imu_csv(dir.join(IMU_CSV), &self.imu)?;
         self.imu_noise.write(dir.join(IMU_YAML))?;
@@ -501,17 +499,13 @@ impl LidarImuSim {
         dir: &Path,
         progress: &mut dyn FnMut(f64),
     ) -> Result<(), DatasetError> {
-        let path = dir.join(LIDAR_DIR);
-        std::fs::create_dir_all(&path).map_err(|source| DatasetError::Io { path, source })?;
+        create_dirs(dir, &[LIDAR_DIR])?;
         self.lidar_yaml().write(dir.join(LIDAR_YAML))?;
         for (k, stamp) in self.scan_stamps.iter().enumerate() {
-            let path = dir.join(LIDAR_DIR).join(format!("{stamp}.pcd"));
-            write_pcd(&path, &self.scan(k), PcdWriteOptions::default()).map_err(|e| {
-                DatasetError::Io {
-                    path: path.clone(),
-                    source: std::io::Error::other(e.to_string()),
-                }
-            })?;
+            write_scan(
+                &dir.join(LIDAR_DIR).join(format!("{stamp}.pcd")),
+                &self.scan(k),
+            )?;
             progress((k + 1) as f64 / self.scan_stamps.len() as f64);
         }
         Ok(())
@@ -534,34 +528,6 @@ impl ScanSource for LidarImuSim {
     fn load(&self, index: usize) -> Result<PointCloud, crate::lidar::ScanLoadError> {
         Ok(self.scan(index))
     }
-}
-
-/// First hit along the unit ray: range, box index and the axis of the surface normal.
-fn cast(
-    world: &BoxWorld,
-    origin: &Vector3<f64>,
-    dir: &Vector3<f64>,
-) -> Option<(f64, usize, usize)> {
-    let mut best: Option<(f64, usize, usize)> = None;
-    for (index, (lo, hi)) in world.boxes.iter().enumerate() {
-        let mut enter = f64::NEG_INFINITY;
-        let mut exit = f64::INFINITY;
-        let mut axis = 0;
-        for k in 0..3 {
-            let inv = 1.0 / dir[k];
-            let (a, b) = ((lo[k] - origin[k]) * inv, (hi[k] - origin[k]) * inv);
-            let near = a.min(b);
-            if near > enter {
-                enter = near;
-                axis = k;
-            }
-            exit = exit.min(a.max(b));
-        }
-        if enter <= exit && enter > 0.0 && best.is_none_or(|(r, _, _)| enter < r) {
-            best = Some((enter, index, axis));
-        }
-    }
-    best
 }
 
 #[cfg(test)]
@@ -606,7 +572,7 @@ mod tests {
         for p in scan.points.iter().step_by(97) {
             let g = pose * nalgebra::Point3::from(p.xyz);
             let dir = (g.coords - pose.translation.vector).normalize();
-            let hit = cast(&sim.world, &pose.translation.vector, &dir).map(|h| h.0);
+            let hit = sim.world.cast(&pose.translation.vector, &dir);
             assert!(hit.is_some_and(|r| (r - p.xyz.norm()).abs() < 1e-6));
         }
         Ok(())

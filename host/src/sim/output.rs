@@ -91,10 +91,7 @@ impl SimDataset {
     /// Writes the dataset layout under `dir` (created if needed).
     pub fn write(&self, dir: impl AsRef<Path>) -> Result<(), DatasetError> {
         let dir = dir.as_ref();
-        for sub in ["imu0", "pose0", "groundtruth"] {
-            let path = dir.join(sub);
-            std::fs::create_dir_all(&path).map_err(|source| DatasetError::Io { path, source })?;
-        }
+        super::write::create_dirs(dir, &["imu0", "pose0", "groundtruth"])?;
         self.metadata().write(dir.join(DATASET_YAML))?;
         write_imu_csv(dir.join(IMU_CSV), &self.imu)?;
         self.imu_noise.write(dir.join(IMU_YAML))?;

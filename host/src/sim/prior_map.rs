@@ -29,12 +29,17 @@ use rand_distr::{Distribution, Normal};
 use rayon::prelude::*;
 
 use super::prior_map_scene::{Intersection, Shadows};
+use super::seeded_rng;
+use super::write::{create_dirs, write_png, write_scan, write_text};
 use crate::camera_yaml::camera_yaml_string;
-use crate::dataset::{write_camera_csv, CameraFrame, DatasetError, DatasetYaml};
+use crate::dataset::{
+    write_camera_csv, CameraFrame, DatasetError, DatasetYaml, CAMERA_CSV, CAMERA_DATA_DIR,
+    CAMERA_YAML, DATASET_YAML,
+};
 use crate::mi::prior_map::input::Survey;
 use crate::mi::prior_map::t_world_cam_yaml;
 use crate::mi::synthetic::ray_cast_ground;
-use crate::pointcloud::{write_pcd, PcdWriteOptions, Point, PointCloud};
+use crate::pointcloud::{Point, PointCloud};
 use crate::vision::GrayImage;
 
 /// Stamp of the single fisheye image (ns).
@@ -131,10 +136,9 @@ pub struct PriorMapSim {
     pub survey: Vec<Survey>,
 }
 
+/// The random stream `stream` of the prior-map scenario (streams 100 and up of [`seeded_rng`]).
 fn rng(seed: u64, stream: u64) -> ChaCha8Rng {
-    let mut rng = <ChaCha8Rng as rand::SeedableRng>::seed_from_u64(seed);
-    rng.set_stream(100 + stream);
-    rng
+    seeded_rng(seed, 100 + stream)
 }
 
 /// The fisheye of `model` for a square image of `size` px (about 190 deg field of view).
@@ -342,38 +346,13 @@ fn survey(scene: &Intersection, camera: &Camera<f64>, t_world_cam: &Isometry3<f6
         .collect()
 }
 
-fn write(path: &Path, text: &str) -> Result<(), DatasetError> {
-    std::fs::write(path, text).map_err(|source| DatasetError::Io {
-        path: path.to_path_buf(),
-        source,
-    })
-}
-
-fn save_png(path: &Path, image: &GrayImage) -> Result<(), DatasetError> {
-    image.to_luma8().save(path).map_err(|e| DatasetError::Io {
-        path: path.to_path_buf(),
-        source: std::io::Error::other(e.to_string()),
-    })
-}
-
 impl PriorMapSim {
     /// Writes the layout of CONVENTIONS.md "Camera in a prior map" under `dir`.
     pub fn write(&self, dir: &Path) -> Result<(), DatasetError> {
-        for sub in ["map", "cam0/data", "groundtruth"] {
-            let path = dir.join(sub);
-            std::fs::create_dir_all(&path).map_err(|source| DatasetError::Io { path, source })?;
-        }
-        write_pcd(
-            dir.join("map/map.pcd"),
-            &self.map,
-            PcdWriteOptions::default(),
-        )
-        .map_err(|e| DatasetError::Io {
-            path: dir.join("map/map.pcd"),
-            source: std::io::Error::other(e.to_string()),
-        })?;
-        save_png(&dir.join("map/satellite.png"), &self.satellite)?;
-        write(
+        create_dirs(dir, &["map", CAMERA_DATA_DIR, "groundtruth"])?;
+        write_scan(&dir.join("map/map.pcd"), &self.map)?;
+        write_png(&dir.join("map/satellite.png"), &self.satellite)?;
+        write_text(
             &dir.join("map/satellite.yaml"),
             &format!(
                 "# metric ortho image, north up: pixel (c, r) is at W (x0 + c m, y0 - r m)\n\
@@ -383,18 +362,17 @@ impl PriorMapSim {
                 self.satellite_top_left.y
             ),
         )?;
-        write(
-            &dir.join("cam0/camera.yaml"),
-            &camera_yaml_string(&self.camera),
-        )?;
+        write_text(&dir.join(CAMERA_YAML), &camera_yaml_string(&self.camera))?;
         let frame = CameraFrame {
             stamp_ns: IMAGE_STAMP_NS,
-            path: dir.join(format!("cam0/data/{IMAGE_STAMP_NS}.png")),
+            path: dir
+                .join(CAMERA_DATA_DIR)
+                .join(format!("{IMAGE_STAMP_NS}.png")),
         };
-        save_png(&frame.path, &self.image)?;
-        write_camera_csv(dir.join("cam0/data.csv"), &[frame])?;
+        write_png(&frame.path, &self.image)?;
+        write_camera_csv(dir.join(CAMERA_CSV), &[frame])?;
         let p = &self.prior;
-        write(
+        write_text(
             &dir.join("prior.yaml"),
             &format!(
                 "# GPS prior of cam0 in W; yaw unknown\nposition: [{}, {}, {}]\n\
@@ -410,8 +388,8 @@ impl PriorMapSim {
                 s.xyz.x, s.xyz.y, s.xyz.z, s.uv.x, s.uv.y
             );
         }
-        write(&dir.join("survey.csv"), &csv)?;
-        write(
+        write_text(&dir.join("survey.csv"), &csv)?;
+        write_text(
             &dir.join("groundtruth/extrinsics.yaml"),
             &t_world_cam_yaml(&self.t_world_cam, [0.0; 3], [0.0; 3]),
         )?;
@@ -426,6 +404,6 @@ impl PriorMapSim {
             ),
             rates_hz: BTreeMap::new(),
         }
-        .write(dir.join("dataset.yaml"))
+        .write(dir.join(DATASET_YAML))
     }
 }

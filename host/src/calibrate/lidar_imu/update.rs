@@ -6,15 +6,30 @@ use super::*;
 use crate::calibrate::convert;
 use crate::lidar::deskew::{imu_time, DeskewedScan};
 use crate::lidar::deskew_scan;
-use crate::ndt::{align, NdtTarget};
+use crate::ndt::{align, NdtError, NdtResult, NdtTarget};
 use crate::pointcloud::voxel_downsample;
 use msreg_estimator::{Ekf, Error as FilterError, RelativePose, Scalar};
-use nalgebra::{Isometry3, Matrix6, Vector6};
+use nalgebra::{Isometry3, Matrix6, Vector3, Vector6};
 use std::time::Instant;
+
+/// What one scan's step carries from stage to stage.
+struct ScanStep {
+    /// The scan's row of the report, filled in as the step goes.
+    record: ScanRecord,
+    /// Reference stamp, LiDAR clock.
+    ref_stamp: u64,
+    /// IMU time of the reference stamp.
+    due: u64,
+    /// The filter's time offset of the LiDAR, ns.
+    td_ns: i64,
+    /// The filter's IMU pose at `due`, before the update.
+    predicted: Isometry3<f64>,
+    /// The filter's `T_imu_lidar`.
+    t_i_l: Isometry3<f64>,
+}
 
 impl<'a> LidarFeed<'a> {
     /// Predict -> deskew -> NDT -> update for one scan whose reference time has come.
-    #[allow(clippy::too_many_lines)]
     pub(crate) fn process<
         T: Scalar,
         const S: usize,
@@ -26,6 +41,44 @@ impl<'a> LidarFeed<'a> {
         ekf: &mut Ekf<T, S, C, N, F>,
         p: Pending,
     ) {
+        let mut step = self.predict_scan(ekf, &p);
+        let (mut this, points) = match self.deskewed_target(&mut step, p) {
+            Ok(prepared) => prepared,
+            Err(why) => {
+                self.reject(ekf, step.record, step.ref_stamp, &why);
+                return;
+            }
+        };
+        let Some(prev) = self.previous.take() else {
+            self.start_chain(ekf, step.record, this, "anchor");
+            return;
+        };
+        let guess = match self.buffer.at(prev.imu_time_ns) {
+            Some(t_g_prev) => {
+                step.t_i_l.inverse() * t_g_prev.inverse() * step.predicted * step.t_i_l
+            }
+            None => Isometry3::identity(),
+        };
+        let matched = self.register(&prev, &mut this, &points, &guess);
+        let result = match self.accepted_match(matched, &mut step.record) {
+            Ok(result) => result,
+            Err(why) => {
+                self.start_chain(ekf, step.record, this, &why);
+                return;
+            }
+        };
+        let (meas, ndt_share) =
+            self.relative_pose_measurement(ekf, &mut step, &prev, &result, &guess);
+        self.apply_update(ekf, step, this, &meas, ndt_share);
+    }
+
+    /// Predicts the filter to the scan's reference time (the pose also goes to the deskew
+    /// buffer) and starts its record.
+    fn predict_scan<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize>(
+        &mut self,
+        ekf: &mut Ekf<T, S, C, N, F>,
+        p: &Pending,
+    ) -> ScanStep {
         let td_ns = (ekf.time_offset(self.sensor).to_f64() * 1e9).round() as i64;
         let ref_stamp = p.stamp_ns.saturating_add(p.ref_offset_ns);
         let due = imu_time(p.stamp_ns, p.ref_offset_ns, td_ns);
@@ -37,68 +90,71 @@ impl<'a> LidarFeed<'a> {
         };
         self.buffer.push(due, predicted);
         let t_i_l = convert::isometry(&ekf.extrinsic(self.sensor));
-
         let t_s = due.saturating_sub(self.first_imu_ns) as f64 * 1e-9;
-        let mut record =
-            ScanRecord::unmatched(p.stamp_ns, ref_stamp, t_s, p.cloud.len(), String::new());
+        ScanStep {
+            record: ScanRecord::unmatched(p.stamp_ns, ref_stamp, t_s, p.cloud.len(), String::new()),
+            ref_stamp,
+            due,
+            td_ns,
+            predicted,
+            t_i_l,
+        }
+    }
+
+    /// Deskews, voxel-filters and builds the NDT target of the scan: the next match's
+    /// `Previous` and the filtered points, or why the scan is rejected.
+    fn deskewed_target(
+        &mut self,
+        step: &mut ScanStep,
+        p: Pending,
+    ) -> Result<(Previous, Vec<Vector3<f64>>), String> {
         let started = Instant::now();
         let deskewed = if self.options.deskew {
             deskew_scan(
                 &p.cloud,
                 p.stamp_ns,
                 p.ref_offset_ns,
-                td_ns,
-                &t_i_l,
+                step.td_ns,
+                &step.t_i_l,
                 &self.buffer,
             )
         } else {
             Some(DeskewedScan::undistorted(p.cloud))
         };
         self.timing.deskew += started.elapsed().as_secs_f64();
-        let Some(deskewed) = deskewed else {
-            self.reject(ekf, record, ref_stamp, "no IMU poses to deskew with");
-            return;
-        };
+        let deskewed = deskewed.ok_or("no IMU poses to deskew with")?;
         let started = Instant::now();
         let filtered = voxel_downsample(&deskewed.cloud, self.options.voxel_m);
         if self.keep_deskewed {
-            self.deskewed = Some((ref_stamp, deskewed));
+            self.deskewed = Some((step.ref_stamp, deskewed));
         }
         let points = filtered.positions();
-        record.points_filtered = points.len();
+        step.record.points_filtered = points.len();
         let target = NdtTarget::build(&points, &self.options.ndt);
         self.timing.voxel_and_target += started.elapsed().as_secs_f64();
         if points.len() < self.options.min_points {
-            self.reject(
-                ekf,
-                record,
-                ref_stamp,
-                "too few points after voxel filtering",
-            );
-            return;
+            return Err("too few points after voxel filtering".into());
         }
-        let target = match target {
-            Ok(t) => t,
-            Err(e) => {
-                self.reject(ekf, record, ref_stamp, &format!("no NDT target: {e}"));
-                return;
-            }
-        };
-        let mut this = Previous {
-            ref_stamp_ns: ref_stamp,
-            imu_time_ns: due,
+        let target = target.map_err(|e| format!("no NDT target: {e}"))?;
+        let this = Previous {
+            ref_stamp_ns: step.ref_stamp,
+            imu_time_ns: step.due,
             target,
             cloud: self.map.is_some().then_some(filtered),
             t_map: Isometry3::identity(),
         };
-        let Some(prev) = self.previous.take() else {
-            self.start_chain(ekf, record, this, "anchor");
-            return;
-        };
-        let guess = match self.buffer.at(prev.imu_time_ns) {
-            Some(t_g_prev) => t_i_l.inverse() * t_g_prev.inverse() * predicted * t_i_l,
-            None => Isometry3::identity(),
-        };
+        Ok((this, points))
+    }
+
+    /// NDT of the scan against the previous one (or the local map) from `guess`: the
+    /// increment `T_prev_this` with its covariance; `this.t_map` becomes its map pose.
+    fn register(
+        &mut self,
+        prev: &Previous,
+        this: &mut Previous,
+        points: &[Vector3<f64>],
+        guess: &Isometry3<f64>,
+    ) -> Result<NdtResult, NdtError> {
         let started = Instant::now();
         let matched = match (&mut self.map, &this.cloud) {
             (Some(map), Some(cloud)) => map.align(cloud, &(prev.t_map * guess)).map(|mut r| {
@@ -116,34 +172,54 @@ impl<'a> LidarFeed<'a> {
                 }
                 r
             }),
-            _ => align(&prev.target, &points, &guess, &self.options.ndt),
+            _ => align(&prev.target, points, guess, &self.options.ndt),
         };
         self.timing.ndt += started.elapsed().as_secs_f64();
-        let result = match matched {
-            Ok(r) if r.converged && r.fitness >= self.options.min_fitness => r,
-            Ok(r) => {
-                record.fitness = Some(r.fitness);
-                record.iterations = Some(r.iterations);
-                let why = if let Some(d) = &r.degenerate {
-                    format!("degenerate NDT match ({d:?})")
-                } else if !r.converged {
-                    "NDT did not converge".to_string()
-                } else {
-                    format!(
-                        "NDT fitness {:.3} below {}",
-                        r.fitness, self.options.min_fitness
-                    )
-                };
-                self.start_chain(ekf, record, this, &why);
-                return;
-            }
-            Err(e) => {
-                self.start_chain(ekf, record, this, &format!("NDT failed: {e}"));
-                return;
-            }
-        };
-        record.fitness = Some(result.fitness);
-        record.iterations = Some(result.iterations);
+        matched
+    }
+
+    /// The match if it converged with enough fitness, else why not (the odometry chain
+    /// restarts at this scan); fitness and iterations go to the record either way.
+    fn accepted_match(
+        &self,
+        matched: Result<NdtResult, NdtError>,
+        record: &mut ScanRecord,
+    ) -> Result<NdtResult, String> {
+        let r = matched.map_err(|e| format!("NDT failed: {e}"))?;
+        record.fitness = Some(r.fitness);
+        record.iterations = Some(r.iterations);
+        if r.converged && r.fitness >= self.options.min_fitness {
+            return Ok(r);
+        }
+        Err(if let Some(d) = &r.degenerate {
+            format!("degenerate NDT match ({d:?})")
+        } else if !r.converged {
+            "NDT did not converge".to_string()
+        } else {
+            format!(
+                "NDT fitness {:.3} below {}",
+                r.fitness, self.options.min_fitness
+            )
+        })
+    }
+
+    /// The relative-pose measurement of the match (its noise from the NDT covariance, the
+    /// floor and the adaptation), booked in the record and the innovation statistics; also
+    /// the NDT term's share of `R`.
+    fn relative_pose_measurement<
+        T: Scalar,
+        const S: usize,
+        const C: usize,
+        const N: usize,
+        const F: usize,
+    >(
+        &mut self,
+        ekf: &Ekf<T, S, C, N, F>,
+        step: &mut ScanStep,
+        prev: &Previous,
+        result: &NdtResult,
+        guess: &Isometry3<f64>,
+    ) -> (RelativePose<T>, f64) {
         let sigma_ratio = extrinsic_sigma_ratio(ekf, self.sensor).max(self.imu_sigma_ratio(ekf));
         let (covariance, ndt_share) = self.measurement_covariance(
             match self.options.ndt_covariance {
@@ -162,20 +238,40 @@ impl<'a> LidarFeed<'a> {
         );
         self.updates += 1;
         let delta = result.t_target_source;
-        self.book_innovation(&guess, &delta, &covariance);
+        self.book_innovation(guess, &delta, &covariance);
+        let record = &mut step.record;
         let rv = delta.rotation.scaled_axis();
         record.delta_rotation = Some([rv.x, rv.y, rv.z]);
         record.delta_translation = Some(delta.translation.vector.into());
         record.sigma = Some(std::array::from_fn(|i| covariance[(i, i)].sqrt()));
         record.ndt = Some(result.clone());
-        record.predicted = Some(guess);
+        record.predicted = Some(*guess);
         let meas = RelativePose {
             stamp_from_ns: prev.ref_stamp_ns,
-            stamp_to_ns: ref_stamp,
+            stamp_to_ns: step.ref_stamp,
             delta: convert::pose::<T>(&delta),
             covariance: Matrix6::from_fn(|r, c| T::lit(covariance[(r, c)])),
         };
-        match ekf.update_relative_pose(self.sensor, &meas) {
+        (meas, ndt_share)
+    }
+
+    /// The filter update with the measurement; on success the scan becomes the next match's
+    /// previous one (and joins the local map).
+    fn apply_update<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize>(
+        &mut self,
+        ekf: &mut Ekf<T, S, C, N, F>,
+        step: ScanStep,
+        this: Previous,
+        meas: &RelativePose<T>,
+        ndt_share: f64,
+    ) {
+        let ScanStep {
+            mut record,
+            ref_stamp,
+            predicted,
+            ..
+        } = step;
+        match ekf.update_relative_pose(self.sensor, meas) {
             Ok(report) => {
                 // The update moved the current pose: keep the buffer continuous.
                 let after = convert::isometry(&ekf.imu().pose());

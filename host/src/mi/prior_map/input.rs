@@ -10,7 +10,7 @@ use nalgebra::{Vector2, Vector3};
 use serde::Deserialize;
 
 use crate::camera_yaml::read_camera_yaml;
-use crate::dataset::{read_camera_csv, DatasetError};
+use crate::dataset::{read_camera_csv, DatasetError, CAMERA_CSV, CAMERA_YAML};
 use crate::pointcloud::{read_pcd, PointCloud};
 use crate::vision::GrayImage;
 
@@ -204,10 +204,10 @@ fn read_satellite(root: &Path) -> Result<Option<Satellite>, PriorMapInputError> 
 pub fn read_input(root: &Path) -> Result<PriorMapInput, PriorMapInputError> {
     let pcd = root.join("map/map.pcd");
     let map = read_pcd(&pcd).map_err(|e| bad(&pcd, None, e.to_string()))?;
-    let camera_yaml = root.join("cam0/camera.yaml");
+    let camera_yaml = root.join(CAMERA_YAML);
     let camera =
         read_camera_yaml(&camera_yaml).map_err(|e| bad(&camera_yaml, None, e.to_string()))?;
-    let csv = root.join("cam0/data.csv");
+    let csv = root.join(CAMERA_CSV);
     let frames = read_camera_csv(&csv)?;
     let frame = frames
         .first()

@@ -1,6 +1,7 @@
-//! Box-world scenes and ray-cast spinning-LiDAR scans for NDT tests and
-//! benchmarks (not the dataset simulator: no motion, no noise model beyond
-//! an optional deterministic range jitter).
+//! Scenes of solid axis-aligned boxes and the ray caster through them: the rooms of the
+//! LiDAR-IMU simulator ([`super::Environment`]) and, with [`BoxWorld::scan`] (a still
+//! spinning-LiDAR scan, no motion, no noise model beyond an optional deterministic range
+//! jitter), the scenes of the NDT tests and benchmarks.
 
 use nalgebra::{Isometry3, Vector3};
 
@@ -52,20 +53,36 @@ impl BoxWorld {
 
     /// Range along the unit ray `origin + s dir` to the first box surface.
     pub fn cast(&self, origin: &Vector3<f64>, dir: &Vector3<f64>) -> Option<f64> {
-        self.boxes
-            .iter()
-            .filter_map(|(lo, hi)| {
-                let mut enter = f64::NEG_INFINITY;
-                let mut exit = f64::INFINITY;
-                for k in 0..3 {
-                    let inv = 1.0 / dir[k];
-                    let (a, b) = ((lo[k] - origin[k]) * inv, (hi[k] - origin[k]) * inv);
-                    enter = enter.max(a.min(b));
-                    exit = exit.min(a.max(b));
+        self.first_hit(origin, dir).map(|(range, _, _)| range)
+    }
+
+    /// First hit along the unit ray `origin + s dir` (`s > 0`): range, index of the box and
+    /// the axis of the surface normal (slab method; the first box wins a tie).
+    pub fn first_hit(
+        &self,
+        origin: &Vector3<f64>,
+        dir: &Vector3<f64>,
+    ) -> Option<(f64, usize, usize)> {
+        let mut best: Option<(f64, usize, usize)> = None;
+        for (index, (lo, hi)) in self.boxes.iter().enumerate() {
+            let mut enter = f64::NEG_INFINITY;
+            let mut exit = f64::INFINITY;
+            let mut axis = 0;
+            for k in 0..3 {
+                let inv = 1.0 / dir[k];
+                let (a, b) = ((lo[k] - origin[k]) * inv, (hi[k] - origin[k]) * inv);
+                let near = a.min(b);
+                if near > enter {
+                    enter = near;
+                    axis = k;
                 }
-                (enter <= exit && enter > 0.0).then_some(enter)
-            })
-            .min_by(f64::total_cmp)
+                exit = exit.min(a.max(b));
+            }
+            if enter <= exit && enter > 0.0 && best.is_none_or(|(r, _, _)| enter < r) {
+                best = Some((enter, index, axis));
+            }
+        }
+        best
     }
 
     /// A spinning-LiDAR scan from `t_world_sensor`: `rings` beams spread

@@ -19,24 +19,28 @@
 //!   the mean of their corners; then a 0.6 px Gaussian blur and 2 grey levels of noise.
 //! - Bad frames (option): board out of view, board cut by the image border, board seen
 //!   almost edge-on (84 deg) — the calibration must reject each with a reason.
-//! - Randomness: ChaCha8 seeded with `seed`, one stream per component.
+//! - Randomness: `super::seeded_rng` seeded with `seed`, one stream per component
+//!   (`Stream`), each scan's and image's draws from their own block (`super::frame_rng`).
 
 use std::path::Path;
 
 use msreg_estimator::camera::{radtan::RadTan, Camera, Distortion, Intrinsics, Projection};
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector2, Vector3};
-use rand::{Rng, SeedableRng};
+use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 use rayon::prelude::*;
 
-use super::board::Board;
+use super::write::{create_dirs, write_png, write_scan, write_text};
+use super::{frame_rng, seeded_rng, SimError, DEFAULT_START_STAMP_NS};
+use crate::camera_yaml::{board_yaml_string, camera_yaml_string, Board};
 use crate::dataset::{
-    CalibrationResult, DatasetError, DatasetYaml, ExtrinsicEstimate, LidarYaml, DATASET_YAML,
-    GROUNDTRUTH_EXTRINSICS_YAML, LIDAR_DIR, LIDAR_YAML,
+    write_camera_csv, write_pose_csv, CalibrationResult, CameraFrame, DatasetError, DatasetYaml,
+    ExtrinsicEstimate, LidarYaml, PoseRecord, CAMERA_CSV, CAMERA_DATA_DIR, CAMERA_YAML,
+    DATASET_YAML, GROUNDTRUTH_EXTRINSICS_YAML, GROUNDTRUTH_TARGET_POSES_CSV, LIDAR_DIR, LIDAR_YAML,
+    TARGET_YAML,
 };
-use crate::pointcloud::{write_pcd, PcdWriteOptions, Point, PointCloud};
-use crate::sim::SimError;
+use crate::pointcloud::{Point, PointCloud};
 use crate::vision::render::add_noise;
 use crate::vision::GrayImage;
 
@@ -166,27 +170,21 @@ impl Default for LidarCameraSimConfig {
                 height_m: 0.8,
             },
             bad_frames: false,
-            start_stamp_ns: crate::sim::DEFAULT_START_STAMP_NS,
+            start_stamp_ns: DEFAULT_START_STAMP_NS,
             image_noise: 2.0,
             blur_px: 0.6,
         }
     }
 }
 
-/// Random stream of each component.
+/// Random stream of each component (this scenario's own numbering: its datasets do not
+/// share draws with the pose-IMU family's `super::Stream`).
 #[derive(Clone, Copy)]
 enum Stream {
     Mounting = 1,
     Poses = 2,
     Range = 3,
     Image = 4,
-}
-
-fn rng_for(seed: u64, stream: Stream, word: u128) -> ChaCha8Rng {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    rng.set_stream(stream as u64);
-    rng.set_word_pos(word << 40);
-    rng
 }
 
 /// The simulated recording; scans and images are made on demand.
@@ -272,9 +270,9 @@ impl LidarCameraSimConfig {
 pub fn simulate_lidar_camera(config: &LidarCameraSimConfig) -> Result<LidarCameraSim, SimError> {
     config.validate()?;
     let camera = sim_camera()?;
-    let t_cam_lidar = random_camera_mounting(&mut rng_for(config.seed, Stream::Mounting, 0));
+    let t_cam_lidar = random_camera_mounting(&mut seeded_rng(config.seed, Stream::Mounting as u64));
     let t_lidar_cam = t_cam_lidar.inverse();
-    let mut rng = rng_for(config.seed, Stream::Poses, 0);
+    let mut rng = seeded_rng(config.seed, Stream::Poses as u64);
     let mut poses = Vec::with_capacity(config.poses + 3);
     while poses.len() < config.poses {
         if let Some(p) = sample_good_pose(config, &camera, &t_lidar_cam, &mut rng) {
@@ -526,7 +524,7 @@ impl LidarCameraSim {
         let model = self.config.lidar;
         let columns = model.columns();
         let elevations = model.elevations_deg();
-        let mut rng = rng_for(self.config.seed, Stream::Range, k as u128);
+        let mut rng = frame_rng(self.config.seed, Stream::Range as u64, k);
         let mut points = Vec::new();
         let origin = Vector3::zeros();
         let scene = Scene::new(&self.config.board, &frame.t_lidar_target);
@@ -638,7 +636,7 @@ impl LidarCameraSim {
         add_noise(
             &mut img,
             self.config.image_noise,
-            &mut rng_for(self.config.seed, Stream::Image, k as u128),
+            &mut frame_rng(self.config.seed, Stream::Image as u64, k),
         );
         img
     }
@@ -651,29 +649,6 @@ impl LidarCameraSim {
         }
     }
 
-    /// `cam0/camera.yaml` text (Kalibr keys).
-    pub fn camera_yaml(&self) -> String {
-        let i = self.camera.intrinsics();
-        let d = match self.camera.distortion() {
-            Distortion::RadTan(d) => [d.k1, d.k2, d.p1, d.p2],
-            _ => [0.0; 4],
-        };
-        format!(
-            "camera_model: pinhole\nintrinsics: [{}, {}, {}, {}]\ndistortion_model: radtan\n\
-             distortion_coeffs: [{}, {}, {}, {}]\nresolution: [{}, {}]\n",
-            i.fu,
-            i.fv,
-            i.cu,
-            i.cv,
-            d[0],
-            d[1],
-            d[2],
-            d[3],
-            self.camera.resolution.0,
-            self.camera.resolution.1
-        )
-    }
-
     /// Writes the dataset layout under `dir` (created if needed); `progress` gets the
     /// fraction of frames written.
     pub fn write(
@@ -682,14 +657,48 @@ impl LidarCameraSim {
         progress: &mut dyn FnMut(f64),
     ) -> Result<(), DatasetError> {
         let dir = dir.as_ref();
-        let io = |path: &Path| {
-            let path = path.to_path_buf();
-            move |source| DatasetError::Io { path, source }
-        };
-        for sub in [LIDAR_DIR, "cam0/data", "groundtruth"] {
-            let path = dir.join(sub);
-            std::fs::create_dir_all(&path).map_err(io(&path))?;
+        create_dirs(dir, &[LIDAR_DIR, CAMERA_DATA_DIR, "groundtruth"])?;
+        let c = &self.config;
+        self.metadata().write(dir.join(DATASET_YAML))?;
+        LidarYaml {
+            rings: Some(c.lidar.elevations_deg().len() as u32),
+            columns: Some(c.lidar.columns() as u32),
+            scan_rate_hz: Some(10.0),
+            range_noise_m: Some(c.lidar.range_noise_m()),
         }
+        .write(dir.join(LIDAR_YAML))?;
+        write_text(&dir.join(CAMERA_YAML), &camera_yaml_string(&self.camera))?;
+        write_text(&dir.join(TARGET_YAML), &board_yaml_string(&c.board))?;
+        self.extrinsics()
+            .write(dir.join(GROUNDTRUTH_EXTRINSICS_YAML))?;
+        let mut images = Vec::with_capacity(self.frames.len());
+        for (k, frame) in self.frames.iter().enumerate() {
+            let scan = dir
+                .join(LIDAR_DIR)
+                .join(format!("{}.pcd", frame.scan_stamp_ns));
+            write_scan(&scan, &self.scan(k))?;
+            let image = CameraFrame {
+                stamp_ns: frame.image_stamp_ns,
+                path: dir
+                    .join(CAMERA_DATA_DIR)
+                    .join(format!("{}.png", frame.image_stamp_ns)),
+            };
+            write_png(&image.path, &self.image(k))?;
+            images.push(image);
+            progress((k + 1) as f64 / self.frames.len() as f64);
+        }
+        write_camera_csv(dir.join(CAMERA_CSV), &images)?;
+        // The board's pose in G = the LiDAR frame, stamped with its scan.
+        let targets: Vec<PoseRecord> = self
+            .frames
+            .iter()
+            .map(|f| PoseRecord::from_isometry(f.scan_stamp_ns, &f.t_lidar_target))
+            .collect();
+        write_pose_csv(dir.join(GROUNDTRUTH_TARGET_POSES_CSV), &targets)
+    }
+
+    /// `dataset.yaml` contents.
+    pub fn metadata(&self) -> DatasetYaml {
         let c = &self.config;
         DatasetYaml {
             sensors: vec!["lidar0".into(), "cam0".into()],
@@ -703,63 +712,6 @@ impl LidarCameraSim {
             ),
             rates_hz: Default::default(),
         }
-        .write(dir.join(DATASET_YAML))?;
-        LidarYaml {
-            rings: Some(c.lidar.elevations_deg().len() as u32),
-            columns: Some(c.lidar.columns() as u32),
-            scan_rate_hz: Some(10.0),
-            range_noise_m: Some(c.lidar.range_noise_m()),
-        }
-        .write(dir.join(LIDAR_YAML))?;
-        let write = |path: &Path, text: &str| std::fs::write(path, text).map_err(io(path));
-        write(&dir.join("cam0/camera.yaml"), &self.camera_yaml())?;
-        write(
-            &dir.join("target.yaml"),
-            &format!(
-                "target_type: 'board'\nwidth_m: {}\nheight_m: {}\n",
-                c.board.width_m, c.board.height_m
-            ),
-        )?;
-        self.extrinsics()
-            .write(dir.join(GROUNDTRUTH_EXTRINSICS_YAML))?;
-        let mut csv = String::from("#timestamp [ns],filename\n");
-        let mut targets = String::from(
-            "#timestamp [ns],p_x [m],p_y [m],p_z [m],q_w,q_x,q_y,q_z  (pose of the board in \
-             G = the LiDAR frame)\n",
-        );
-        for (k, frame) in self.frames.iter().enumerate() {
-            let scan_path = dir
-                .join(LIDAR_DIR)
-                .join(format!("{}.pcd", frame.scan_stamp_ns));
-            write_pcd(&scan_path, &self.scan(k), PcdWriteOptions::default()).map_err(|e| {
-                DatasetError::Io {
-                    path: scan_path.clone(),
-                    source: std::io::Error::other(e.to_string()),
-                }
-            })?;
-            let name = format!("{}.png", frame.image_stamp_ns);
-            let png = dir.join("cam0/data").join(&name);
-            self.image(k)
-                .to_luma8()
-                .save(&png)
-                .map_err(|e| DatasetError::Io {
-                    path: png.clone(),
-                    source: std::io::Error::other(e.to_string()),
-                })?;
-            csv.push_str(&format!("{},{name}\n", frame.image_stamp_ns));
-            let (p, q) = (
-                frame.t_lidar_target.translation.vector,
-                frame.t_lidar_target.rotation,
-            );
-            targets.push_str(&format!(
-                "{},{},{},{},{},{},{},{}\n",
-                frame.scan_stamp_ns, p.x, p.y, p.z, q.w, q.i, q.j, q.k
-            ));
-            progress((k + 1) as f64 / self.frames.len() as f64);
-        }
-        write(&dir.join("cam0/data.csv"), &csv)?;
-        write(&dir.join("groundtruth/target_poses.csv"), &targets)?;
-        Ok(())
     }
 }
 
