@@ -56,10 +56,7 @@ pub struct TopView {
 impl TopView {
     /// The view of `keyframes` (`T_vo_F` per keyframe) and the solved `cameras`
     /// (`T_vo_C`, its intrinsics, its `[theta, p]` covariance).
-    pub fn new(
-        keyframes: &[Isometry3<f64>],
-        cameras: &[SolvedCamera<'_>],
-    ) -> TopView {
+    pub fn new(keyframes: &[Isometry3<f64>], cameras: &[SolvedCamera<'_>]) -> TopView {
         let n = keyframes.len().max(1) as f64;
         let plane_z_m = keyframes.iter().map(|k| k.translation.z).sum::<f64>() / n;
         let trajectory_xy_m = keyframes
