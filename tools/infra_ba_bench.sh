@@ -5,6 +5,8 @@
 #
 #   tools/infra_ba_bench.sh [workdir] [sizes: "full quarter"]
 #
+# msreg runs twice: every step exact (the default, as `calibrate infra`) and with
+# conjugate-gradient steps (`solve --inexact`).
 # Needs Debian's libceres-dev (apt-get install libceres-dev) for the Ceres side,
 # tools/infra_ba_ceres.cc. Both solvers get 2 threads; wall time, CPU time and peak RSS
 # from /usr/bin/time -v; both final states are evaluated with msreg's robust cost
@@ -43,14 +45,18 @@ for size in $SIZES; do
   esac
   P=$WORK/$size.txt
   obs=$("$BENCH" gen "$P" "${args[@]}" | sed 's/.*observations //')
-  read -r mw mu mr <<<"$(timed "$WORK/$size.msreg.log" env RAYON_NUM_THREADS=2 "$BENCH" solve "$P" "$WORK/$size.msreg.state")"
+  read -r xw xu xr <<<"$(timed "$WORK/$size.exact.log" env RAYON_NUM_THREADS=2 "$BENCH" solve "$P" "$WORK/$size.exact.state")"
+  read -r mw mu mr <<<"$(timed "$WORK/$size.msreg.log" env RAYON_NUM_THREADS=2 "$BENCH" solve "$P" "$WORK/$size.msreg.state" --inexact)"
   read -r cw cu cr <<<"$(timed "$WORK/$size.ceres.log" "$CERES" "$P" "$WORK/$size.ceres.state" 2)"
-  "$BENCH" eval "$P" "$WORK/$size.msreg.state" "$WORK/$size.ceres.state" >"$WORK/$size.eval.log"
+  "$BENCH" eval "$P" "$WORK/$size.exact.state" "$WORK/$size.msreg.state" "$WORK/$size.ceres.state" >"$WORK/$size.eval.log"
+  xc=$(awk '/exact.state cost/ { print $3 }' "$WORK/$size.eval.log")
+  xi=$(sed -n 's/.*iterations \([0-9]*\).*/\1/p' "$WORK/$size.exact.log")
   mc=$(awk '/msreg.state cost/ { print $3 }' "$WORK/$size.eval.log")
   cc=$(awk '/ceres.state cost/ { print $3 }' "$WORK/$size.eval.log")
   mi=$(sed -n 's/.*iterations \([0-9]*\).*/\1/p' "$WORK/$size.msreg.log")
   ci=$(sed -n 's/^ceres.*iterations \([0-9]*\).*/\1/p' "$WORK/$size.ceres.log")
-  echo "| $size | msreg | $obs | $mc | $mw | $mu | $mr | $mi |"
+  echo "| $size | msreg | $obs | $xc | $xw | $xu | $xr | $xi |"
+  echo "| $size | msreg --inexact (conjugate-gradient steps) | $obs | $mc | $mw | $mu | $mr | $mi |"
   echo "| $size | Ceres $(pkg-config --modversion ceres 2>/dev/null || echo 2.1) SPARSE_SCHUR | $obs | $cc | $cw | $cu | $cr | $ci |"
 done
 echo

@@ -5,7 +5,7 @@
 //!
 //! ```text
 //! infra_ba_bench gen <problem.txt> [--keyframes 2000] [--points 50000] [--track 74] [--seed 1]
-//! infra_ba_bench solve <problem.txt> <state_out.txt>
+//! infra_ba_bench solve <problem.txt> <state_out.txt> [--inexact]
 //! infra_ba_bench eval <problem.txt> <state.txt>...
 //! ```
 //!
@@ -23,6 +23,7 @@
 use anyhow::{bail, Context, Result};
 use msreg_estimator::camera::{Camera, Distortion, Projection};
 use msreg_host::infra::ba::{robust_cost, BaProblem, BaState, BlobObs, MarkerObs, VoObs};
+use msreg_host::infra::ba_solver::{solve_with, Steps};
 use msreg_host::infra::io::MarkerDetection;
 use msreg_host::infra::scene::{self, RobotMotion, SceneConfig};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector2, Vector3};
@@ -83,7 +84,10 @@ fn main() -> Result<()> {
             );
             Ok(())
         }
-        Some("solve") if args.len() == 3 => solve(&args[1], &args[2]),
+        Some("solve") if args.len() == 3 => solve(&args[1], &args[2], Steps::Exact),
+        Some("solve") if args.len() == 4 && args[3] == "--inexact" => {
+            solve(&args[1], &args[2], Steps::Inexact)
+        }
         Some("eval") if args.len() >= 3 => {
             let b = read_problem(&args[1])?;
             let p = b.problem();
@@ -95,7 +99,7 @@ fn main() -> Result<()> {
             }
             Ok(())
         }
-        _ => bail!("usage: gen <out> [--keyframes N --points N --track T --seed S] | solve <problem> <state_out> | eval <problem> <state>..."),
+        _ => bail!("usage: gen <out> [--keyframes N --points N --track T --seed S] | solve <problem> <state_out> [--inexact] | eval <problem> <state>..."),
     }
 }
 
@@ -121,20 +125,24 @@ fn gen_args(a: &[String]) -> Result<GenArgs> {
     Ok(g)
 }
 
-fn solve(problem: &str, out: &str) -> Result<()> {
+/// Solves with every step exact (the default, as `calibrate infra`) or with conjugate-
+/// gradient steps (`--inexact`).
+fn solve(problem: &str, out: &str, steps: Steps) -> Result<()> {
     let t0 = Instant::now();
     let b = read_problem(problem)?;
     let p = b.problem();
     let t1 = Instant::now();
-    let sol = msreg_host::infra::ba_solver::solve(&p, b.start.clone(), 50).context("BA failed")?;
+    let sol = solve_with(&p, b.start.clone(), 50, steps).context("BA failed")?;
     let t2 = Instant::now();
     std::fs::write(out, write_state(&sol.state))?;
     println!(
-        "msreg read {:.2} s solve {:.2} s iterations {} (rejected {}) initial cost {:.6} final cost {:.6}",
+        "msreg read {:.2} s solve {:.2} s iterations {} (rejected {}) exact steps {} cg products {} initial cost {:.6} final cost {:.6}",
         (t1 - t0).as_secs_f64(),
         (t2 - t1).as_secs_f64(),
         sol.iterations,
         sol.rejected,
+        sol.exact_steps,
+        sol.pcg_products,
         sol.initial_cost,
         sol.final_cost
     );

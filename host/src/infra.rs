@@ -21,3 +21,4 @@ pub mod pipeline;
 pub mod render;
 pub mod scene;
 pub mod sim;
+pub mod topview;

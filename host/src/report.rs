@@ -12,6 +12,7 @@ mod slices;
 mod svg;
 #[cfg(test)]
 mod tests;
+mod topview;
 
 use std::path::{Path, PathBuf};
 

@@ -160,6 +160,10 @@ fn assert_nis_dofs_match(name: &str, report: &Value) {
     );
 }
 
+/// The aligned truth is this close to each estimated camera in `infra_report_renders`
+/// (3x the worst measured, 14.8 mm of 6 cameras, simulation seed 0).
+const TRUTH_GAP_M: f64 = 0.045;
+
 const FILTER_IDS: [&str; 8] = [
     "status",
     "result",
@@ -261,8 +265,24 @@ fn infra_report_renders() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let ds = tmp.path().join("ds").to_string_lossy().into_owned();
     run_ok(&["simulate", "infra", &ds, "--cameras", "6"]);
-    let (_, html) = reports(tmp.path(), &["calibrate", "infra", &ds]);
-    let ids = ["fig-residuals", "cameras"];
+    let (report, html) = reports(tmp.path(), &["calibrate", "infra", &ds]);
+    // The simulated dataset's truth is in the top view, aligned onto the estimate.
+    let cams = report["top_view"]["cameras"].as_array().expect("top view");
+    assert_eq!(cams.len(), 6);
+    for c in cams {
+        let (p, t) = (&c["position_m"], &c["truth_m"]);
+        let d: f64 = (0..3)
+            .map(|k| (p[k].as_f64().unwrap() - t[k].as_f64().expect("truth")).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        eprintln!(
+            "infra top view: {} truth {:.1} mm from the estimate",
+            c["id"],
+            1e3 * d
+        );
+        assert!(d < TRUTH_GAP_M, "{}: {d} m", c["id"]);
+    }
+    let ids = ["fig-residuals", "fig-infra-topview", "cameras"];
     assert_ids("infra", &html, &ids);
     assert_renders("infra", tmp.path(), &ids);
 }

@@ -80,10 +80,16 @@ pub struct CalibrateInfra {
 /// result holds the others).
 pub fn calibrate(args: &CalibrateInfra) -> anyhow::Result<bool> {
     let data = msreg_host::infra::dataset::InfraDataset::open(&args.dataset)?;
-    let cal = msreg_host::infra::pipeline::calibrate(&data)
+    let mut cal = msreg_host::infra::pipeline::calibrate(&data)
         .with_context(|| format!("{}", args.dataset.display()))?;
     cal.result.write(&args.output)?;
     if let Some(path) = &args.report {
+        // A simulated dataset's truth goes into the top view (aligned onto the estimate).
+        let truth = args.dataset.join("groundtruth/infra.yaml");
+        if truth.is_file() {
+            let truth = msreg_host::infra::io::InfraResultFile::read(&truth)?;
+            cal.report.top_view.add_truth(&truth)?;
+        }
         msreg_host::report::write_report(path, &cal.report)?;
     }
     let failed: Vec<&msreg_host::infra::pipeline::CameraReport> =

@@ -10,7 +10,11 @@
 //!   block-sparse pattern ([`super::blocksym`]) and is factored by faer's sparse
 //!   (supernodal) Cholesky, symbolic analysis once (in the blocks' own order when that
 //!   fills less than minimum degree), its buffers reused across iterations;
-//! - the marker, blob and epipolar terms are linearised in parallel.
+//! - the marker, blob and epipolar terms are linearised in parallel;
+//! - optionally ([`Steps::Inexact`], not the default), a step is first tried by conjugate
+//!   gradients on the implicit reduced system (`pcg`), preconditioned by the factor of the
+//!   last exact step, and solved exactly only when they do not converge within a few
+//!   products.
 //!
 //! Damping: `lambda * diag` on the reduced-side blocks and on each point block, as
 //! Marquardt scaled; the step is accepted when the robust cost decreases.
@@ -21,6 +25,17 @@ use std::ops::Range;
 
 use super::ba::{blob_term, epipolar_term, marker_term, plus, vo_term, BaProblem, BaState};
 use super::blocksym::{BlockPattern, Factor, PatternBuilder};
+
+mod pcg;
+
+/// Conjugate gradients stop at this residual, relative to the reduced right-hand side's
+/// norm. With the limit below, chosen on the quarter-size benchmark problem among
+/// (1e-6, 30), (1e-3, 12) and (1e-2, 8): the CPU time fell in that order, the final cost
+/// stayed within 5e-6 of the exact steps' (docs/benchmarks.md).
+const PCG_TOLERANCE: f64 = 1e-2;
+/// Products with the reduced system before the step is solved exactly instead (one
+/// product costs about 1/25 of forming and factoring the reduced system).
+const PCG_MAX_PRODUCTS: usize = 8;
 
 /// Solution of the bundle adjustment.
 #[derive(Clone, Debug)]
@@ -41,6 +56,22 @@ pub struct BaSolution {
     /// Variance factor (robust cost, i.e. whitened chi-square, per degree of freedom)
     /// applied to the covariances.
     pub variance_factor: f64,
+    /// Steps solved exactly (reduced system formed and factored; the covariance's
+    /// factorisation not counted).
+    pub exact_steps: usize,
+    /// Products with the implicit reduced system in the conjugate-gradient steps.
+    pub pcg_products: usize,
+}
+
+/// How each Levenberg-Marquardt step is solved.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Steps {
+    /// Every step exactly: Schur complement formed, factored, solved.
+    Exact,
+    /// By conjugate gradients on the implicit reduced system, preconditioned with the
+    /// factor of the last exact step; exactly for the first step and whenever they do not
+    /// converge.
+    Inexact,
 }
 
 /// Block numbers of the reduced system.
@@ -83,6 +114,9 @@ struct Structure {
     w_ptr: Vec<usize>,
     /// Reduced-system block of each `W` entry.
     w_block: Vec<usize>,
+    /// The slots `(slot, a, b)` the terms other than keypoints fill in `U` (and every
+    /// diagonal): the implicit product reads only these.
+    u_slots: Vec<(usize, usize, usize)>,
 }
 
 fn structure(p: &BaProblem<'_>, start: &BaState) -> Option<Structure> {
@@ -135,15 +169,47 @@ fn structure(p: &BaProblem<'_>, start: &BaState) -> Option<Structure> {
         }
         w_ptr.push(w_block.len());
     }
+    let pat = b.finish()?;
+    let u_slots = u_slots(p, &lay, &pat)?;
     Some(Structure {
         lay,
-        pat: b.finish()?,
+        pat,
         by_point,
         order,
         chunks,
         w_ptr,
         w_block,
+        u_slots,
     })
+}
+
+/// The slots of `U` that other terms than the keypoints fill, and the diagonal.
+fn u_slots(
+    p: &BaProblem<'_>,
+    lay: &Layout,
+    pat: &BlockPattern,
+) -> Option<Vec<(usize, usize, usize)>> {
+    let mut pairs: Vec<(usize, usize)> = (0..lay.blocks()).map(|b| (b, b)).collect();
+    for o in &p.blobs {
+        if let Some(k) = lay.kf(o.kf) {
+            pairs.push((k, lay.cam(o.cam)));
+        }
+    }
+    for m in &p.markers {
+        let list: Vec<usize> = lay.marker_blocks(m).iter().flatten().copied().collect();
+        for &a in &list {
+            pairs.extend(list.iter().map(|&b| (a, b)));
+        }
+    }
+    pairs.extend(p.epipolar.iter().map(|o| (lay.cam(o.a), lay.cam(o.b))));
+    let mut out = Vec::with_capacity(pairs.len());
+    for (a, b) in pairs {
+        let (a, b) = (a.min(b), a.max(b));
+        out.push((pat.slot(a, b)?, a, b));
+    }
+    out.sort_unstable();
+    out.dedup();
+    Some(out)
 }
 
 /// Contiguous ranges of points with about equal numbers of pairs of keypoints.
@@ -364,21 +430,32 @@ fn linearise_blobs_epipolar(p: &BaProblem<'_>, s: &BaState, st: &Structure, lin:
     }
 }
 
-/// Linearises every term at `s`; the keypoints' `W` entries go to `w` (overwritten, also
-/// when `None` is returned).
+/// Linearises every term at `s`, into the buffers of `reuse` when given (tens of MB at the
+/// benchmark size, whose page faults cost ~5 % of the run when allocated anew); the
+/// keypoints' `W` entries go to `w` (overwritten, also when `None` is returned).
 fn linearise(
     p: &BaProblem<'_>,
     s: &BaState,
     st: &Structure,
     w: &mut [Matrix6x3<f64>],
+    reuse: Option<Lin>,
 ) -> Option<Lin> {
-    let mut lin = Lin {
-        u: vec![Matrix6::zeros(); st.pat.slots()],
-        g: vec![0.0; 6 * st.lay.blocks()],
-        v: vec![Matrix3::zeros(); s.points.len()],
-        gp: vec![Vector3::zeros(); s.points.len()],
-        cost: 0.0,
-        count: 0,
+    let mut lin = match reuse {
+        Some(mut lin) => {
+            lin.u.fill(Matrix6::zeros());
+            lin.g.fill(0.0);
+            (lin.cost, lin.count) = (0.0, 0);
+            lin
+        }
+        // `v` and `gp` are written for every point by `linearise_vo`.
+        None => Lin {
+            u: vec![Matrix6::zeros(); st.pat.slots()],
+            g: vec![0.0; 6 * st.lay.blocks()],
+            v: vec![Matrix3::zeros(); s.points.len()],
+            gp: vec![Vector3::zeros(); s.points.len()],
+            cost: 0.0,
+            count: 0,
+        },
     };
     if !linearise_vo(p, s, st, &mut lin, w) || !linearise_markers(p, s, st, &mut lin) {
         return None;
@@ -620,6 +697,10 @@ struct Work {
     rhs: Vec<f64>,
     parts: Vec<(Vec<Matrix6<f64>>, Vec<f64>)>,
     factor: Option<Factor>,
+    /// Steps solved exactly (Schur complement formed and factored).
+    exact: usize,
+    /// Products with the implicit reduced system (conjugate gradients).
+    products: usize,
 }
 
 impl Work {
@@ -635,6 +716,8 @@ impl Work {
             rhs: vec![0.0; 6 * st.lay.blocks()],
             parts: st.chunks.iter().map(|_| part()).collect(),
             factor: None,
+            exact: 0,
+            products: 0,
         }
     }
 
@@ -701,13 +784,26 @@ fn apply(s: &BaState, st: &Structure, d: &[f64], dx: &[Vector3<f64>]) -> BaState
     out
 }
 
-/// One damped step: `None` when the reduced system is not positive definite.
-fn step(
+/// The step of the reduced unknowns: by conjugate gradients preconditioned with the kept
+/// factor when there is one (and `steps` allows), else, or when they do not converge,
+/// exactly (which refreshes the factor); `None` when the reduced system is not positive
+/// definite.
+fn reduced_step(
     (lin, w, st): (&Lin, &[Matrix6x3<f64>], &Structure),
-    s: &BaState,
     lambda: f64,
     work: &mut Work,
-) -> Option<BaState> {
+    steps: Steps,
+) -> Option<Vec<f64>> {
+    if let (Steps::Inexact, Some(f)) = (steps, work.factor.as_ref()) {
+        let implicit = pcg::Implicit::new(lin, w, st, lambda);
+        let b = implicit.rhs();
+        let out = implicit.solve(&b, f, PCG_TOLERANCE, PCG_MAX_PRODUCTS);
+        work.products += out.products;
+        if out.d.is_some() {
+            return out.d;
+        }
+    }
+    work.exact += 1;
     reduced(lin, w, st, lambda, work);
     if !work.factor(&st.pat) {
         return None;
@@ -715,7 +811,17 @@ fn step(
     let rhs = &work.rhs;
     let mut x = faer::Mat::from_fn(rhs.len(), 1, |i, _| -rhs[i]);
     st.pat.solve(work.factor.as_ref()?, &mut x);
-    let d: Vec<f64> = (0..rhs.len()).map(|i| x[(i, 0)]).collect();
+    Some((0..rhs.len()).map(|i| x[(i, 0)]).collect())
+}
+
+/// One damped step: `None` when the reduced system is not positive definite.
+fn step(
+    (lin, w, st): (&Lin, &[Matrix6x3<f64>], &Structure),
+    s: &BaState,
+    lambda: f64,
+    (work, steps): (&mut Work, Steps),
+) -> Option<BaState> {
+    let d = reduced_step((lin, w, st), lambda, work, steps)?;
     if d.iter().any(|v| !v.is_finite()) {
         return None;
     }
@@ -736,17 +842,31 @@ fn step(
 /// Runs Levenberg-Marquardt from `start`. Each iteration linearises once (the keypoint
 /// `W` blocks are cached for the Schur complement and the back-substitution); a rejected
 /// step linearises the kept state again, as the candidate's overwrote the cache.
+/// Every step is solved exactly ([`Steps::Inexact`] stopped 4e-6 above the exact steps'
+/// final cost on the full benchmark: the stop on a small relative decrease can fire after
+/// an inexact step; docs/benchmarks.md).
 pub fn solve(p: &BaProblem<'_>, start: BaState, max_iterations: usize) -> Option<BaSolution> {
+    solve_with(p, start, max_iterations, Steps::Exact)
+}
+
+/// [`solve`] with the choice of how the steps are solved.
+pub fn solve_with(
+    p: &BaProblem<'_>,
+    start: BaState,
+    max_iterations: usize,
+    steps: Steps,
+) -> Option<BaSolution> {
     let st = structure(p, &start)?;
     let mut w = vec![Matrix6x3::zeros(); st.w_block.len()];
     let mut work = Work::new(&st);
     let mut s = start;
-    let mut n = linearise(p, &s, &st, &mut w)?;
+    let mut n = linearise(p, &s, &st, &mut w, None)?;
+    let mut spare = None;
     let initial_cost = n.cost;
     let (mut lambda, mut iterations, mut rejected) = (1e-4, 0, 0);
     while iterations < max_iterations {
         iterations += 1;
-        let Some(c) = step((&n, &w, &st), &s, lambda, &mut work) else {
+        let Some(c) = step((&n, &w, &st), &s, lambda, (&mut work, steps)) else {
             rejected += 1;
             lambda *= 10.0;
             if lambda > 1e6 {
@@ -754,18 +874,19 @@ pub fn solve(p: &BaProblem<'_>, start: BaState, max_iterations: usize) -> Option
             }
             continue;
         };
-        match linearise(p, &c, &st, &mut w) {
+        match linearise(p, &c, &st, &mut w, spare.take()) {
             Some(m) if m.cost < n.cost => {
                 let done = n.cost - m.cost < 1e-7 * n.cost;
-                (s, n) = (c, m);
+                s = c;
+                spare = Some(std::mem::replace(&mut n, m));
                 lambda = (lambda * 0.2).max(1e-10);
                 if done {
                     break;
                 }
             }
-            _ => {
+            candidate => {
                 rejected += 1;
-                n = linearise(p, &s, &st, &mut w)?;
+                n = linearise(p, &s, &st, &mut w, candidate)?;
                 lambda *= 10.0;
                 if lambda > 1e6 {
                     break;
@@ -784,6 +905,8 @@ pub fn solve(p: &BaProblem<'_>, start: BaState, max_iterations: usize) -> Option
         iterations,
         rejected,
         variance_factor,
+        exact_steps: work.exact,
+        pcg_products: work.products,
     })
 }
 

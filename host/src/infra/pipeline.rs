@@ -11,6 +11,7 @@ use super::init::{self, CameraProblem, CornerObs, MarkerPose};
 use super::interp::KeyframeTrack;
 use super::io::{matrix_rows, pose_of_rows, CameraResult, InfraResultFile, InfraSection};
 use super::motion::{self, MotionPair, MotionSolution};
+use super::topview::TopView;
 
 /// Fewest accepted marker detections to initialise a camera.
 pub const MIN_DETECTIONS: usize = 5;
@@ -64,6 +65,8 @@ pub struct InfraReport {
     pub cameras: Vec<CameraReport>,
     /// Per camera pair that saw the marker at once.
     pub sampson: Vec<PairSampson>,
+    /// Keyframes and cameras from above (the report's top-view figure).
+    pub top_view: TopView,
 }
 
 /// The calibration.
@@ -194,6 +197,7 @@ pub fn calibrate(data: &InfraDataset) -> Result<InfraCalibration, InfraCalibrati
         }
     }
     let sampson = sampson_pairs(data, &prepared.poses, &solved_poses);
+    let top_view = top_view(data, &keyframes, &ba, &solved_poses, &covariances);
     let result = InfraResultFile {
         infra: InfraSection {
             frame: "vo".into(),
@@ -223,9 +227,35 @@ pub fn calibrate(data: &InfraDataset) -> Result<InfraCalibration, InfraCalibrati
             motion: Some(sol),
             cameras: reports,
             sampson,
+            top_view,
         },
         covariances,
     })
+}
+
+/// The top view of the solved keyframes (the bundle adjustment's, else the scaled VO's)
+/// and cameras.
+fn top_view(
+    data: &InfraDataset,
+    keyframes: &[(u64, Isometry3<f64>)],
+    ba: &Option<(super::ba_solver::BaSolution, Vec<usize>, Vec<f64>)>,
+    solved: &[Option<Isometry3<f64>>],
+    covariances: &BTreeMap<String, Matrix6<f64>>,
+) -> TopView {
+    let kf: Vec<Isometry3<f64>> = match ba {
+        Some((b, _, _)) => b.state.kf.clone(),
+        None => keyframes.iter().map(|k| k.1).collect(),
+    };
+    let cameras: Vec<_> = data
+        .cameras
+        .iter()
+        .zip(solved)
+        .filter_map(|(c, pose)| {
+            let cov = covariances.get(&c.id)?;
+            Some((c.id.clone(), &c.camera, (*pose)?, *cov))
+        })
+        .collect();
+    TopView::new(&kf, &cameras)
 }
 
 struct Solved {

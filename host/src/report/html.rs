@@ -78,6 +78,10 @@ pub fn page(report: &Value, images: &[Image<'_>], figures: &[super::SvgFigure]) 
         "MI slices through the estimate (Fig. 7.8 / 7.9)",
         super::slices::mi_slices(report),
     );
+    section(
+        "Top view: keyframes, cameras and their 3-sigma ellipses",
+        super::topview::top_view(report),
+    );
     for f in figures {
         let body = format!(
             "<figure id=\"{}\">{}<figcaption>{}</figcaption></figure>",

@@ -117,6 +117,30 @@ impl Panel {
         )
     }
 
+    /// A panel at `(x0, y0)`, `width` wide, whose data ranges cover `x` and `y` at one
+    /// scale on both axes (a map): as tall as that makes it, at most `max_height` (the x
+    /// range then widens).
+    pub fn equal_aspect(
+        (x0, y0): (f64, f64),
+        width: f64,
+        max_height: f64,
+        x: (f64, f64),
+        y: (f64, f64),
+    ) -> Panel {
+        let (plot_w, max_plot_h) = (width - LEFT - RIGHT, max_height - TOP - BOTTOM);
+        let px_per_unit = (plot_w / (x.1 - x.0)).min(max_plot_h / (y.1 - y.0));
+        let half_x = 0.5 * plot_w / px_per_unit;
+        let mid_x = 0.5 * (x.0 + x.1);
+        Panel {
+            x0,
+            y0,
+            width,
+            height: (y.1 - y.0) * px_per_unit + TOP + BOTTOM,
+            x: (mid_x - half_x, mid_x + half_x),
+            y,
+        }
+    }
+
     /// Opens a group clipped to the plot area; `clip_id` must be unique in the page.
     pub fn open_clip(&self, out: &mut String, clip_id: &str) {
         let (x, y, w, h) = self.plot_area();
@@ -194,40 +218,47 @@ impl Panel {
         );
     }
 
-    /// A polyline through the finite points.
-    pub fn line(&self, out: &mut String, points: &[(f64, f64)], stroke: &str, width: f64) {
+    /// The `points` attribute of the finite points, in pixels (empty when none).
+    fn points_attr<'a, I: IntoIterator<Item = (&'a f64, &'a f64)>>(&self, points: I) -> String {
         let mut d = String::new();
-        for &(x, y) in points
-            .iter()
+        for (&x, &y) in points
+            .into_iter()
             .filter(|(x, y)| x.is_finite() && y.is_finite())
         {
             let _ = write!(d, "{:.1},{:.1} ", self.px(x), self.py(y));
         }
+        d.trim_end().to_string()
+    }
+
+    /// A polyline through the finite points.
+    pub fn line(&self, out: &mut String, points: &[(f64, f64)], stroke: &str, width: f64) {
+        let d = self.points_attr(points.iter().map(|(x, y)| (x, y)));
         if !d.is_empty() {
             let _ = write!(
                 out,
-                r#"<polyline points="{}" fill="none" stroke="{stroke}" stroke-width="{width}"/>"#,
-                d.trim_end()
+                r#"<polyline points="{d}" fill="none" stroke="{stroke}" stroke-width="{width}"/>"#
             );
         }
     }
 
     /// A filled band between `lower` and `upper` at the same x.
     pub fn band(&self, out: &mut String, xs: &[f64], lower: &[f64], upper: &[f64], fill: &str) {
-        let mut d = String::new();
-        let fwd = xs.iter().zip(upper);
-        let back = xs.iter().zip(lower).rev();
-        for (&x, &y) in fwd
-            .chain(back)
-            .filter(|(x, y)| x.is_finite() && y.is_finite())
-        {
-            let _ = write!(d, "{:.1},{:.1} ", self.px(x), self.py(y));
-        }
+        let d = self.points_attr(xs.iter().zip(upper).chain(xs.iter().zip(lower).rev()));
         if !d.is_empty() {
             let _ = write!(
                 out,
-                r#"<polygon class="band" points="{}" fill="{fill}" stroke="none"/>"#,
-                d.trim_end()
+                r#"<polygon class="band" points="{d}" fill="{fill}" stroke="none"/>"#
+            );
+        }
+    }
+
+    /// A closed polygon through the finite points.
+    pub fn polygon(&self, out: &mut String, points: &[(f64, f64)], fill: &str, stroke: &str) {
+        let d = self.points_attr(points.iter().map(|(x, y)| (x, y)));
+        if !d.is_empty() {
+            let _ = write!(
+                out,
+                r#"<polygon points="{d}" fill="{fill}" stroke="{stroke}" stroke-width="0.8"/>"#
             );
         }
     }

@@ -191,3 +191,51 @@ fn ticks_are_round_and_cover_the_range() {
     assert_eq!(t.len(), 4);
     assert!((t[0] - 0.2).abs() < 1e-12 && (t[3] - 0.8).abs() < 1e-12);
 }
+
+/// An infra report: a square loop, two cameras with 2 mm / 1 mm sigmas, one with its truth.
+fn infra_report() -> Value {
+    let trajectory: Vec<[f64; 2]> = (0..40)
+        .map(|k| {
+            let t = k as f64 / 40.0 * std::f64::consts::TAU;
+            [10.0 * t.cos(), 5.0 * t.sin()]
+        })
+        .collect();
+    let camera = |id: &str, x: f64, truth: Value| {
+        json!({"id": id, "position_m": [x, 6.0, 3.0], "axis_xy_m": [x, 4.0],
+               "footprint_xy_m": [[x - 2.0, 2.0], [x + 2.0, 2.0], [x + 2.0, 5.0], [x - 2.0, 5.0]],
+               "covariance_xy_m2": [[4e-6, 0.0], [0.0, 1e-6]], "truth_m": truth})
+    };
+    json!({
+        "stages": ["global bundle adjustment"],
+        "cameras": [{"id": "c0", "solved": true, "reprojection_rmse_px": 0.3, "blob_rmse_px": 1.0}],
+        "sampson": [],
+        "top_view": {"plane_z_m": 0.0, "trajectory_xy_m": trajectory,
+                     "cameras": [camera("c0", -3.0, json!([-2.999, 6.001, 3.0])),
+                                 camera("c1", 3.0, Value::Null)]},
+    })
+}
+
+#[test]
+fn infra_page_has_the_top_view_with_ellipses_and_the_aligned_truth() {
+    // Given an infra report with a top view
+    let report = infra_report();
+    assert_eq!(Kind::of(&report), Kind::Infra);
+    // When it is rendered
+    let html = render_html(&report);
+    // Then the top view is there once, with the two footprints, both labels and the
+    // magnification that brings the 6 mm 3-sigma semi-axis to at most 1.5 m (x200)
+    assert_eq!(html.matches("id=\"fig-infra-topview\"").count(), 1);
+    assert_eq!(html.matches("<polygon points=").count(), 2);
+    assert!(html.contains(">c0</text>") && html.contains(">c1</text>"));
+    assert!(html.contains("magnified x200"));
+    // the truth only where the report has it
+    assert_eq!(html.matches("truth (aligned)").count(), 1);
+    assert_eq!(html.matches("fill=\"#2ca02c\"").count(), 2); // c0's dot and the legend
+    for tag in ["svg", "g", "clipPath", "section"] {
+        assert_balanced(&html, tag);
+    }
+    // and without a top view there is no figure
+    let mut bare = report;
+    bare.as_object_mut().unwrap().remove("top_view");
+    assert!(!render_html(&bare).contains("fig-infra-topview"));
+}
