@@ -132,13 +132,14 @@ def main():
     ap.add_argument("--settings", default="default", choices=["default", "opencv"])
     ap.add_argument("--data", default=os.path.join(REPO, "..", "shared", "data"))
     ap.add_argument("--venv", default="/tmp/msreg-opencv-venv")
+    ap.add_argument("--exe", help="the detect_timing executable (default: cargo builds it)")
     ap.add_argument("--baseline", help="another detect_timing executable, timed alongside")
     args = ap.parse_args()
     ensure_venv(args.venv)
     import cv2
 
     cv2.setNumThreads(args.threads)
-    msreg = Msreg(args.settings, args.threads)
+    msreg = Msreg(args.settings, args.threads, args.exe)
     before = Msreg(args.settings, args.threads, args.baseline) if args.baseline else None
     items = []
     for set_dir, what, rows, cols, path in images(os.path.realpath(args.data)):
