@@ -19,8 +19,12 @@ by this script when missing (idempotent):
 
 `--threads` is given to both sides (`cv2.setNumThreads`, `RAYON_NUM_THREADS`).
 `--baseline EXE` adds a third contestant, another build of `detect_timing` (e.g. from an
-older commit: `git archive <rev> | tar -x -C /tmp/before`, build there, copy the binary),
-timed in the same rounds: before / after / OpenCV from one run.
+older commit: `git archive <rev> | tar -x -C /tmp/before`, copy `detect_timing.rs` in, build
+there with its own CARGO_TARGET_DIR, copy the binary), timed in the same rounds: before /
+after / OpenCV from one run. Do not share this worktree's target dir with that build: cargo
+names a workspace package's artifacts without its path and fingerprints its sources by
+relative path, so the old library would replace this one and look fresh (then `touch` the
+sources here to rebuild).
 """
 import argparse
 import os
