@@ -99,6 +99,10 @@ pub struct DetectorParams {
     pub epsilon_px: f64,
     /// Largest refinement move from the grid position, as a fraction of the local step.
     pub max_refine_shift: f64,
+    /// Search images of at least 240 x 240 at half resolution first (4x fewer pixels;
+    /// corners still refined at full resolution), falling back to full resolution when
+    /// that finds no board.
+    pub coarse_first: bool,
 }
 
 impl Default for DetectorParams {
@@ -110,6 +114,7 @@ impl Default for DetectorParams {
             max_iterations: 40,
             epsilon_px: 1e-4,
             max_refine_shift: 0.3,
+            coarse_first: true,
         }
     }
 }
@@ -164,16 +169,48 @@ pub fn detect_checkerboard(
             height: img.height(),
         });
     }
-    let (smooth, saddles) = find_saddles(img, &params.saddle);
-    let grids = find_grids(saddles, &smooth, rows, cols, &params.saddle);
-    let grid = select_grid(grids, &smooth, rows, cols)?;
-    let ordered = order_kalibr(&grid, &smooth, rows, cols).ok_or(NoDetection::Inconsistent)?;
+    if params.coarse_first && img.width().min(img.height()) >= COARSE_MIN_SIZE {
+        // Candidates and grid at half resolution, corners refined at full resolution; any
+        // failure falls back to the full-resolution search (small squares, low contrast).
+        let half = img.half_size();
+        if let Ok(ordered) = find_board(&half, rows, cols, params) {
+            let scaled: Vec<Vector2<f64>> = ordered
+                .iter()
+                .map(|p| 2.0 * p + Vector2::new(0.5, 0.5))
+                .collect();
+            if let Ok(corners) = refine_all(img, &scaled, rows, cols, params) {
+                return Ok(CheckerboardDetection {
+                    rows,
+                    cols,
+                    corners,
+                });
+            }
+        }
+    }
+    let ordered = find_board(img, rows, cols, params)?;
     let corners = refine_all(img, &ordered, rows, cols, params)?;
     Ok(CheckerboardDetection {
         rows,
         cols,
         corners,
     })
+}
+
+/// Images at least this large (both sides, pixels) are searched at half resolution first.
+const COARSE_MIN_SIZE: usize = 240;
+
+/// The board's grid corners in Kalibr id order, unrefined (candidates, grids, selection,
+/// ids).
+fn find_board(
+    img: &GrayImage,
+    rows: usize,
+    cols: usize,
+    params: &DetectorParams,
+) -> Result<Vec<Vector2<f64>>, NoDetection> {
+    let (smooth, saddles) = find_saddles(img, &params.saddle);
+    let grids = find_grids(saddles, &smooth, rows, cols, &params.saddle);
+    let grid = select_grid(grids, &smooth, rows, cols)?;
+    order_kalibr(&grid, &smooth, rows, cols).ok_or(NoDetection::Inconsistent)
 }
 
 /// Grows a grid from every candidate not already in a grid at least as large as the
@@ -188,7 +225,7 @@ fn find_grids(
     let max_dim = rows.max(cols) + 2;
     let mut order: Vec<usize> = (0..saddles.len()).collect();
     order.sort_by(|&a, &b| saddles[b].response.total_cmp(&saddles[a].response));
-    let mut cands = Candidates::new(saddles);
+    let mut cands = Candidates::new(saddles, smooth.width(), smooth.height());
     let gp = GrowParams {
         max_edge_angle: 0.4,
         search_fraction: 0.35,

@@ -146,9 +146,8 @@ impl GrayImage {
     /// Bilinear sample at `(u, v)`, border replicated.
     #[inline]
     pub fn sample(&self, u: f64, v: f64) -> f32 {
-        let (x0, y0) = (u.floor(), v.floor());
-        let (fx, fy) = ((u - x0) as f32, (v - y0) as f32);
-        let (x0, y0) = (x0 as isize, y0 as isize);
+        let (x0, y0) = (floor(u), floor(v));
+        let (fx, fy) = ((u - x0 as f64) as f32, (v - y0 as f64) as f32);
         let inside =
             x0 >= 0 && y0 >= 0 && (x0 as usize) + 1 < self.width && (y0 as usize) + 1 < self.height;
         let (a, b, c, d) = if inside {
@@ -170,6 +169,25 @@ impl GrayImage {
         let top = a + (b - a) * fx;
         let bottom = c + (d - c) * fx;
         top + (bottom - top) * fy
+    }
+
+    /// Half the size: each pixel the mean of a 2 x 2 block (an odd last row/column is
+    /// dropped). Pixel `(i, j)` here is centred on `(2 i + 0.5, 2 j + 0.5)` of the original.
+    pub fn half_size(&self) -> GrayImage {
+        let (w, h) = (self.width / 2, self.height / 2);
+        let mut data = vec![0.0f32; w * h];
+        for (y, row) in data.chunks_mut(w.max(1)).enumerate().take(h) {
+            let top = &self.data[2 * y * self.width..];
+            let bottom = &self.data[(2 * y + 1) * self.width..];
+            for (x, out) in row.iter_mut().enumerate() {
+                *out = 0.25 * (top[2 * x] + top[2 * x + 1] + bottom[2 * x] + bottom[2 * x + 1]);
+            }
+        }
+        GrayImage {
+            width: w,
+            height: h,
+            data,
+        }
     }
 
     /// Separable Gaussian blur (kernel radius `ceil(3 sigma)`, border replicated);
@@ -203,18 +221,20 @@ impl GrayImage {
         let mut out = vec![0.0; self.data.len()];
         out.par_chunks_mut(w)
             .zip(self.data.par_chunks(w))
-            .for_each(|(row_out, row_in)| {
-                let mut padded = vec![0.0f32; w + 2 * r];
-                padded[r..r + w].copy_from_slice(row_in);
-                let (first, last) = (row_in[0], row_in[w - 1]);
-                padded[..r].iter_mut().for_each(|p| *p = first);
-                padded[r + w..].iter_mut().for_each(|p| *p = last);
-                for (k, &kv) in kernel.iter().enumerate() {
-                    for (o, &p) in row_out.iter_mut().zip(&padded[k..k + w]) {
-                        *o += kv * p;
+            .for_each_init(
+                || vec![0.0f32; w + 2 * r],
+                |padded, (row_out, row_in)| {
+                    padded[r..r + w].copy_from_slice(row_in);
+                    let (first, last) = (row_in[0], row_in[w - 1]);
+                    padded[..r].iter_mut().for_each(|p| *p = first);
+                    padded[r + w..].iter_mut().for_each(|p| *p = last);
+                    for (k, &kv) in kernel.iter().enumerate() {
+                        for (o, &p) in row_out.iter_mut().zip(&padded[k..k + w]) {
+                            *o += kv * p;
+                        }
                     }
-                }
-            });
+                },
+            );
         GrayImage {
             width: self.width,
             height: self.height,
@@ -244,6 +264,18 @@ impl GrayImage {
     }
 }
 
+/// `v.floor()` as an integer without a libm call (x86-64's baseline has no rounding
+/// instruction); NaN gives 0 like `v.floor() as isize`.
+#[inline]
+pub(crate) fn floor(v: f64) -> isize {
+    let t = v as isize;
+    if (t as f64) > v {
+        t - 1
+    } else {
+        t
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -254,6 +286,24 @@ mod tests {
         assert!((img.sample(0.0, 0.0) - 0.0).abs() < 1e-6);
         assert!((img.sample(0.25, 0.0) - 2.5).abs() < 1e-6);
         assert!((img.sample(1.0, 0.0) - 10.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn floor_matches_the_float_floor() {
+        for v in [-2.5, -2.0, -1e-9, 0.0, 0.3, 1.0, 7.999, 1e6 + 0.5] {
+            assert_eq!(floor(v), v.floor() as isize, "{v}");
+        }
+    }
+
+    #[test]
+    fn half_size_averages_2x2_blocks_centred_on_the_original_pixels() {
+        let data: Vec<f32> = (0..5 * 3).map(|k| k as f32).collect();
+        let img = GrayImage::from_vec(5, 3, data).unwrap();
+        let half = img.half_size();
+        assert_eq!((half.width(), half.height()), (2, 1));
+        // Pixel (0, 1) averages (2, 0), (3, 0), (2, 1), (3, 1): its centre (2.5, 0.5).
+        assert!((half.at(1, 0) - img.sample(2.5, 0.5)).abs() < 1e-6);
+        assert!((half.at(0, 0) - 3.0).abs() < 1e-6);
     }
 
     #[test]

@@ -6,10 +6,8 @@
 //! locally (sub-pixel saddle + ring test at the prediction). Growth stops at the board's
 //! border, where no X-junctions remain.
 
-use std::collections::HashMap;
-
 use super::gray::GrayImage;
-use super::saddle::{ring_test, wrap, Saddle, GUIDED_RING};
+use super::saddle::{ring_test, Saddle, GUIDED_RING};
 use super::subpix::{refine_corner, SubpixParams};
 use nalgebra::Vector2;
 
@@ -31,20 +29,31 @@ impl Grid {
     }
 }
 
-/// Candidates with a bucket index for radius queries.
+/// Candidates with a bucket index (a flat grid of 16 px cells) for radius queries, and
+/// their edge directions as unit vectors.
 pub struct Candidates {
     saddles: Vec<Saddle>,
+    edge_dirs: Vec<[Vector2<f64>; 4]>,
     cell: f64,
-    buckets: HashMap<(i64, i64), Vec<usize>>,
+    nx: usize,
+    ny: usize,
+    buckets: Vec<Vec<usize>>,
 }
 
 impl Candidates {
-    /// Indexes the candidates.
-    pub fn new(saddles: Vec<Saddle>) -> Self {
+    /// Indexes the candidates of a `width` x `height` image (candidates outside it are
+    /// kept in the border cells).
+    pub fn new(saddles: Vec<Saddle>, width: usize, height: usize) -> Self {
+        let cell = 16.0;
+        let nx = (width as f64 / cell).ceil().max(1.0) as usize;
+        let ny = (height as f64 / cell).ceil().max(1.0) as usize;
         let mut c = Self {
-            saddles: Vec::new(),
-            cell: 16.0,
-            buckets: HashMap::new(),
+            saddles: Vec::with_capacity(saddles.len()),
+            edge_dirs: Vec::with_capacity(saddles.len()),
+            cell,
+            nx,
+            ny,
+            buckets: vec![Vec::new(); nx * ny],
         };
         for s in saddles {
             c.push(s);
@@ -52,17 +61,18 @@ impl Candidates {
         c
     }
 
-    fn key(&self, p: &Vector2<f64>) -> (i64, i64) {
-        (
-            (p.x / self.cell).floor() as i64,
-            (p.y / self.cell).floor() as i64,
-        )
+    /// The cell column and row of `p`, clamped to the grid.
+    fn key(&self, p: &Vector2<f64>) -> (usize, usize) {
+        let k = |v: f64, n: usize| ((v / self.cell).floor().max(0.0) as usize).min(n - 1);
+        (k(p.x, self.nx), k(p.y, self.ny))
     }
 
     fn push(&mut self, s: Saddle) -> usize {
         let i = self.saddles.len();
-        let k = self.key(&s.pixel);
-        self.buckets.entry(k).or_default().push(i);
+        let (kx, ky) = self.key(&s.pixel);
+        self.buckets[ky * self.nx + kx].push(i);
+        self.edge_dirs
+            .push(s.edges.map(|e| Vector2::new(e.cos(), e.sin())));
         self.saddles.push(s);
         i
     }
@@ -72,38 +82,37 @@ impl Candidates {
         &self.saddles
     }
 
-    /// Indices within `radius` of `p` for which `keep` holds.
-    fn within(
-        &self,
-        p: &Vector2<f64>,
-        radius: f64,
-        mut keep: impl FnMut(usize) -> bool,
-    ) -> Vec<usize> {
+    /// Calls `f(i, distance)` for every candidate within `radius` of `p`.
+    fn for_each_within(&self, p: &Vector2<f64>, radius: f64, mut f: impl FnMut(usize, f64)) {
         let (kx0, ky0) = self.key(&(p - Vector2::new(radius, radius)));
         let (kx1, ky1) = self.key(&(p + Vector2::new(radius, radius)));
-        let mut out = Vec::new();
         for ky in ky0..=ky1 {
             for kx in kx0..=kx1 {
-                if let Some(b) = self.buckets.get(&(kx, ky)) {
-                    for &i in b {
-                        if (self.saddles[i].pixel - p).norm() <= radius && keep(i) {
-                            out.push(i);
-                        }
+                for &i in &self.buckets[ky * self.nx + kx] {
+                    let dist = (self.saddles[i].pixel - p).norm();
+                    if dist <= radius {
+                        f(i, dist);
                     }
                 }
             }
         }
-        out
     }
 
     fn nearest(&self, p: &Vector2<f64>, radius: f64, used: &[bool]) -> Option<usize> {
-        self.within(p, radius, |i| !used.get(i).copied().unwrap_or(false))
-            .into_iter()
-            .min_by(|&a, &b| {
-                let da = (self.saddles[a].pixel - p).norm();
-                let db = (self.saddles[b].pixel - p).norm();
-                da.total_cmp(&db)
-            })
+        let mut best: Option<(usize, f64)> = None;
+        self.for_each_within(p, radius, |i, dist| {
+            let free = !used.get(i).copied().unwrap_or(false);
+            if free && best.is_none_or(|(_, bd)| dist < bd) {
+                best = Some((i, dist));
+            }
+        });
+        best.map(|(i, _)| i)
+    }
+
+    /// True when an edge of candidate `i` points along `d` (length `dist`) within the
+    /// angle whose cosine is `cos_max`.
+    fn edge_points(&self, i: usize, d: &Vector2<f64>, dist: f64, cos_max: f64) -> bool {
+        self.edge_dirs[i].iter().any(|e| e.dot(d) > cos_max * dist)
     }
 }
 
@@ -162,10 +171,7 @@ fn seed_grid(
     used: &mut Vec<bool>,
 ) -> Option<Vec<Vec<usize>>> {
     let s = cands.saddles[seed];
-    let mut n = [0usize; 4];
-    for (k, nk) in n.iter_mut().enumerate() {
-        *nk = neighbour_along(cands, seed, s.edges[k], params)?;
-    }
+    let n = neighbours_along_edges(cands, seed, params)?;
     let p = |i: usize| cands.saddles[i].pixel;
     // e0 -> +c, e1 -> +r, e2 -> -c, e3 -> -r.
     let mut g = vec![vec![usize::MAX; 3]; 3];
@@ -197,35 +203,41 @@ fn seed_grid(
     Some(g)
 }
 
-/// The nearest candidate along edge direction `angle` whose own edges point back.
-fn neighbour_along(cands: &Candidates, i: usize, angle: f64, params: &GrowParams) -> Option<usize> {
+/// For each of the four edges of candidate `i`, the nearest candidate along it whose own
+/// edges point back (searched within 24, then 64, then 160 px); `None` when an edge has
+/// none.
+fn neighbours_along_edges(cands: &Candidates, i: usize, params: &GrowParams) -> Option<[usize; 4]> {
     let s = cands.saddles[i];
-    let mut best: Option<(usize, f64)> = None;
+    let cos_max = params.max_edge_angle.cos();
+    let dirs = cands.edge_dirs[i];
+    let mut best: [Option<(usize, f64)>; 4] = [None; 4];
+    let mut settled = [false; 4];
     for radius in [24.0, 64.0, 160.0] {
-        for j in cands.within(&s.pixel, radius, |j| j != i) {
+        cands.for_each_within(&s.pixel, radius, |j, dist| {
+            if j == i || dist < 3.0 {
+                return;
+            }
             let d = cands.saddles[j].pixel - s.pixel;
-            let dist = d.norm();
-            if dist < 3.0 {
-                continue;
+            let mut points_back = None;
+            for k in 0..4 {
+                if settled[k] || dirs[k].dot(&d) <= cos_max * dist {
+                    continue;
+                }
+                let back =
+                    *points_back.get_or_insert_with(|| cands.edge_points(j, &-d, dist, cos_max));
+                if back && best[k].is_none_or(|(_, bd)| dist < bd) {
+                    best[k] = Some((j, dist));
+                }
             }
-            let ang = wrap(d.y.atan2(d.x) - angle).abs();
-            if ang > params.max_edge_angle {
-                continue;
-            }
-            let back = (-d.y).atan2(-d.x);
-            let points_back = cands.saddles[j]
-                .edges
-                .iter()
-                .any(|&e| wrap(e - back).abs() < params.max_edge_angle);
-            if points_back && best.is_none_or(|(_, bd)| dist < bd) {
-                best = Some((j, dist));
-            }
+        });
+        for k in 0..4 {
+            settled[k] = best[k].is_some();
         }
-        if best.is_some() {
+        if settled.iter().all(|&x| x) {
             break;
         }
     }
-    best.map(|(j, _)| j)
+    Some([best[0]?.0, best[1]?.0, best[2]?.0, best[3]?.0])
 }
 
 /// Line `k` of the grid seen from `side`, ordered from the border inwards:
@@ -295,12 +307,9 @@ fn extend(
 
 /// True when an edge of `a` points at `b` and an edge of `b` points at `a`.
 fn edges_link(cands: &Candidates, a: usize, b: usize, max_angle: f64) -> bool {
-    let (sa, sb) = (&cands.saddles[a], &cands.saddles[b]);
-    let d = sb.pixel - sa.pixel;
-    let there = d.y.atan2(d.x);
-    let back = (-d.y).atan2(-d.x);
-    sa.edges.iter().any(|&e| wrap(e - there).abs() < max_angle)
-        && sb.edges.iter().any(|&e| wrap(e - back).abs() < max_angle)
+    let d = cands.saddles[b].pixel - cands.saddles[a].pixel;
+    let (dist, cos_max) = (d.norm(), max_angle.cos());
+    cands.edge_points(a, &d, dist, cos_max) && cands.edge_points(b, &-d, dist, cos_max)
 }
 
 /// The squares between a new line and the border line alternate in colour along the line

@@ -6,6 +6,7 @@
 //! The ring test also yields the four edge directions, which guide the grid growing.
 
 use std::f64::consts::PI;
+use std::sync::OnceLock;
 
 use super::gray::GrayImage;
 use nalgebra::Vector2;
@@ -91,16 +92,12 @@ const CONTRAST_FLOOR: f32 = 10.0;
 /// border).
 fn saddle_response(smooth: &GrayImage, contrast_radius: usize) -> GrayImage {
     let (w, h) = (smooth.width(), smooth.height());
-    let mean = smooth.box_mean(contrast_radius);
-    let mut sq = smooth.clone();
-    sq.data_mut().iter_mut().for_each(|x| *x *= *x);
-    let mean_sq = sq.box_mean(contrast_radius);
     let mut out = GrayImage::new(w, h, 0.0);
     if w < 3 || h < 3 {
         return out;
     }
+    let std = local_std(smooth, contrast_radius);
     let d = smooth.data();
-    let (mean, mean_sq) = (mean.data(), mean_sq.data());
     let rows = out.data_mut().par_chunks_mut(w).enumerate();
     rows.skip(1).take(h - 2).for_each(|(y, o)| {
         for (x, ox) in o.iter_mut().enumerate().take(w - 1).skip(1) {
@@ -110,11 +107,58 @@ fn saddle_response(smooth: &GrayImage, contrast_radius: usize) -> GrayImage {
             let ixy = 0.25 * (d[i + w + 1] - d[i + w - 1] - d[i - w + 1] + d[i - w - 1]);
             let s = ixy * ixy - ixx * iyy;
             if s > 0.0 {
-                let var = (mean_sq[i] - mean[i] * mean[i]).max(0.0);
-                *ox = s.sqrt() / (var.sqrt() + CONTRAST_FLOOR);
+                *ox = s.sqrt() / (std[i] + CONTRAST_FLOOR);
             }
         }
     });
+    out
+}
+
+/// The standard deviation over the `(2r+1)^2` box around every pixel, border replicated:
+/// running sums of the values and their squares (f64, so the variance does not cancel),
+/// down the columns, then along each row: O(1) per pixel whatever `r`.
+fn local_std(img: &GrayImage, r: usize) -> Vec<f32> {
+    let (w, h) = (img.width(), img.height());
+    let d = img.data();
+    let row = |y: isize| {
+        let y = y.clamp(0, h as isize - 1) as usize;
+        &d[y * w..(y + 1) * w]
+    };
+    let (mut s1, mut s2) = (vec![0.0f64; w], vec![0.0f64; w]);
+    let ri = r as isize;
+    for k in -ri..=ri {
+        for (x, &v) in row(k).iter().enumerate() {
+            s1[x] += f64::from(v);
+            s2[x] += f64::from(v) * f64::from(v);
+        }
+    }
+    let n = ((2 * r + 1) * (2 * r + 1)) as f64;
+    let mut out = vec![0.0f32; w * h];
+    for y in 0..h {
+        if y > 0 {
+            let (add, sub) = (row(y as isize + ri), row(y as isize - 1 - ri));
+            for x in 0..w {
+                let (a, b) = (f64::from(add[x]), f64::from(sub[x]));
+                s1[x] += a - b;
+                s2[x] += a * a - b * b;
+            }
+        }
+        let (mut t1, mut t2) = (0.0, 0.0);
+        for k in -ri..=ri {
+            let x = k.clamp(0, w as isize - 1) as usize;
+            t1 += s1[x];
+            t2 += s2[x];
+        }
+        for x in 0..w {
+            if x > 0 {
+                let (a, b) = ((x + r).min(w - 1), x.saturating_sub(r + 1));
+                t1 += s1[a] - s1[b];
+                t2 += s2[a] - s2[b];
+            }
+            let mean = t1 / n;
+            out[y * w + x] = (t2 / n - mean * mean).max(0.0).sqrt() as f32;
+        }
+    }
     out
 }
 
@@ -198,9 +242,8 @@ pub fn ring_test(
     tolerance: &RingTolerance,
 ) -> Option<([f64; 4], f64)> {
     let mut v = [0.0f64; RING_SAMPLES];
-    for (k, x) in v.iter_mut().enumerate() {
-        let a = 2.0 * PI * k as f64 / RING_SAMPLES as f64;
-        *x = f64::from(smooth.sample(p.x + radius * a.cos(), p.y + radius * a.sin()));
+    for (x, (c, s)) in v.iter_mut().zip(ring_directions()) {
+        *x = f64::from(smooth.sample(p.x + radius * c, p.y + radius * s));
     }
     let (lo, hi) = v
         .iter()
@@ -221,20 +264,18 @@ pub fn ring_test(
     let mid = v.iter().sum::<f64>() / RING_SAMPLES as f64;
     let band = 0.15 * amplitude;
     // Hysteresis labels: +1 above mid+band, -1 below mid-band, 0 between.
-    let labels: Vec<i8> = v
-        .iter()
-        .map(|&x| {
-            if x > mid + band {
-                1
-            } else if x < mid - band {
-                -1
-            } else {
-                0
-            }
-        })
-        .collect();
+    let labels: [i8; RING_SAMPLES] = std::array::from_fn(|k| {
+        if v[k] > mid + band {
+            1
+        } else if v[k] < mid - band {
+            -1
+        } else {
+            0
+        }
+    });
     let first = labels.iter().position(|&l| l != 0)?;
-    let mut crossings = Vec::with_capacity(4);
+    let mut crossings = [0.0; 4];
+    let mut found = 0;
     let mut last = first;
     for step in 1..=RING_SAMPLES {
         let k = (first + step) % RING_SAMPLES;
@@ -242,14 +283,15 @@ pub fn ring_test(
             continue;
         }
         if labels[k] != labels[last] {
-            if crossings.len() == 4 {
+            if found == 4 {
                 return None;
             }
-            crossings.push(crossing_angle(&v, last, k, mid));
+            crossings[found] = crossing_angle(&v, last, k, mid);
+            found += 1;
         }
         last = k;
     }
-    if crossings.len() != 4 {
+    if found != 4 {
         return None;
     }
     crossings.sort_by(f64::total_cmp);
@@ -268,10 +310,18 @@ pub fn ring_test(
             return None;
         }
     }
-    Some((
-        [crossings[0], crossings[1], crossings[2], crossings[3]],
-        amplitude,
-    ))
+    Some((crossings, amplitude))
+}
+
+/// `(cos, sin)` of the ring's sample angles `2 pi k / RING_SAMPLES`.
+fn ring_directions() -> &'static [(f64, f64); RING_SAMPLES] {
+    static TABLE: OnceLock<[(f64, f64); RING_SAMPLES]> = OnceLock::new();
+    TABLE.get_or_init(|| {
+        std::array::from_fn(|k| {
+            let a = 2.0 * PI * k as f64 / RING_SAMPLES as f64;
+            (a.cos(), a.sin())
+        })
+    })
 }
 
 /// The angle where the ring crosses `mid` between samples `from` and `to` (circular).

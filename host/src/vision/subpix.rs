@@ -5,7 +5,7 @@
 //! the new estimate (bilinear), as OpenCV does, so results agree with OpenCV-refined
 //! reference corners when the same window is used.
 
-use super::gray::GrayImage;
+use super::gray::{floor, GrayImage};
 use nalgebra::Vector2;
 
 /// Settings of the refinement.
@@ -43,37 +43,19 @@ pub fn refine_corner(
     let half = params.half_window.max(1);
     let n = 2 * half + 1;
     let coeff = 1.0 / (half * half) as f64;
-    let mask: Vec<f64> = (0..n)
+    let mask: Vec<f32> = (0..n)
         .map(|i| {
             let d = i as f64 - half as f64;
-            (-d * d * coeff).exp()
+            (-d * d * coeff).exp() as f32
         })
         .collect();
+    let offsets: Vec<f32> = (0..n).map(|j| j as f32 - half as f32).collect();
     let mut patch = vec![0.0f32; (n + 2) * (n + 2)];
     let mut q = start;
     let eps2 = params.epsilon_px * params.epsilon_px;
     for _ in 0..params.max_iterations.max(1) {
         sample_patch(img, q, n + 2, &mut patch);
-        let stride = n + 2;
-        let (mut a, mut b, mut c, mut bb1, mut bb2) = (0.0, 0.0, 0.0, 0.0, 0.0);
-        for i in 0..n {
-            let py = i as f64 - half as f64;
-            let row = (i + 1) * stride;
-            for j in 0..n {
-                let px = j as f64 - half as f64;
-                let m = mask[i] * mask[j];
-                let tgx = f64::from(patch[row + j + 2] - patch[row + j]);
-                let tgy = f64::from(patch[row + stride + j + 1] - patch[row - stride + j + 1]);
-                let gxx = tgx * tgx * m;
-                let gxy = tgx * tgy * m;
-                let gyy = tgy * tgy * m;
-                a += gxx;
-                b += gxy;
-                c += gyy;
-                bb1 += gxx * px + gxy * py;
-                bb2 += gxy * px + gyy * py;
-            }
-        }
+        let [a, b, c, bb1, bb2] = normal_equations(&patch, &mask, &offsets);
         let det = a * c - b * b;
         if det.abs() <= 1e-12 * (a * c).abs().max(1e-30) {
             return None;
@@ -91,15 +73,51 @@ pub fn refine_corner(
     Some(q)
 }
 
+/// `[sum w gx^2, sum w gx gy, sum w gy^2, sum w (gx^2 x + gx gy y), sum w (gx gy x + gy^2 y)]`
+/// over the window (central-difference gradients of the `(n + 2)^2` patch, `x, y` the
+/// offsets from its centre, `w` the separable Gaussian mask): each row in f32 (it
+/// vectorises), the rows summed in f64.
+fn normal_equations(patch: &[f32], mask: &[f32], offsets: &[f32]) -> [f64; 5] {
+    let n = mask.len();
+    let stride = n + 2;
+    let mut sums = [0.0f64; 5];
+    for i in 0..n {
+        let row = (i + 1) * stride;
+        let (centre, above, below) = (
+            &patch[row..row + stride],
+            &patch[row - stride + 1..row + 1 + n],
+            &patch[row + stride + 1..row + stride + 1 + n],
+        );
+        let (mut a, mut b, mut c, mut ax, mut bx) = (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
+        for j in 0..n {
+            let m = mask[i] * mask[j];
+            let gx = centre[j + 2] - centre[j];
+            let gy = below[j] - above[j];
+            let (gxx, gxy, gyy) = (gx * gx * m, gx * gy * m, gy * gy * m);
+            a += gxx;
+            b += gxy;
+            c += gyy;
+            ax += gxx * offsets[j];
+            bx += gxy * offsets[j];
+        }
+        let py = f64::from(offsets[i]);
+        sums[0] += f64::from(a);
+        sums[1] += f64::from(b);
+        sums[2] += f64::from(c);
+        sums[3] += f64::from(ax) + py * f64::from(b);
+        sums[4] += f64::from(bx) + py * f64::from(c);
+    }
+    sums
+}
+
 /// `patch[i][j] = img(q + (j - (size-1)/2, i - (size-1)/2))`, bilinear (OpenCV
 /// `getRectSubPix`).
 fn sample_patch(img: &GrayImage, q: Vector2<f64>, size: usize, patch: &mut [f32]) {
     let half = (size as f64 - 1.0) / 2.0;
     let (u0, v0) = (q.x - half, q.y - half);
     // One set of bilinear weights for the whole patch: integer offsets.
-    let (x0, y0) = (u0.floor(), v0.floor());
-    let (fx, fy) = ((u0 - x0) as f32, (v0 - y0) as f32);
-    let (x0, y0) = (x0 as isize, y0 as isize);
+    let (x0, y0) = (floor(u0), floor(v0));
+    let (fx, fy) = ((u0 - x0 as f64) as f32, (v0 - y0 as f64) as f32);
     let inside = x0 >= 0
         && y0 >= 0
         && (x0 as usize) + size < img.width()
