@@ -13,8 +13,8 @@
 //! one sample over the whole interval instead would delay the signal by half a period, and
 //! every time offset estimated against it by `dt / 2` (1.25 ms at 400 Hz). Against the
 //! simulator's exact motion at 200 Hz (hand-held, up to 2.7 rad/s), the mean of two samples
-//! alone drifts 4.4e-5 rad RMS and 0.3 mm at worst in one second; this step, 7e-7 rad and
-//! 16 um (`propagation_matches_exact_motion` in the host's simulator tests).
+//! alone drifts 4.3e-5 rad RMS and 0.31 mm at worst in one second; this step, 7.5e-7 rad and
+//! 0.011 mm (`cargo run --release -p msreg --example propagation_error`).
 //!
 //! IMUs whose driver outputs interval means (integrating IMUs) are re-stamped to their
 //! interval's midpoint by the dataset reader (`sample_timing` in `imu0/imu.yaml`), which
