@@ -70,33 +70,6 @@ impl<T: Scalar> ImuSample<T> {
         }
         Ok(())
     }
-
-    /// The reading at `t_ns` on the straight line from `self` to the later sample `next`
-    /// (`t_ns` clamped to their stamps; `next` itself at its stamp, bit for bit).
-    pub fn lerp(&self, next: &Self, t_ns: u64) -> Self {
-        if t_ns >= next.stamp_ns || next.stamp_ns <= self.stamp_ns {
-            return *next;
-        }
-        if t_ns <= self.stamp_ns {
-            return *self;
-        }
-        let span = (next.stamp_ns - self.stamp_ns) as f64;
-        let f = T::lit((t_ns - self.stamp_ns) as f64 / span);
-        Self {
-            stamp_ns: t_ns,
-            gyro: self.gyro + (next.gyro - self.gyro) * f,
-            accel: self.accel + (next.accel - self.accel) * f,
-        }
-    }
-
-    /// The mean of two readings: the held value of the step between them.
-    pub fn mean(&self, other: &Self) -> (Vector3<T>, Vector3<T>) {
-        let half = T::lit(0.5);
-        (
-            (self.gyro + other.gyro) * half,
-            (self.accel + other.accel) * half,
-        )
-    }
 }
 
 /// Continuous-time IMU noise in Kalibr's `imu.yaml` units.
