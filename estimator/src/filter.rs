@@ -401,9 +401,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         let (step, end) = self.step_to(t_ns)?;
         let phi = step.transition;
         let p_ii = self.cov.fixed_view::<15, 15>(0, 0).clone_owned();
-        let phi_p = propagate::transition_mul(&phi, &p_ii);
-        let new_ii = propagate::transition_mul(&phi, &phi_p.transpose()).transpose() + step.noise;
-        let new_ii = (new_ii + new_ii.transpose()) * T::lit(0.5);
+        let new_ii = propagate::covariance_step(&phi, &p_ii, &step.noise);
         let pending = propagate::transition_compose(&phi, &self.pending_transition);
         let finite = step.state.is_finite()
             && new_ii.iter().all(|x| x.is_finite())

@@ -23,6 +23,8 @@
 //! The error-state transition `Phi` and the discrete noise `Q_d = G Q G^T` follow from the
 //! right perturbation `R = R_hat Exp(dtheta)`; both are checked against central differences.
 
+use core::ops::AddAssign;
+
 use crate::lie::{exp, right_jacobian, skew};
 use crate::scalar::Scalar;
 use crate::state::{imu, ImuState};
@@ -127,9 +129,9 @@ pub struct ImuStep<T: Scalar> {
 /// second-order terms of a signal that changes within the interval: coning
 /// (`dt^2 / 12 w_a x w_b` in the rotation vector), sculling (`R_a dt^2 / 12 (w_a x da - dw x a_a)`
 /// in the velocity) and the position's double integral of a force that changes linearly
-/// (`dt^2 / 12 (f_a - f_b)`). They vanish for a constant reading. `Phi` and `Q` are those of
-/// the mean reading: the terms above change them by `O(|w| dt)` relative, below the
-/// linearisation error.
+/// (`dt^2 / 12 (f_a - f_b)`). They vanish for a constant reading. `Phi` includes their
+/// derivatives (central-difference tests below); `Q` treats each reading's white noise as
+/// a bias error held over the interval, entering through `Phi`'s bias columns.
 pub fn step<T: Scalar>(
     x: &ImuState<T>,
     signal: &ImuInterval<T>,
@@ -314,6 +316,50 @@ pub fn transition_mul<T: Scalar, const K: usize>(
     out
 }
 
+/// `Phi P Phi^T + Q` for a symmetric `P` (the IMU block of the covariance) and a symmetric
+/// `Q`, with `Phi`'s block structure as in [`transition_mul`]. `A = Phi P` is formed whole;
+/// of `Phi A^T` only the block-lower triangle (513 multiply-adds instead of 1,215), which is
+/// then mirrored: the result is exactly symmetric without an averaging pass.
+pub fn covariance_step<T: Scalar>(
+    phi: &SMatrix<T, 15, 15>,
+    p: &SMatrix<T, 15, 15>,
+    q: &SMatrix<T, 15, 15>,
+) -> SMatrix<T, 15, 15> {
+    let (o, pp, v, bg, ba) = BLOCKS;
+    let a = transition_mul(phi, p);
+    let b = |r: usize, c: usize| phi.fixed_view::<3, 3>(r, c);
+    let mut out = *q;
+    let row_o = b(o, o) * at::<T, 3>(&a, o) + b(o, bg) * at::<T, 3>(&a, bg);
+    let row_p = b(pp, o) * at::<T, 6>(&a, o)
+        + at::<T, 6>(&a, pp)
+        + b(pp, v) * at::<T, 6>(&a, v)
+        + b(pp, bg) * at::<T, 6>(&a, bg)
+        + b(pp, ba) * at::<T, 6>(&a, ba);
+    let row_v = b(v, o) * at::<T, 9>(&a, o)
+        + at::<T, 9>(&a, v)
+        + b(v, bg) * at::<T, 9>(&a, bg)
+        + b(v, ba) * at::<T, 9>(&a, ba);
+    out.fixed_view_mut::<3, 3>(o, 0).add_assign(&row_o);
+    out.fixed_view_mut::<3, 6>(pp, 0).add_assign(&row_p);
+    out.fixed_view_mut::<3, 9>(v, 0).add_assign(&row_v);
+    out.fixed_view_mut::<3, 12>(bg, 0)
+        .add_assign(&at::<T, 12>(&a, bg));
+    out.fixed_view_mut::<3, 15>(ba, 0)
+        .add_assign(&at::<T, 15>(&a, ba));
+    for i in 0..15 {
+        for j in i + 1..15 {
+            out[(i, j)] = out[(j, i)];
+        }
+    }
+    out
+}
+
+/// Block column `k` of `a` over its first `N` rows, transposed: rows `k..k+3` of `a^T`
+/// over its first `N` columns.
+fn at<T: Scalar, const N: usize>(a: &SMatrix<T, 15, 15>, k: usize) -> SMatrix<T, 3, N> {
+    a.fixed_view::<N, 3>(0, k).transpose()
+}
+
 /// `Phi A` for `A` a product of transitions (e.g. the pending transition of
 /// `Ekf::flush_transition`): the same block pattern as `Phi` (orientation rows touch only
 /// orientation and gyro bias, velocity rows not the position, bias rows identity), which is
@@ -440,6 +486,32 @@ mod tests {
             boxminus(&step(&boxplus(&x, &d), &signal, &noise).state, &nominal)
         });
         assert_mat_close(&step(&x, &signal, &noise).transition, &numeric, 1e-6);
+    }
+
+    #[test]
+    fn covariance_step_equals_the_dense_product() {
+        let noise = ImuNoise::<f64>::vn300();
+        let x = moving_state();
+        let signal = ImuInterval::linear(
+            (Vector3::new(0.3, -1.2, 2.1), Vector3::new(0.4, 9.9, -1.3)),
+            (Vector3::new(0.5, -1.0, 2.4), Vector3::new(0.1, 9.6, -1.0)),
+            0.0025,
+        );
+        let step = step(&x, &signal, &noise);
+        // A symmetric positive definite P with every entry non-zero.
+        let l = SMatrix::<f64, 15, 15>::from_fn(|i, j| {
+            if j <= i {
+                1.0 + 0.1 * ((i * 7 + j * 3) % 11) as f64
+            } else {
+                0.0
+            }
+        });
+        let p = l * l.transpose();
+        let phi = step.transition;
+        let dense = phi * p * phi.transpose() + step.noise;
+        let structured = covariance_step(&phi, &p, &step.noise);
+        assert_mat_close(&structured, &dense, 1e-13);
+        assert_eq!(structured, structured.transpose());
     }
 
     #[test]
