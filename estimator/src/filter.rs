@@ -364,7 +364,9 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         Ok(self.step_to(t_ns)?.0.state)
     }
 
-    /// The propagation step from the filter time to `t_ns` and the reading at `t_ns`.
+    /// The propagation step from the filter time to `t_ns` and the reading at `t_ns`. Out of
+    /// line: the step's temporaries are popped before the covariance product.
+    #[inline(never)]
     fn step_to(&self, t_ns: u64) -> Result<(propagate::ImuStep<T>, ImuSample<T>), Error> {
         let now = self.imu_now.ok_or(Error::NotInitialized)?;
         if t_ns < self.time_ns {
@@ -399,10 +401,8 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
             return Ok(());
         }
         let (step, end) = self.step_to(t_ns)?;
-        let phi = step.transition;
-        let p_ii = self.cov.fixed_view::<15, 15>(0, 0).clone_owned();
-        let new_ii = propagate::covariance_step(&phi, &p_ii, &step.noise);
-        let pending = propagate::transition_compose(&phi, &self.pending_transition);
+        let new_ii = Self::propagated_imu_block(&self.cov, &step.transition, &step.noise);
+        let pending = propagate::transition_compose(&step.transition, &self.pending_transition);
         let finite = step.state.is_finite()
             && new_ii.iter().all(|x| x.is_finite())
             && pending.iter().all(|x| x.is_finite());
@@ -415,6 +415,19 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         self.imu_now = Some(end);
         self.time_ns = t_ns;
         Ok(())
+    }
+
+    /// `Phi P_II Phi^T + Q` ([`propagate::covariance_step`]) for the covariance's IMU block.
+    /// Out of line, so that its 15 x 15 temporaries are popped before an update that follows
+    /// a propagation.
+    #[inline(never)]
+    fn propagated_imu_block(
+        cov: &SMatrix<T, N, N>,
+        phi: &SMatrix<T, 15, 15>,
+        noise: &SMatrix<T, 15, 15>,
+    ) -> SMatrix<T, 15, 15> {
+        let p_ii = cov.fixed_view::<15, 15>(0, 0).clone_owned();
+        propagate::covariance_step(phi, &p_ii, noise)
     }
 }
 

@@ -63,14 +63,15 @@ pub struct Hold<T: Scalar> {
 }
 
 impl<T: Scalar> Hold<T> {
-    /// Removes the gain's component along the held direction, in place.
-    pub(crate) fn project<const M: usize, const N: usize>(&self, gain: &mut SMatrix<T, N, M>) {
+    /// Removes the gain's component along the held direction, in place, on the gain
+    /// stored transposed (`K^T`, `M x N`).
+    pub(crate) fn project<const M: usize, const N: usize>(&self, gain_t: &mut SMatrix<T, M, N>) {
         if self.block + 3 > N {
             return;
         }
-        let mut rows = gain.fixed_rows_mut::<3>(self.block);
-        let along = self.axis.transpose() * &rows;
-        rows -= self.axis * along;
+        let mut columns = gain_t.fixed_columns_mut::<3>(self.block);
+        let along = &columns * self.axis;
+        columns -= along * self.axis.transpose();
     }
 }
 

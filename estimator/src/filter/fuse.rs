@@ -1,7 +1,7 @@
 //! Measurement updates of the filter: relative pose, zero velocity, and the bookkeeping
 //! every update shares (correction, NIS record, health monitor and its reaction).
 
-use super::undo::CloneUndo;
+use super::undo::{ColumnsUndo, StepUndo};
 use super::Ekf;
 use crate::chi2;
 use crate::health::{ExtrinsicInnovation, HealthEvent};
@@ -45,17 +45,44 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         }
         let t = self.reachable_imu_time(s, meas.stamp_to_ns)?;
         let to_slot = self.free_slot()?;
-        let undo = CloneUndo::save(self, to_slot);
-        self.advance_to(t)?;
-        self.clone_imu_pose(s, to_slot, meas.stamp_to_ns);
-        let report = self.fuse_relative_pose(s, from_slot, to_slot, meas);
+        let step = StepUndo::save(self);
+        let report = self
+            .advance_out_of_line(t)
+            .and_then(|()| self.clone_and_fuse(s, from_slot, to_slot, meas));
         if report.is_err() {
-            undo.restore(self);
+            step.restore(self);
         }
         let report = report?;
         self.drop_clone(from_slot);
         self.anchors[s] = Some(to_slot);
         Ok(report)
+    }
+
+    /// The propagation in its own stack frame: its temporaries and an update's never share
+    /// one frame (the stack depth is the larger of the two, not their sum).
+    #[inline(never)]
+    pub(super) fn advance_out_of_line(&mut self, t: u64) -> Result<(), Error> {
+        self.advance_to(t)
+    }
+
+    /// After the propagation: clones the IMU pose into `to_slot` and fuses the relative
+    /// pose; on error puts back the covariance columns the two wrote.
+    #[inline(never)]
+    fn clone_and_fuse(
+        &mut self,
+        s: usize,
+        from_slot: usize,
+        to_slot: usize,
+        meas: &relative_pose::RelativePose<T>,
+    ) -> Result<UpdateReport<T>, Error> {
+        let mut columns = ColumnsUndo::new();
+        columns.save(self, Some(to_slot));
+        self.clone_imu_pose(s, to_slot, meas.stamp_to_ns);
+        let report = self.fuse_relative_pose(s, from_slot, to_slot, meas);
+        if report.is_err() {
+            columns.restore(self);
+        }
+        report
     }
 
     /// The relative-pose update between two clones; changes the filter only on success.
@@ -147,7 +174,8 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         self.flush_transition();
         let (holds, count) = self.holds();
         let threshold = chi2::quantile::<T>(M, self.config.gate);
-        let gain = Gain::compute(&self.cov, meas, threshold, &holds[..count])?;
+        let mut gain = Gain::empty();
+        gain.compute_into(&self.cov, meas, threshold, &holds[..count])?;
         self.correct(&gain)?;
         let innovation = extrinsic_jacobian.map(|h_e| {
             extrinsic_innovation(

@@ -64,31 +64,51 @@ impl<T: Scalar, const M: usize, const L: usize> SparseJacobian<T, M, L> {
         h
     }
 
-    /// `P H^T` from the stored columns of `P` only (plain slices: nalgebra's strided
-    /// iterators cost several times more on the M4F).
-    fn cov_times_transpose<const N: usize>(&self, cov: &SMatrix<T, N, N>) -> SMatrix<T, N, M> {
-        let mut out = SMatrix::<T, N, M>::zeros();
-        let out_columns = out.as_mut_slice();
+    /// The covariance of the stored columns, `P[columns, columns]` (`L x L`; a column
+    /// listed twice appears twice, so `H P_sub H^T` is still `H P H^T`). Errors on a
+    /// column outside `N`.
+    pub fn sub_covariance<const N: usize>(
+        &self,
+        cov: &SMatrix<T, N, N>,
+    ) -> Result<SMatrix<T, L, L>, Error> {
+        if self.columns.iter().any(|&c| c >= N) {
+            return Err(Error::InvalidConfig);
+        }
+        let p = cov.as_slice();
+        Ok(SMatrix::from_fn(|r, c| {
+            p[self.columns[c] * N + self.columns[r]]
+        }))
+    }
+
+    /// `(P H^T)^T = H P` into `out_t` (`M x N`), from the stored columns of `P` only
+    /// (plain slices: nalgebra's strided iterators cost several times more on the M4F).
+    fn cov_times_transpose_into<const N: usize>(
+        &self,
+        cov: &SMatrix<T, N, N>,
+        out_t: &mut SMatrix<T, M, N>,
+    ) {
+        out_t.fill(T::zero());
+        let out = out_t.as_mut_slice();
         for (l, &c) in self.columns.iter().enumerate() {
             let p = &cov.as_slice()[c * N..(c + 1) * N];
-            for (r, o) in out_columns.chunks_exact_mut(N).enumerate() {
+            for r in 0..M {
                 let h = self.values[(r, l)];
                 if h != T::zero() {
-                    for (o, x) in o.iter_mut().zip(p) {
+                    for (o, x) in out.iter_mut().skip(r).step_by(M).zip(p) {
                         *o += h * *x;
                     }
                 }
             }
         }
-        out
     }
 
-    /// `H X` for an `N x M` matrix `X` (rows of `X` at the stored columns only).
-    fn times<const N: usize>(&self, x: &SMatrix<T, N, M>) -> SMatrix<T, M, M> {
+    /// `H X` for `X` given transposed (`X^T`, `M x N`; columns of `X^T` at the stored
+    /// columns only).
+    fn times_transposed<const N: usize>(&self, x_t: &SMatrix<T, M, N>) -> SMatrix<T, M, M> {
         let mut out = SMatrix::<T, M, M>::zeros();
         for (l, &c) in self.columns.iter().enumerate() {
             for j in 0..M {
-                let xc = x[(c, j)];
+                let xc = x_t[(j, c)];
                 for r in 0..M {
                     out[(r, j)] += self.values[(r, l)] * xc;
                 }
@@ -134,10 +154,10 @@ pub struct Gain<T: Scalar, const M: usize, const N: usize> {
     pub weighted_residual: SVector<T, M>,
     /// `S^-1`.
     pub innovation_inverse: SMatrix<T, M, M>,
-    /// `K` (zero when rejected).
-    gain: SMatrix<T, N, M>,
-    /// `C = K S / 2 - P H^T` (zero when rejected).
-    cross: SMatrix<T, N, M>,
+    /// `K^T` (zero when rejected): stored transposed, so a row of `K` is contiguous.
+    gain_t: SMatrix<T, M, N>,
+    /// `C^T`, `C = K S / 2 - P H^T` (zero when rejected), transposed as `K^T`.
+    cross_t: SMatrix<T, M, N>,
 }
 
 impl<T: Scalar, const M: usize, const N: usize> Gain<T, M, N> {
@@ -151,47 +171,85 @@ impl<T: Scalar, const M: usize, const N: usize> Gain<T, M, N> {
         threshold: T,
         holds: &[Hold<T>],
     ) -> Result<Self, Error> {
+        let mut out = Self::empty();
+        out.compute_into(cov, meas, threshold, holds)?;
+        Ok(out)
+    }
+
+    /// A gain that applies nothing (rejected, NIS 0), to be filled by
+    /// [`Gain::compute_into`].
+    pub fn empty() -> Self {
+        Self {
+            nis: T::zero(),
+            threshold: T::zero(),
+            accepted: false,
+            correction: SVector::zeros(),
+            weighted_residual: SVector::zeros(),
+            innovation_inverse: SMatrix::zeros(),
+            gain_t: SMatrix::zeros(),
+            cross_t: SMatrix::zeros(),
+        }
+    }
+
+    /// [`Gain::compute`] into `self`, with no `N x M` temporary: `(P H^T)^T` is formed in
+    /// the storage of `C^T` and turned into `C^T` in place (on the M4F a returned gain and
+    /// its temporaries were several `N x M` copies on the stack). On error `self` is
+    /// unspecified.
+    #[inline(never)]
+    pub fn compute_into<const L: usize>(
+        &mut self,
+        cov: &SMatrix<T, N, N>,
+        meas: &Measurement<T, M, L>,
+        threshold: T,
+        holds: &[Hold<T>],
+    ) -> Result<(), Error> {
         if !meas.is_finite() {
             return Err(Error::NonFinite);
         }
         if meas.jacobian.columns.iter().any(|&c| c >= N) {
             return Err(Error::InvalidConfig);
         }
-        let ph_t = meas.jacobian.cov_times_transpose(cov);
-        let s = meas.jacobian.times(&ph_t) + meas.noise;
+        self.threshold = threshold;
+        self.accepted = false;
+        self.correction.fill(T::zero());
+        self.gain_t.fill(T::zero());
+        // (P H^T)^T, kept in the storage of C^T until C^T is formed.
+        meas.jacobian
+            .cov_times_transpose_into(cov, &mut self.cross_t);
+        let s = meas.jacobian.times_transposed(&self.cross_t) + meas.noise;
         let s = (s + s.transpose()) * T::lit(0.5);
         let chol = Cholesky::new(s).ok_or(Error::SingularInnovation)?;
-        let s_inv = chol.inverse();
-        let weighted_residual = s_inv * meas.residual;
-        let nis = meas.residual.dot(&weighted_residual);
-        if !nis.is_finite() {
+        self.innovation_inverse = chol.inverse();
+        self.weighted_residual = self.innovation_inverse * meas.residual;
+        self.nis = meas.residual.dot(&self.weighted_residual);
+        if !self.nis.is_finite() {
             return Err(Error::DivergentUpdate);
         }
-        let mut out = Self {
-            nis,
-            threshold,
-            accepted: false,
-            correction: SVector::zeros(),
-            weighted_residual,
-            innovation_inverse: s_inv,
-            gain: SMatrix::zeros(),
-            cross: SMatrix::zeros(),
-        };
-        if nis > threshold {
-            return Ok(out);
+        if self.nis > threshold {
+            self.cross_t.fill(T::zero());
+            return Ok(());
         }
-        let mut gain = ph_t * s_inv;
+        // K^T = S^-1 (P H^T)^T (S^-1 symmetric), every hold projected out.
+        self.innovation_inverse
+            .mul_to(&self.cross_t, &mut self.gain_t);
         for hold in holds {
-            hold.project(&mut gain);
+            hold.project(&mut self.gain_t);
         }
-        out.correction = gain * meas.residual;
-        out.cross = gain * s * T::lit(0.5) - ph_t;
-        out.gain = gain;
-        out.accepted = true;
-        if !out.fits(cov) {
+        self.gain_t.tr_mul_to(&meas.residual, &mut self.correction);
+        // C^T = S K^T / 2 - (P H^T)^T, column by column in place.
+        let half = T::lit(0.5);
+        let rows = self.gain_t.as_slice().chunks_exact(M);
+        for (c, k) in self.cross_t.as_mut_slice().chunks_exact_mut(M).zip(rows) {
+            for (r, c) in c.iter_mut().enumerate() {
+                let sk = (0..M).fold(T::zero(), |a, q| a + s[(r, q)] * k[q]);
+                *c = half * sk - *c;
+            }
+        }
+        self.accepted = true;
+        if !self.fits(cov) {
             return Err(Error::DivergentUpdate);
         }
-        Ok(out)
+        Ok(())
     }
 
     /// True when the correction is finite and `P + K C^T + C K^T` cannot overflow: every
@@ -203,23 +261,24 @@ impl<T: Scalar, const M: usize, const N: usize> Gain<T, M, N> {
         let sum = |m: &[T]| m.iter().fold(T::zero(), |a, x| a + x.abs());
         let diag = (0..N).fold(T::zero(), |a, i| a + cov[(i, i)].abs());
         let bound = T::lit(2.0) * diag
-            + T::lit(2.0 * M as f64) * sum(self.gain.as_slice()) * sum(self.cross.as_slice());
+            + T::lit(2.0 * M as f64) * sum(self.gain_t.as_slice()) * sum(self.cross_t.as_slice());
         bound.is_finite() && sum(self.correction.as_slice()).is_finite()
     }
 
     /// `P <- P + K C^T + C K^T` (the Joseph form, see the module doc), upper triangle then
     /// mirrored; nothing when the gate rejected.
+    #[inline(never)]
     pub fn apply_to(&self, cov: &mut SMatrix<T, N, N>) {
         if !self.accepted {
             return;
         }
-        // Rows of K and C as arrays: the inner loop runs over slices, without index checks.
-        let (gain, cross) = (self.gain.as_slice(), self.cross.as_slice());
-        let k: [[T; M]; N] = core::array::from_fn(|i| core::array::from_fn(|r| gain[r * N + i]));
-        let c: [[T; M]; N] = core::array::from_fn(|i| core::array::from_fn(|r| cross[r * N + i]));
+        // Rows of K and C are the contiguous columns of K^T and C^T: no copies.
+        let k = self.gain_t.as_slice();
+        let c = self.cross_t.as_slice();
         for (j, column) in cov.as_mut_slice().chunks_exact_mut(N).enumerate() {
-            let (kj, cj) = (&k[j], &c[j]);
-            for ((p, ki), ci) in column[..=j].iter_mut().zip(&k).zip(&c) {
+            let (kj, cj) = (&k[j * M..(j + 1) * M], &c[j * M..(j + 1) * M]);
+            let rows = k.chunks_exact(M).zip(c.chunks_exact(M));
+            for (p, (ki, ci)) in column[..=j].iter_mut().zip(rows) {
                 let mut d = T::zero();
                 for r in 0..M {
                     d += ki[r] * cj[r] + ci[r] * kj[r];
