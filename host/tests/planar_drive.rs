@@ -122,6 +122,38 @@ fn rotation_consistency(data: &SimDataset, c: &PoseImuCalibration) -> (f64, f64)
     (nees, largest / limit)
 }
 
+/// Seed 16's drive starts straight at a near-constant 10 m/s, which its IMU reads exactly as
+/// rest: the odometry, which moves, must veto the standstill (before that check, zero-velocity
+/// updates pinned the car to the ground and the gate rejected all 1198 relative poses).
+#[test]
+fn a_car_cruising_straight_is_not_at_rest() {
+    let mut c = SimConfig {
+        seed: 16,
+        duration_s: 60.0,
+        ..SimConfig::default()
+    };
+    c.trajectory.motion = sim::MotionKind::Drive(sim::DriveConfig::default());
+    c.pose.time_offset_s = 0.01;
+    let data = simulate(&c);
+    let still = msreg_host::calibrate::init::detect_standstill(&data.imu, 0.3);
+    assert!(still.is_some(), "the IMU alone sees a standstill");
+    let c = calibrate::<f64>(&data, &PoseImuOptions::default());
+    let total = c.report.updates_accepted + c.report.updates_rejected;
+    println!(
+        "seed 16, 60 s: standstill {} s, {} of {total} updates rejected, rotation {:.3} deg",
+        c.report.standstill_s,
+        c.report.updates_rejected,
+        rotation_error_deg(&c, &data.t_imu_pose)
+    );
+    assert!(
+        c.report.standstill_s.abs() < 1e-12,
+        "{}",
+        c.report.standstill_s
+    );
+    assert!(c.report.updates_rejected * 100 < total, "{total}");
+    assert!(inside_three_sigma(&c, &data.t_imu_pose));
+}
+
 #[test]
 fn cli_exits_0_and_warns_that_the_height_is_not_observable() {
     let dir = tempfile::tempdir().expect("tempdir");

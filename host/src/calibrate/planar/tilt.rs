@@ -124,7 +124,7 @@ mod tests {
     /// specific force is gravity seen through the rocking and the mounting.
     fn drive(truth: (f64, f64, f64)) -> Vec<ImuRecord> {
         let r_i_s = UnitQuaternion::from_euler_angles(truth.0, truth.1, truth.2);
-        (0..3000)
+        (0..=3000)
             .map(|k| {
                 let t = k as f64 * 0.02;
                 let rock = UnitQuaternion::from_euler_angles(
@@ -167,8 +167,14 @@ mod tests {
                 tilt.spread_rad
             );
         }
-        // The rotation it reports carries that tilt with zero yaw.
-        assert!((tilt.rotation() * Vector3::z() - up).norm() < 1e-12);
+        // The rotation of a roll and pitch puts the z axis where they were read from.
+        let exact = GravityTilt {
+            roll_rad: roll,
+            pitch_rad: pitch,
+            ..tilt
+        };
+        assert!((exact.rotation() * Vector3::z() - up).norm() < 1e-12);
+        assert!(exact.rotation().euler_angles().2.abs() < 1e-12, "zero yaw");
         assert!(
             gravity_tilt(&drive(truth)[..1000], 0.05).is_none(),
             "20 s: 2 windows"
