@@ -26,6 +26,8 @@ use super::gyro_bias::{self, GyroBiasEstimate};
 use super::init::{self, RotationIncrement, RotationInit};
 use crate::dataset::{ImuRecord, PoseRecord};
 
+pub mod tilt;
+
 /// Largest second / first eigenvalue of the IMU rotation scatter treated as planar motion:
 /// the rms rate about every other axis is under a third (`sqrt 0.1`) of the rate about the
 /// main one. Hand-held calibration motion excites the second axis well above it; a car's
@@ -35,6 +37,10 @@ pub const PLANAR_AXIS_RATIO: f64 = 0.1;
 /// A rotation increment of the IMU and of the sensor over the same interval, as rotation
 /// vectors `(r_I, r_S)`.
 pub type RotationPair = (Vector3<f64>, Vector3<f64>);
+
+/// Prior 1-sigma of the rotation about the axis when nothing tells it (no yaw fit, or an
+/// odometry whose rotation is not the body's), rad: a quarter turn.
+pub const UNKNOWN_YAW_SIGMA_RAD: f64 = 0.5 * PI;
 
 /// Fewest rotation increments to call the motion planar.
 const MIN_PAIRS: usize = 20;
@@ -270,7 +276,7 @@ impl PlanarStart {
     /// sigma of the yaw fit and at least [`MIN_YAW_PRIOR_SIGMA_DEG`]; a quarter turn when
     /// the yaw is unknown.
     pub fn rotation_sigma(&self, default: f64) -> f64 {
-        self.yaw.as_ref().map_or(0.5 * PI, |y| {
+        self.yaw.as_ref().map_or(UNKNOWN_YAW_SIGMA_RAD, |y| {
             default
                 .max(3.0 * y.sigma_rad)
                 .max(MIN_YAW_PRIOR_SIGMA_DEG.to_radians())

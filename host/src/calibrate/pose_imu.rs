@@ -19,6 +19,8 @@ use super::driver::{
 };
 use super::init::{self};
 use super::planar::{self};
+
+mod trust;
 use crate::dataset::{ImuNoiseYaml, ImuRecord, PoseRecord, PoseSensorYaml};
 
 /// What the pipeline reads.
@@ -54,14 +56,15 @@ pub fn calibrate<T: Scalar>(
         });
     }
     let started = Instant::now();
-    let standstill = init::detect_standstill(imu, options.min_standstill_s);
+    let standstill = init::detect_standstill(imu, options.min_standstill_s)
+        .filter(|s| odometry_still(s, poses, input.pose_noise.translation_noise_m));
     let period_ns = nominal_period_ns(poses);
     let max_interval_ns = period_ns.saturating_mul(3) / 2;
     let increments = init::pose_increments(poses, max_interval_ns);
     let (rotation, gyro_bias) = hand_eye_and_gyro_bias(imu, &increments, standstill.as_ref());
     let bias = starting_gyro_bias(standstill.as_ref(), gyro_bias.as_ref());
     let pairs = init::rotation_pairs(imu, increments.iter().copied(), &bias);
-    let scale_problem = rotation_scale_problem(&pairs);
+    let scale_problem = trust::rotation_scale_problem(&pairs);
     let planar = planar::planar_start(
         (imu, poses),
         (&increments, &pairs),
@@ -119,43 +122,33 @@ pub fn calibrate<T: Scalar>(
         calibration.report.reasons.insert(0, problem);
         calibration.report.converged = false;
     }
+    calibration.report.planar = planar.as_ref().map_or_else(String::new, |p| p.describe());
     if let Some(problem) = scale_problem {
-        distrust_rotation(&mut calibration.report.observability);
-        calibration.report.reasons.insert(0, problem);
-        calibration.report.converged = false;
+        trust::refuse_rotation(&mut calibration, &problem, planar.is_some(), (imu, poses));
     }
     calibration.report.moving_start = describe_moving_start(&moving_start);
     calibration.report.gyro_bias_init = gyro_bias_init;
-    calibration.report.planar = planar.as_ref().map_or_else(String::new, |p| p.describe());
     Ok(calibration)
 }
 
-/// Marks the rotation rows `not trusted`: when the pose sensor and the gyro disagree on
-/// how much the body turned, the filter's rotation sigmas measure agreement with a wrong
-/// input, not accuracy, and must not read as `observed`.
-fn distrust_rotation(rows: &mut [super::observability::DofObservability]) {
-    for row in rows.iter_mut().filter(|r| r.dof.starts_with("rotation")) {
-        row.status = "not trusted";
-        row.reason = "the pose sensor's rotation disagrees with the gyro's".into();
-    }
-}
+/// Odometry noise sigmas (accumulated over the standstill's increments) the pose sensor may
+/// move while the IMU is said to be at rest.
+const STILL_SIGMAS: f64 = 4.0;
 
-/// Largest factor by which the pose sensor's and the gyro's total rotation may differ: a few
-/// percent is noise and slip; a gyro in deg/s reads 57x, skid-steer wheel odometry
-/// several times the true turn.
-const MAX_ROTATION_SCALE: f64 = 1.25;
-
-/// The reason to distrust the result when the pose sensor and the gyro disagree on how much
-/// the body turned (see [`init::rotation_scale`]).
-fn rotation_scale_problem(pairs: &[planar::RotationPair]) -> Option<String> {
-    let scale = init::rotation_scale(pairs)?;
-    (!(1.0 / MAX_ROTATION_SCALE..=MAX_ROTATION_SCALE).contains(&scale)).then(|| {
-        format!(
-            "pose0 turns {scale:.2}x as much as the gyro over the same intervals: the odometry's \
-             rotation is not the body's (wheel slip of a skid-steer base, or a unit error in \
-             pose0 or imu0)"
-        )
-    })
+/// True when the pose sensor agrees with the IMU's standstill `s`: an IMU moving at
+/// constant velocity without turning reads exactly as at rest (a car cruising straight
+/// when the recording starts), so the odometry must not move over it by more than its
+/// increment noise `sigma_t` allows. Without poses inside the standstill the IMU decides.
+fn odometry_still(s: &init::Standstill, poses: &[PoseRecord], sigma_t: f64) -> bool {
+    let Some(first) = poses.first() else {
+        return true;
+    };
+    let within = poses.iter().take_while(|p| p.stamp_ns <= s.until_ns);
+    let (count, moved) = within.fold((0usize, 0f64), |(n, m), p| {
+        (n + 1, m.max((p.position - first.position).norm()))
+    });
+    let increments = count.saturating_sub(1).max(1) as f64;
+    moved <= STILL_SIGMAS * sigma_t * increments.sqrt()
 }
 
 /// The pose-IMU pipeline's measurement feed: fuses every pose whose IMU time has come.

@@ -1,0 +1,169 @@
+//! When the pose sensor's rotation is not the body's (it turns more or less than the gyro):
+//! the reason, and what of the result can still be trusted.
+
+use msreg_estimator::InitialState;
+use nalgebra::{Isometry3, Matrix6, Vector3, Vector6};
+
+use super::super::driver::report::PoseImuCalibration;
+use super::super::init;
+use super::super::observability::DofObservability;
+use super::super::planar::{self, tilt};
+use crate::dataset::{ImuRecord, PoseRecord};
+
+/// Refuses the result (not converged) because the pose sensor's rotation disagrees with the
+/// gyro's (`problem`, from [`rotation_scale_problem`]). Under `planar` motion against level
+/// 2-D odometry the tilt of the mounting is still measured ([`tilt_only`]); otherwise every
+/// rotation row is marked `not trusted`.
+pub(super) fn refuse_rotation(
+    calibration: &mut PoseImuCalibration,
+    problem: &str,
+    planar: bool,
+    (imu, poses): (&[ImuRecord], &[PoseRecord]),
+) {
+    let level = planar && tilt::is_level(poses);
+    match level
+        .then(|| tilt::gravity_tilt(imu, accel_bias_prior_sigma()))
+        .flatten()
+    {
+        Some(t) => tilt_only(calibration, &t, problem),
+        None => {
+            distrust_rotation(&mut calibration.report.observability);
+            calibration.report.reasons.insert(0, problem.to_string());
+        }
+    }
+    calibration.report.converged = false;
+}
+
+/// The accelerometer bias prior of the filter (the estimator's default), m/s^2.
+fn accel_bias_prior_sigma() -> f64 {
+    InitialState::<f64, 1>::at_rest(Vector3::new(0.0, 0.0, 9.81))
+        .map_or(0.05, |s| s.sigma_accel_bias)
+}
+
+/// Why a DoF the pose sensor's rotation shaped is not trusted.
+const TILT_ONLY_REASON: &str = "the pose sensor's rotation disagrees with the gyro's";
+
+/// The honest result when the pose sensor's rotation is not the body's but the motion is
+/// planar against level 2-D odometry: roll and pitch of `R_I_S` from gravity
+/// ([`tilt::gravity_tilt`]), everything the filter took from the odometry's rotation (the
+/// yaw about the axis, the lever arm across it through `w x p`, the time offset) back at
+/// its prior, marked `not trusted`, and the reasons naming each.
+fn tilt_only(calibration: &mut PoseImuCalibration, tilt: &tilt::GravityTilt, problem: &str) {
+    let report = &mut calibration.report;
+    let prior = |dof: &str| {
+        report
+            .observability
+            .iter()
+            .find(|r| r.dof == dof)
+            .map_or(0.0, |r| r.prior_sigma)
+    };
+    let (sigma_t, sigma_td_s) = (prior("translation x"), prior("time offset") * 1e-3);
+    let [sr, sp] = tilt.sigma_rad;
+    let yaw = planar::UNKNOWN_YAW_SIGMA_RAD;
+    calibration.t_imu_sensor = Isometry3::from_parts(Default::default(), tilt.rotation());
+    calibration.covariance = Matrix6::from_diagonal(&Vector6::new(
+        sr * sr,
+        sp * sp,
+        yaw * yaw,
+        sigma_t * sigma_t,
+        sigma_t * sigma_t,
+        sigma_t * sigma_t,
+    ));
+    calibration.time_offset_s = 0.0;
+    calibration.time_offset_sigma_s = sigma_td_s;
+    let from_gravity = format!(
+        "from gravity against the level 2-D odometry frame (spread over {} windows of {} s: \
+         roll {:.2} deg, pitch {:.2} deg)",
+        tilt.windows,
+        tilt::TILT_WINDOW_S,
+        tilt.spread_rad[0].to_degrees(),
+        tilt.spread_rad[1].to_degrees()
+    );
+    tilt_only_rows(&mut report.observability, tilt.sigma_rad, &from_gravity);
+    report
+        .reasons
+        .retain(|r| !r.starts_with("rotation about") && !r.starts_with("translation along"));
+    report.reasons.insert(
+        0,
+        format!(
+            "rotation z (the yaw of the mounting about the planar axis), the lever arm across \
+             the axis and the time offset are not trusted: {problem}; only roll {:.2} deg and \
+             pitch {:.2} deg (sigma {:.2}, {:.2} deg) are reported, {from_gravity}",
+            tilt.roll_rad.to_degrees(),
+            tilt.pitch_rad.to_degrees(),
+            sr.to_degrees(),
+            sp.to_degrees()
+        ),
+    );
+    report.planar = format!(
+        "{}; roll {:.2} deg, pitch {:.2} deg of the mounting {from_gravity}",
+        report.planar,
+        tilt.roll_rad.to_degrees(),
+        tilt.pitch_rad.to_degrees()
+    );
+}
+
+/// The observability rows of [`tilt_only`]: roll and pitch (`sigma_rad`) observed
+/// `from_gravity`, the yaw at the prior of an unknown yaw, the lever arm across the axis and
+/// the time offset at their priors, all three `not trusted`.
+fn tilt_only_rows(rows: &mut [DofObservability], [sr, sp]: [f64; 2], from_gravity: &str) {
+    let yaw = planar::UNKNOWN_YAW_SIGMA_RAD.to_degrees();
+    for row in rows.iter_mut() {
+        let (sigma, prior, status, reason) = match row.dof.as_str() {
+            "rotation x" => (
+                sr.to_degrees(),
+                row.prior_sigma,
+                "observed",
+                from_gravity.into(),
+            ),
+            "rotation y" => (
+                sp.to_degrees(),
+                row.prior_sigma,
+                "observed",
+                from_gravity.into(),
+            ),
+            "rotation z" => (
+                yaw,
+                yaw,
+                "not trusted",
+                format!("{TILT_ONLY_REASON}; held at the prior of an unknown yaw"),
+            ),
+            "translation x" | "translation y" | "time offset" => (
+                row.prior_sigma,
+                row.prior_sigma,
+                "not trusted",
+                format!("{TILT_ONLY_REASON}; held at its prior"),
+            ),
+            _ => continue,
+        };
+        (row.sigma, row.prior_sigma, row.status, row.reason) = (sigma, prior, status, reason);
+    }
+}
+
+/// Marks the rotation rows `not trusted`: when the pose sensor and the gyro disagree on
+/// how much the body turned, the filter's rotation sigmas measure agreement with a wrong
+/// input, not accuracy, and must not read as `observed`.
+fn distrust_rotation(rows: &mut [DofObservability]) {
+    for row in rows.iter_mut().filter(|r| r.dof.starts_with("rotation")) {
+        row.status = "not trusted";
+        row.reason = TILT_ONLY_REASON.into();
+    }
+}
+
+/// Largest factor by which the pose sensor's and the gyro's total rotation may differ: a few
+/// percent is noise and slip; a gyro in deg/s reads 57x, skid-steer wheel odometry
+/// several times the true turn.
+const MAX_ROTATION_SCALE: f64 = 1.25;
+
+/// The reason to distrust the result when the pose sensor and the gyro disagree on how much
+/// the body turned (see [`init::rotation_scale`]).
+pub(super) fn rotation_scale_problem(pairs: &[planar::RotationPair]) -> Option<String> {
+    let scale = init::rotation_scale(pairs)?;
+    (!(1.0 / MAX_ROTATION_SCALE..=MAX_ROTATION_SCALE).contains(&scale)).then(|| {
+        format!(
+            "pose0 turns {scale:.2}x as much as the gyro over the same intervals: the odometry's \
+             rotation is not the body's (wheel slip of a skid-steer base, or a unit error in \
+             pose0 or imu0)"
+        )
+    })
+}
