@@ -19,9 +19,9 @@ use super::driver::{
 };
 use super::init::{self};
 use super::planar::{self};
+use crate::dataset::{ImuNoiseYaml, ImuRecord, PoseRecord, PoseSensorYaml};
 
 mod trust;
-use crate::dataset::{ImuNoiseYaml, ImuRecord, PoseRecord, PoseSensorYaml};
 
 /// What the pipeline reads.
 #[derive(Debug, Clone, Copy)]
