@@ -299,8 +299,11 @@ fn detect_for_calibration(
     })?;
     detecting.finish_and_clear();
     eprintln!(
-        "msreg: board found in {} of {} images ({:.1} s)",
-        detection.detected, detection.images, detection.time_s
+        "msreg: {} found in {} of {} images ({:.1} s)",
+        describe(&camera_data.target),
+        detection.detected,
+        detection.images,
+        detection.time_s
     );
     if frames.len() < MIN_IMAGES {
         let reasons: Vec<String> = detection
@@ -309,17 +312,25 @@ fn detect_for_calibration(
             .map(|(why, n)| format!("{n} x {why}"))
             .collect();
         return Err(anyhow!(
-            "{}: the {}x{} checkerboard of target.yaml is found in {} of {} images, at least \
-             {MIN_IMAGES} are needed (rejected: {})",
+            "{}: the {} of target.yaml is found in {} of {} images, at least {MIN_IMAGES} are \
+             needed (rejected: {})",
             dataset.display(),
-            camera_data.target.rows,
-            camera_data.target.cols,
+            describe(&camera_data.target),
             frames.len(),
             detection.images,
             reasons.join(", ")
         ));
     }
     Ok((frames, detection))
+}
+
+/// The target in a message: "6x7 checkerboard", "6x6 aprilgrid".
+fn describe(target: &Target) -> String {
+    match target {
+        Target::Checkerboard(t) => format!("{}x{} checkerboard", t.rows, t.cols),
+        Target::AprilGrid(t) => format!("{}x{} aprilgrid", t.tag_cols, t.tag_rows),
+        Target::Board { .. } => "plain board".to_string(),
+    }
 }
 
 /// The convergence plot of `T_imu_cam` (the filter's state), with the truth when the
