@@ -149,8 +149,8 @@ enum Task {
     LidarImu(cli::lidar_imu::CalibrateLidarImu),
     /// LiDAR-camera calibration with a plain board (PBPC-Cal or PPC-Cal), judged by MLRE.
     LidarCamera(cli::lidar_camera::CalibrateLidarCamera),
-    /// Camera-IMU calibration from checkerboard images: corner reprojection (RepErrCal) or
-    /// PnP relative poses (MoCal) in the EKF.
+    /// Camera-IMU calibration from checkerboard or AprilGrid images: corner reprojection
+    /// (RepErrCal) or PnP relative poses (MoCal) in the EKF.
     CameraImu(cli::camera_imu::CalibrateCameraImu),
     /// Static infrastructure cameras registered from a robot's VO (COLMAP model), marker
     /// detections and blobs (chapter 6).

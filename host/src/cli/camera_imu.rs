@@ -1,7 +1,8 @@
-//! `msreg calibrate camera-imu <dataset>`: detects the checkerboard in every image of
-//! `cam0/`, runs RepErrCal (or MoCal) on the corners and the IMU, and writes the result
-//! YAML (`cam0`: Kalibr's `T_cam_imu`, `timeshift_cam_imu`), the JSON report, the
-//! convergence plot and the reprojection overlay of one image (the dissertation's Fig. 4.4).
+//! `msreg calibrate camera-imu <dataset>`: detects the checkerboard or Kalibr AprilGrid in
+//! every image of `cam0/` (or reads `cam0/corners.csv`), runs RepErrCal (or MoCal) on the
+//! corners and the IMU, and writes the result YAML (`cam0`: Kalibr's `T_cam_imu`,
+//! `timeshift_cam_imu`), the JSON report, the convergence plot and the reprojection overlay
+//! of one image (the dissertation's Fig. 4.4).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
