@@ -182,8 +182,9 @@ pub fn detect_frames(
         .collect()
 }
 
-/// The corners of `target` in one image.
-fn detect_corners(
+/// The corners of `target` in one image: a whole checkerboard, or an AprilGrid from
+/// [`AprilGridParams::min_tags`] tags up (its default parameters).
+pub fn detect_corners(
     image: &GrayImage,
     target: &Target,
     params: &DetectorParams,
