@@ -46,7 +46,7 @@ fn main() -> Result<()> {
     for t in read_corners_csv(&truth_path)? {
         truth.insert((t.stamp_ns, t.corner_id), (t.pixel, t.in_image));
     }
-    let n_ids = dataset.target.rows * dataset.target.cols;
+    let n_ids = dataset.target.corner_count();
     let full = |stamp: u64| (0..n_ids).all(|id| truth.get(&(stamp, id)).is_some_and(|t| t.1));
     let (mut sum, mut n, mut worst, mut false_detections) = (0.0, 0usize, 0.0f64, 0);
     let in_view = results.iter().filter(|r| full(r.stamp_ns)).count();

@@ -90,6 +90,28 @@ impl Board {
     }
 }
 
+impl Target {
+    /// Corner `id` of a corner target (checkerboard or AprilGrid) in the target frame;
+    /// `None` for an id outside it and for a plain board, which has no corners.
+    pub fn corner(&self, id: usize) -> Option<nalgebra::Vector3<f64>> {
+        match self {
+            Self::Checkerboard(t) => (id < t.rows * t.cols).then(|| t.corner_in_target(id)),
+            Self::AprilGrid(t) => t.corner(id),
+            Self::Board { .. } => None,
+        }
+    }
+
+    /// Number of corner ids (`0..n`): inner corners of a checkerboard, 4 per AprilGrid tag,
+    /// none on a plain board.
+    pub fn corner_count(&self) -> usize {
+        match self {
+            Self::Checkerboard(t) => t.rows * t.cols,
+            Self::AprilGrid(t) => 4 * t.tag_cols * t.tag_rows,
+            Self::Board { .. } => 0,
+        }
+    }
+}
+
 /// A Kalibr AprilGrid: `tag_cols x tag_rows` tags of side `tag_size_m`, `tag_spacing` (a
 /// ratio of the tag size) apart. Corner id `4 i + k` is corner `k` (0..3 counter-clockwise
 /// from the tag's bottom-left: (0, 0), (s, 0), (s, s), (0, s)) of tag `i`, which sits at
@@ -541,5 +563,16 @@ pub fn board_yaml_string(board: &Board) -> String {
     format!(
         "target_type: 'board'\nwidth_m: {}\nheight_m: {}\n",
         board.width_m, board.height_m
+    )
+}
+
+/// Kalibr's `target.yaml` text of an AprilGrid.
+pub fn aprilgrid_yaml_string(target: &AprilGridTarget) -> String {
+    format!(
+        "target_type: 'aprilgrid'\ntagCols: {}\ntagRows: {}\ntagSize: {}\ntagSpacing: {}\n",
+        target.tag_cols,
+        target.tag_rows,
+        yaml_float(target.tag_size_m),
+        yaml_float(target.tag_spacing)
     )
 }

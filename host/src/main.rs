@@ -78,7 +78,10 @@ enum Command {
 #[derive(Subcommand)]
 enum DetectTarget {
     /// Inner corners of a Kalibr checkerboard, as CSV `image,corner_id,u,v`.
-    Checkerboard(cli::detect::DetectCheckerboardArgs),
+    Checkerboard(cli::detect::DetectCornersArgs),
+    /// Tag corners of a Kalibr AprilGrid (Kalibr ids `4 tag + k`), as CSV
+    /// `image,corner_id,u,v`.
+    Aprilgrid(cli::detect::DetectCornersArgs),
     /// ArUco markers, as CSV `image,id,u0,v0,...,u3,v3` (corners in OpenCV order).
     Aruco(cli::aruco::DetectArucoArgs),
     /// Bright blobs (e.g. infrastructure cameras in the fisheye), as CSV `image,u,v,area,peak`.
@@ -149,8 +152,8 @@ enum Task {
     LidarImu(cli::lidar_imu::CalibrateLidarImu),
     /// LiDAR-camera calibration with a plain board (PBPC-Cal or PPC-Cal), judged by MLRE.
     LidarCamera(cli::lidar_camera::CalibrateLidarCamera),
-    /// Camera-IMU calibration from checkerboard images: corner reprojection (RepErrCal) or
-    /// PnP relative poses (MoCal) in the EKF.
+    /// Camera-IMU calibration from checkerboard or AprilGrid images: corner reprojection
+    /// (RepErrCal) or PnP relative poses (MoCal) in the EKF.
     CameraImu(cli::camera_imu::CalibrateCameraImu),
     /// Static infrastructure cameras registered from a robot's VO (COLMAP model), marker
     /// detections and blobs (chapter 6).
@@ -243,7 +246,7 @@ fn run(command: Command) -> Result<(), Failure> {
             .map_err(Failure::BadInput),
         Command::Link { command } => Ok(cli::link::run(command)?),
         Command::Detect {
-            target: DetectTarget::Checkerboard(args),
+            target: DetectTarget::Checkerboard(args) | DetectTarget::Aprilgrid(args),
         } => cli::detect::run(&args)
             .map(|_| ())
             .map_err(Failure::BadInput),

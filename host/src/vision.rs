@@ -4,6 +4,7 @@
 //! [`msreg_estimator::camera::Camera`] for tests and the image simulator. Method and
 //! measured accuracy: docs/checkerboard.md.
 
+pub mod aprilgrid;
 pub mod aruco;
 pub mod blobs;
 pub mod checkerboard;

@@ -164,7 +164,7 @@ fn the_written_dataset_reads_back_and_detects_like_the_truth() {
     assert!((truth.transform.inverse() * sim.t_cam_imu).rotation.angle() < 1e-12);
     let cam = CameraDataset::open(dir.path()).unwrap();
     assert_eq!(cam.camera, sim.config.camera);
-    assert_eq!((cam.target.rows, cam.target.cols), (6, 7));
+    assert_eq!(cam.target.corner_count(), 6 * 7);
     assert_eq!(cam.frames.len(), sim.frame_stamps.len());
     let poses = read_target_poses_csv(dir.path().join("groundtruth/target_poses.csv")).unwrap();
     assert_eq!(poses.len(), cam.frames.len());
@@ -231,7 +231,7 @@ fn bad_camera_inputs_are_errors_naming_the_file() {
     .unwrap();
     let err = CameraDataset::open(dir.path()).unwrap_err();
     assert!(
-        matches!(err, CameraInputError::NotCheckerboard { .. }),
+        matches!(err, CameraInputError::NotCornerTarget { .. }),
         "{err}"
     );
 

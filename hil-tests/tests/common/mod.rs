@@ -532,6 +532,6 @@ pub fn host_reperrcal(dir: &Path) -> HostCameraRun {
     HostCameraRun {
         calibration: host,
         imu_samples: input.imu.len(),
-        board_corners: camera.target.rows * camera.target.cols,
+        board_corners: camera.target.corner_count(),
     }
 }

@@ -1,7 +1,8 @@
-//! `msreg calibrate camera-imu <dataset>`: detects the checkerboard in every image of
-//! `cam0/`, runs RepErrCal (or MoCal) on the corners and the IMU, and writes the result
-//! YAML (`cam0`: Kalibr's `T_cam_imu`, `timeshift_cam_imu`), the JSON report, the
-//! convergence plot and the reprojection overlay of one image (the dissertation's Fig. 4.4).
+//! `msreg calibrate camera-imu <dataset>`: detects the checkerboard or Kalibr AprilGrid in
+//! every image of `cam0/` (or reads `cam0/corners.csv`), runs RepErrCal (or MoCal) on the
+//! corners and the IMU, and writes the result YAML (`cam0`: Kalibr's `T_cam_imu`,
+//! `timeshift_cam_imu`), the JSON report, the convergence plot and the reprojection overlay
+//! of one image (the dissertation's Fig. 4.4).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -299,8 +300,11 @@ fn detect_for_calibration(
     })?;
     detecting.finish_and_clear();
     eprintln!(
-        "msreg: board found in {} of {} images ({:.1} s)",
-        detection.detected, detection.images, detection.time_s
+        "msreg: {} found in {} of {} images ({:.1} s)",
+        describe(&camera_data.target),
+        detection.detected,
+        detection.images,
+        detection.time_s
     );
     if frames.len() < MIN_IMAGES {
         let reasons: Vec<String> = detection
@@ -309,17 +313,25 @@ fn detect_for_calibration(
             .map(|(why, n)| format!("{n} x {why}"))
             .collect();
         return Err(anyhow!(
-            "{}: the {}x{} checkerboard of target.yaml is found in {} of {} images, at least \
-             {MIN_IMAGES} are needed (rejected: {})",
+            "{}: the {} of target.yaml is found in {} of {} images, at least {MIN_IMAGES} are \
+             needed (rejected: {})",
             dataset.display(),
-            camera_data.target.rows,
-            camera_data.target.cols,
+            describe(&camera_data.target),
             frames.len(),
             detection.images,
             reasons.join(", ")
         ));
     }
     Ok((frames, detection))
+}
+
+/// The target in a message: "6x7 checkerboard", "6x6 aprilgrid".
+fn describe(target: &Target) -> String {
+    match target {
+        Target::Checkerboard(t) => format!("{}x{} checkerboard", t.rows, t.cols),
+        Target::AprilGrid(t) => format!("{}x{} aprilgrid", t.tag_cols, t.tag_rows),
+        Target::Board { .. } => "plain board".to_string(),
+    }
 }
 
 /// The convergence plot of `T_imu_cam` (the filter's state), with the truth when the

@@ -1,6 +1,7 @@
-//! `msreg detect checkerboard`: Kalibr-target corners of images as CSV
-//! (`image,corner_id,u,v`), one line per corner; images without a full board are reported
-//! on stderr with the reason and produce no lines.
+//! `msreg detect checkerboard` / `msreg detect aprilgrid`: Kalibr-target corners of images
+//! as CSV (`image,corner_id,u,v`, Kalibr's corner ids), one line per corner; images without
+//! a full checkerboard (or with fewer than 4 AprilGrid tags) are reported on stderr with the
+//! reason and produce no lines. The target is the one `target.yaml` names.
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -8,15 +9,16 @@ use std::path::PathBuf;
 use anyhow::{bail, ensure, Context};
 use clap::Args;
 use msreg_host::camera_yaml::{read_camera_yaml, read_target_yaml, Target};
-use msreg_host::vision::{detect_checkerboard, DetectorParams, GrayImage};
+use msreg_host::vision::frames::detect_corners;
+use msreg_host::vision::{DetectorParams, GrayImage};
 
-/// Arguments of `msreg detect checkerboard`.
+/// Arguments of `msreg detect checkerboard` and `msreg detect aprilgrid`.
 #[derive(Args)]
-pub struct DetectCheckerboardArgs {
+pub struct DetectCornersArgs {
     /// Images (PNG or JPEG, grey or colour).
     #[arg(required = true)]
     images: Vec<PathBuf>,
-    /// Kalibr target.yaml (target_type checkerboard).
+    /// Kalibr target.yaml (target_type checkerboard or aprilgrid).
     #[arg(long)]
     target: PathBuf,
     /// Kalibr camera.yaml: checks the image size (the detector works on the raw image).
@@ -31,14 +33,15 @@ pub struct DetectCheckerboardArgs {
     opencv_window: bool,
 }
 
-/// Runs the detector; returns how many images had a full board. Errors are bad input.
-pub fn run(args: &DetectCheckerboardArgs) -> anyhow::Result<usize> {
-    let Target::Checkerboard(target) = read_target_yaml(&args.target)? else {
+/// Runs the detector; returns how many images had the target. Errors are bad input.
+pub fn run(args: &DetectCornersArgs) -> anyhow::Result<usize> {
+    let target = read_target_yaml(&args.target)?;
+    if let Target::Board(_) = target {
         bail!(
-            "{}: target_type must be checkerboard",
+            "{}: target_type must be checkerboard or aprilgrid",
             args.target.display()
         );
-    };
+    }
     let camera = args.camera.as_deref().map(read_camera_yaml).transpose()?;
     let params = if args.opencv_window {
         DetectorParams::opencv_compatible()
@@ -61,14 +64,14 @@ pub fn run(args: &DetectCheckerboardArgs) -> anyhow::Result<usize> {
                 camera.resolution.1
             );
         }
-        match detect_checkerboard(&image, target.rows, target.cols, &params) {
-            Ok(detection) => {
+        match detect_corners(&image, &target, &params) {
+            Ok(found) => {
                 detected += 1;
-                for (id, p) in detection.corners.iter().enumerate() {
+                for (id, p) in found.ids.iter().zip(&found.pixels) {
                     writeln!(csv, "{},{id},{:.4},{:.4}", path.display(), p.x, p.y)?;
                 }
             }
-            Err(reason) => eprintln!("{}: no full board: {reason}", path.display()),
+            Err(reason) => eprintln!("{}: no target: {reason}", path.display()),
         }
     }
     match &args.output {

@@ -44,6 +44,10 @@ pub struct SimulateCameraImu {
     /// Camera model.
     #[arg(long, value_enum, default_value_t = ModelArg::PinholeRadtan)]
     pub model: ModelArg,
+    /// Print a Kalibr AprilGrid (6 x 5 tag36h11 tags of 5 cm, spacing 0.3) instead of the
+    /// checkerboard: images, target.yaml and ground-truth corners in Kalibr's ids.
+    #[arg(long)]
+    pub aprilgrid: bool,
 }
 
 /// Simulates and writes the dataset, with a progress bar on stderr.
@@ -58,6 +62,7 @@ pub fn simulate(args: &SimulateCameraImu) -> anyhow::Result<()> {
             ModelArg::PinholeEquidistant => CameraModelChoice::PinholeEquidistant,
         }
         .camera(),
+        aprilgrid: args.aprilgrid.then(CameraImuSimConfig::default_aprilgrid),
         ..CameraImuSimConfig::default()
     };
     let realistic = CameraImuSimConfig::default().with_blur_and_noise();

@@ -7,7 +7,9 @@
 //!   board stays in view in nearly every frame. The IMU follows as `T_G_I = T_G_C T_cam_imu`,
 //!   synthesised exactly as in the other scenarios (VN-300-class, 400 Hz).
 //! - Board: `rows x cols` inner corners (default 6 x 7 at 6 cm, Kalibr ids), 0.75 m in front
-//!   of the viewpoint, facing it within +-0.2 rad, turned in its plane within +-0.2 rad.
+//!   of the viewpoint, facing it within +-0.2 rad, turned in its plane within +-0.2 rad; or,
+//!   with [`CameraImuSimConfig::aprilgrid`], a Kalibr AprilGrid (tag36h11, corner squares,
+//!   Kalibr corner ids) placed the same way.
 //! - Camera: pinhole + radtan (EuRoC cam0 intrinsics, 752 x 480) or pinhole + equidistant;
 //!   frames at `rate_hz`, image stamped `t_C` shows the scene at IMU time `t_C + t_d`
 //!   (mid-exposure). Rendering ([`crate::vision::render`]): anti-aliased edges (8 x 8
@@ -37,7 +39,10 @@ use super::imu::{imu_noise_yaml, synthesize_imu};
 use super::trajectory::{LookAtConfig, Mount, Trajectory, TrajectoryConfig};
 use super::write::{create_dirs, write_png, write_text};
 use super::{frame_rng, rng_for, Stream};
-use crate::camera_yaml::{camera_yaml_string, checkerboard_yaml_string, CheckerboardTarget};
+use crate::camera_yaml::{
+    aprilgrid_yaml_string, camera_yaml_string, checkerboard_yaml_string, AprilGridTarget,
+    CheckerboardTarget, Target,
+};
 use crate::dataset::{
     write_camera_csv, write_corners_csv, write_groundtruth_csv, write_imu_csv, write_pose_csv,
     CalibrationResult, CameraFrame, CornerTruth, DatasetError, DatasetYaml, ExtrinsicEstimate,
@@ -45,6 +50,7 @@ use crate::dataset::{
     CAMERA_YAML, DATASET_YAML, GROUNDTRUTH_CORNERS_CSV, GROUNDTRUTH_EXTRINSICS_YAML,
     GROUNDTRUTH_TARGET_POSES_CSV, GROUNDTRUTH_TRAJECTORY_CSV, IMU_CSV, IMU_YAML, TARGET_YAML,
 };
+use crate::vision::aprilgrid::AprilGridPattern;
 use crate::vision::render::{
     add_noise, apply_lighting_gradient, render_exposure, BoardPattern, PixelRays, RenderSettings,
 };
@@ -123,6 +129,9 @@ pub struct CameraImuSimConfig {
     pub time_offset_s: f64,
     /// The board (Kalibr checkerboard plus white margin).
     pub board: BoardPattern,
+    /// When set, the printed target is this Kalibr AprilGrid instead of `board` (rendered,
+    /// written to `target.yaml`, its corners in the ground truth).
+    pub aprilgrid: Option<AprilGridPattern>,
     /// Exposure time for motion blur, s; `None`: sharp images.
     pub exposure_s: Option<f64>,
     /// Gaussian image noise, grey levels (0: none).
@@ -164,6 +173,7 @@ impl Default for CameraImuSimConfig {
                 col_spacing_m: 0.06,
                 margin_m: 0.03,
             },
+            aprilgrid: None,
             exposure_s: None,
             noise_sigma: 0.0,
             lighting_gradient: [0.0, 0.0],
@@ -174,6 +184,20 @@ impl Default for CameraImuSimConfig {
 }
 
 impl CameraImuSimConfig {
+    /// The AprilGrid of `msreg simulate camera-imu --aprilgrid`: 6 x 5 tag36h11 tags of 5 cm,
+    /// spacing 0.3 (0.375 x 0.31 m, about the default checkerboard's extent), 3 cm margin.
+    pub fn default_aprilgrid() -> AprilGridPattern {
+        AprilGridPattern {
+            target: AprilGridTarget {
+                tag_cols: 6,
+                tag_rows: 5,
+                tag_size_m: 0.05,
+                tag_spacing: 0.3,
+            },
+            margin_m: 0.03,
+        }
+    }
+
     /// Motion blur (4 ms exposure), noise (sigma 2.5 grey levels) and a lighting gradient:
     /// the realistic-image variant.
     pub fn with_blur_and_noise(mut self) -> Self {
@@ -228,6 +252,20 @@ impl CameraImuSimConfig {
             || !(b.row_spacing_m > 0.0 && b.col_spacing_m > 0.0 && b.margin_m >= 0.0)
         {
             return bad("board", "at least 3 x 3 inner corners, positive spacings");
+        }
+        if let Some(g) = &self.aprilgrid {
+            let t = &g.target;
+            if t.tag_cols < 2
+                || t.tag_rows < 2
+                || t.tag_cols * t.tag_rows > 587
+                || !(t.tag_size_m > 0.0 && t.tag_spacing > 0.0 && t.tag_spacing <= 1.0)
+                || !(g.margin_m.is_finite() && g.margin_m >= 0.0)
+            {
+                return bad(
+                    "aprilgrid",
+                    "2 x 2 to 587 tags, positive size, spacing in (0, 1], margin >= 0",
+                );
+            }
         }
         if let Some(e) = self.exposure_s {
             if !(e.is_finite() && e > 0.0 && e < 0.5 / self.rate_hz) {
@@ -300,12 +338,21 @@ fn random_scene(
     let tilt =
         UnitQuaternion::from_euler_angles(rng.gen_range(-0.2..0.2), rng.gen_range(-0.2..0.2), 0.0);
     let r_w_t = tilt * spin * r_facing;
-    let b = &config.board;
-    let centre_t = Vector3::new(
-        (b.rows - 1) as f64 * b.row_spacing_m / 2.0,
-        (b.cols - 1) as f64 * b.col_spacing_m / 2.0,
-        0.0,
-    );
+    let centre_t = match &config.aprilgrid {
+        None => {
+            let b = &config.board;
+            Vector3::new(
+                (b.rows - 1) as f64 * b.row_spacing_m / 2.0,
+                (b.cols - 1) as f64 * b.col_spacing_m / 2.0,
+                0.0,
+            )
+        }
+        Some(g) => {
+            let t = &g.target;
+            let span = |n: usize| (n as f64 * (1.0 + t.tag_spacing) - t.tag_spacing) * t.tag_size_m;
+            Vector3::new(span(t.tag_cols) / 2.0, span(t.tag_rows) / 2.0, 0.0)
+        }
+    };
     let p_w_t = Vector3::new(0.0, 0.0, config.look_at.distance_m) - r_w_t * centre_t;
     let t_w_t = Isometry3::from_parts(Translation3::from(p_w_t), r_w_t);
     (t_g_w, t_g_w * t_w_t)
@@ -408,7 +455,16 @@ impl CameraImuSim {
         Pose::new(t_c_t.rotation, t_c_t.translation.vector)
     }
 
-    /// The Kalibr target of the board.
+    /// The Kalibr target of `target.yaml`: the AprilGrid when there is one, else the
+    /// checkerboard.
+    pub fn printed_target(&self) -> Target {
+        match &self.config.aprilgrid {
+            Some(g) => Target::AprilGrid(g.target),
+            None => Target::Checkerboard(self.target()),
+        }
+    }
+
+    /// The Kalibr target of the checkerboard.
     pub fn target(&self) -> CheckerboardTarget {
         let b = &self.config.board;
         CheckerboardTarget {
@@ -423,11 +479,18 @@ impl CameraImuSim {
 
     /// The true pixel of every corner of frame `k` (`None`: not projectable).
     pub fn true_corners(&self, k: usize) -> Vec<Option<Vector2<f64>>> {
-        crate::vision::render::true_corners(
-            &self.config.camera,
-            &self.t_cam_target(self.frame_time(k)),
-            &self.config.board,
-        )
+        let target = self.printed_target();
+        let t_cam_target = self.t_cam_target(self.frame_time(k));
+        (0..target.corner_count())
+            .map(|id| {
+                let p = target.corner(id)?;
+                let q = self
+                    .config
+                    .camera
+                    .project(&t_cam_target.transform_point(&p))?;
+                Some(q.pixel)
+            })
+            .collect()
     }
 
     /// True when every corner of frame `k` projects inside the image.
@@ -451,7 +514,10 @@ impl CameraImuSim {
                     .collect()
             }
         };
-        let mut img = render_exposure(&self.rays, &poses, &c.board, &c.render);
+        let mut img = match &c.aprilgrid {
+            Some(grid) => render_exposure(&self.rays, &poses, grid, &c.render),
+            None => render_exposure(&self.rays, &poses, &c.board, &c.render),
+        };
         let [gu, gv] = c.lighting_gradient;
         if gu != 0.0 || gv != 0.0 {
             apply_lighting_gradient(&mut img, gu, gv);
@@ -468,16 +534,22 @@ impl CameraImuSim {
     /// continuous blur within a small symmetric error that does not move corners).
     fn blur_steps(&self, t: f64, e: f64) -> usize {
         let cam = &self.config.camera;
-        let board = &self.config.board;
         let (a, b) = (
             self.t_cam_target(t - e / 2.0),
             self.t_cam_target(t + e / 2.0),
         );
-        let corners = [0, board.cols - 1, board.rows * board.cols - 1];
+        let target = self.printed_target();
+        let last = target.corner_count() - 1;
+        // Three extreme corners: first, end of the first row, last.
+        let corners = match target {
+            Target::Checkerboard(t) => [0, t.cols - 1, last],
+            Target::AprilGrid(t) => [0, 4 * (t.tag_cols - 1) + 1, last],
+            Target::Board { .. } => [0, 0, 0],
+        };
         let motion = corners
             .iter()
             .filter_map(|&id| {
-                let p = board.corner_in_target(id);
+                let p = target.corner(id)?;
                 let pa = cam.project(&a.transform_point(&p))?.pixel;
                 let pb = cam.project(&b.transform_point(&p))?.pixel;
                 Some((pa - pb).norm())
@@ -526,17 +598,23 @@ impl CameraImuSim {
             sensors: vec!["imu0".into(), "cam0".into()],
             description: format!(
                 "msreg simulator: camera-IMU, seed {}, {} s, IMU {} Hz, camera {} Hz {}x{}, \
-                 board {}x{} inner corners at {} m, exposure {:?} s, noise {} grey levels, \
-                 time offset {} s",
+                 {}, exposure {:?} s, noise {} grey levels, time offset {} s",
                 c.seed,
                 c.duration_s,
                 c.imu.rate_hz,
                 c.rate_hz,
                 c.camera.resolution.0,
                 c.camera.resolution.1,
-                c.board.rows,
-                c.board.cols,
-                c.board.row_spacing_m,
+                match &c.aprilgrid {
+                    Some(g) => format!(
+                        "aprilgrid {}x{} tags of {} m",
+                        g.target.tag_cols, g.target.tag_rows, g.target.tag_size_m
+                    ),
+                    None => format!(
+                        "board {}x{} inner corners at {} m",
+                        c.board.rows, c.board.cols, c.board.row_spacing_m
+                    ),
+                },
                 c.exposure_s,
                 c.noise_sigma,
                 c.time_offset_s
@@ -562,7 +640,11 @@ impl CameraImuSim {
         write_imu_csv(dir.join(IMU_CSV), &self.imu)?;
         self.imu_noise.write(dir.join(IMU_YAML))?;
         text(CAMERA_YAML, camera_yaml_string(&self.config.camera))?;
-        text(TARGET_YAML, checkerboard_yaml_string(&self.target()))?;
+        let target_yaml = match self.printed_target() {
+            Target::AprilGrid(t) => aprilgrid_yaml_string(&t),
+            _ => checkerboard_yaml_string(&self.target()),
+        };
+        text(TARGET_YAML, target_yaml)?;
         write_groundtruth_csv(dir.join(GROUNDTRUTH_TRAJECTORY_CSV), &self.groundtruth)?;
         self.extrinsics()
             .write(dir.join(GROUNDTRUTH_EXTRINSICS_YAML))?;

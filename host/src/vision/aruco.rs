@@ -7,11 +7,11 @@
 //! `DetectorParameters` with `CORNER_REFINE_SUBPIX`. Method and accuracy against OpenCV on
 //! real photos: docs/aruco.md.
 
-mod decode;
+pub(crate) mod decode;
 mod dictionaries;
 pub mod dictionary;
 mod edges;
-mod quad;
+pub(crate) mod quad;
 pub mod render;
 
 pub use decode::{apply as apply_homography, homography_4pt, otsu};

@@ -80,6 +80,9 @@ pub enum NoDetection {
     /// A full-size grid failed the colour/topology check or its refinement.
     #[error("the corner grid is inconsistent (colours, geometry or refinement)")]
     Inconsistent,
+    /// The AprilGrid detector found too little (the target is an AprilGrid).
+    #[error(transparent)]
+    AprilGrid(#[from] super::aprilgrid::NoAprilGrid),
 }
 
 /// Detector settings; the defaults work from ~8 px squares up, on 8-bit images.

@@ -1,7 +1,8 @@
 //! Corner detection over a whole dataset (the input of camera-IMU calibration): the camera,
-//! target and image list of the dataset layout ([`CameraDataset`]), and the checkerboard
-//! detector run on every image in parallel ([`detect_frames`]), one [`FrameResult`] per
-//! image in stamp order with the corners or the reason there are none. Unreadable images and
+//! target and image list of the dataset layout ([`CameraDataset`]), and the target's
+//! detector (checkerboard or AprilGrid) run on every image in parallel ([`detect_frames`]),
+//! one [`FrameResult`] per image in stamp order with the corners or the reason there are
+//! none. Unreadable images and
 //! images of the wrong size are bad input (an error naming the file), not a rejected frame.
 
 use std::path::{Path, PathBuf};
@@ -11,11 +12,10 @@ use msreg_estimator::camera::Camera;
 use nalgebra::{Vector2, Vector3};
 use rayon::prelude::*;
 
+use super::aprilgrid::{detect_aprilgrid, AprilGridParams};
 use super::checkerboard::{detect_checkerboard, DetectorParams, NoDetection};
 use super::gray::{GrayImage, ImageLoadError};
-use crate::camera_yaml::{
-    read_camera_yaml, read_target_yaml, CheckerboardTarget, Target, YamlError,
-};
+use crate::camera_yaml::{read_camera_yaml, read_target_yaml, Target, YamlError};
 use crate::dataset::{
     read_camera_csv, CameraFrame, DatasetError, CAMERA_CSV, CAMERA_YAML, TARGET_YAML,
 };
@@ -29,9 +29,12 @@ pub enum CameraInputError {
     /// `cam0/camera.yaml` or `target.yaml` missing or malformed.
     #[error(transparent)]
     Yaml(#[from] YamlError),
-    /// `target.yaml` describes a plain board, not a checkerboard.
-    #[error("{}: target_type must be checkerboard for corner detection", path.display())]
-    NotCheckerboard {
+    /// `target.yaml` describes a plain board, not a corner target.
+    #[error(
+        "{}: target_type must be checkerboard or aprilgrid for corner detection",
+        path.display()
+    )]
+    NotCornerTarget {
         /// The target file.
         path: PathBuf,
     },
@@ -62,8 +65,8 @@ pub enum CameraInputError {
 pub struct CameraDataset {
     /// `cam0/camera.yaml`.
     pub camera: Camera<f64>,
-    /// `target.yaml` (a checkerboard).
-    pub target: CheckerboardTarget,
+    /// `target.yaml`: a checkerboard or an AprilGrid.
+    pub target: Target,
     /// `cam0/data.csv`, stamps strictly increasing, paths resolved to `cam0/data/`.
     pub frames: Vec<CameraFrame>,
 }
@@ -81,9 +84,10 @@ impl CameraDataset {
         }
         let camera = read_camera_yaml(&dir.join(CAMERA_YAML))?;
         let target_path = dir.join(TARGET_YAML);
-        let Target::Checkerboard(target) = read_target_yaml(&target_path)? else {
-            return Err(CameraInputError::NotCheckerboard { path: target_path });
-        };
+        let target = read_target_yaml(&target_path)?;
+        if let Target::Board { .. } = target {
+            return Err(CameraInputError::NotCornerTarget { path: target_path });
+        }
         let frames = read_camera_csv(dir.join(CAMERA_CSV))?;
         Ok(Self {
             camera,
@@ -111,7 +115,7 @@ impl CameraDataset {
 /// The corners found in one image.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FrameCorners {
-    /// Kalibr corner ids (`r * cols + c`), ascending.
+    /// Kalibr corner ids (checkerboard `r * cols + c`, AprilGrid `4 * tag + k`), ascending.
     pub ids: Vec<usize>,
     /// Refined pixel of each id.
     pub pixels: Vec<Vector2<f64>>,
@@ -119,10 +123,10 @@ pub struct FrameCorners {
 
 impl FrameCorners {
     /// The target-frame point of every id (for PnP or a reprojection residual).
-    pub fn target_points(&self, target: &CheckerboardTarget) -> Vec<Vector3<f64>> {
+    pub fn target_points(&self, target: &Target) -> Vec<Vector3<f64>> {
         self.ids
             .iter()
-            .map(|&id| target.corner_in_target(id))
+            .filter_map(|&id| target.corner(id))
             .collect()
     }
 }
@@ -138,12 +142,13 @@ pub struct FrameResult {
     pub corners: Result<FrameCorners, NoDetection>,
 }
 
-/// Detects the checkerboard in every frame in parallel (rayon), results in the order of
-/// `frames`. Only full boards are reported (the detector's rule). `camera`, when given,
+/// Detects the target in every frame in parallel (rayon), results in the order of `frames`:
+/// a checkerboard only when it is whole (that detector's rule), an AprilGrid from
+/// [`AprilGridParams::min_tags`] tags up (partial views are its point). `camera`, when given,
 /// checks every image's size. `progress` receives the fraction of images done.
 pub fn detect_frames(
     frames: &[CameraFrame],
-    target: &CheckerboardTarget,
+    target: &Target,
     camera: Option<&Camera<f64>>,
     params: &DetectorParams,
     progress: &(dyn Fn(f64) + Sync),
@@ -165,12 +170,7 @@ pub fn detect_frames(
                     });
                 }
             }
-            let corners = detect_checkerboard(&image, target.rows, target.cols, params).map(|d| {
-                FrameCorners {
-                    ids: (0..d.corners.len()).collect(),
-                    pixels: d.corners,
-                }
-            });
+            let corners = detect_corners(&image, target, params);
             let n = done.fetch_add(1, Ordering::Relaxed) + 1;
             progress(n as f64 / frames.len().max(1) as f64);
             Ok(FrameResult {
@@ -180,4 +180,28 @@ pub fn detect_frames(
             })
         })
         .collect()
+}
+
+/// The corners of `target` in one image: a whole checkerboard, or an AprilGrid from
+/// [`AprilGridParams::min_tags`] tags up (its default parameters).
+pub fn detect_corners(
+    image: &GrayImage,
+    target: &Target,
+    params: &DetectorParams,
+) -> Result<FrameCorners, NoDetection> {
+    match target {
+        Target::Checkerboard(t) => {
+            detect_checkerboard(image, t.rows, t.cols, params).map(|d| FrameCorners {
+                ids: (0..d.corners.len()).collect(),
+                pixels: d.corners,
+            })
+        }
+        Target::AprilGrid(t) => detect_aprilgrid(image, t, &AprilGridParams::default())
+            .map(|d| FrameCorners {
+                ids: d.ids,
+                pixels: d.pixels,
+            })
+            .map_err(NoDetection::AprilGrid),
+        Target::Board { .. } => Err(NoDetection::NoCorners),
+    }
 }

@@ -38,8 +38,9 @@ impl BoardPattern {
             0.0,
         )
     }
+}
 
-    /// The class of a point on the board plane.
+impl PrintedTarget for BoardPattern {
     fn class(&self, x: f64, y: f64) -> Class {
         let (rs, cs) = (self.row_spacing_m, self.col_spacing_m);
         let (x0, x1) = (-rs, self.rows as f64 * rs);
@@ -63,6 +64,26 @@ impl BoardPattern {
             Class::Background
         }
     }
+
+    fn outline(&self) -> [f64; 4] {
+        let (rs, cs, m) = (self.row_spacing_m, self.col_spacing_m, self.margin_m);
+        [
+            -rs - m,
+            self.rows as f64 * rs + m,
+            -cs - m,
+            self.cols as f64 * cs + m,
+        ]
+    }
+}
+
+/// A printed calibration target as the renderer sees it: the ink at every point of its
+/// plane (target frame, z = 0) and the rectangle that holds all of it.
+pub trait PrintedTarget: Sync {
+    /// The class of the target-plane point `(x, y)`.
+    fn class(&self, x: f64, y: f64) -> Class;
+    /// `[x_min, x_max, y_min, y_max]` of the printed sheet (margin included), metres;
+    /// everything outside is [`Class::Background`].
+    fn outline(&self) -> [f64; 4];
 }
 
 /// Grey levels and anti-aliasing.
@@ -89,10 +110,14 @@ impl Default for RenderSettings {
     }
 }
 
+/// What a point of the target plane shows.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Class {
+pub enum Class {
+    /// Off the printed sheet.
     Background,
+    /// White paper.
     Light,
+    /// Black ink.
     Dark,
 }
 
@@ -142,7 +167,7 @@ impl PixelRays {
 pub fn render_checkerboard(
     camera: &Camera<f64>,
     t_cam_target: &Pose<f64>,
-    board: &BoardPattern,
+    board: &impl PrintedTarget,
     settings: &RenderSettings,
 ) -> GrayImage {
     render_exposure(
@@ -158,7 +183,7 @@ pub fn render_checkerboard(
 pub fn render_exposure(
     rays: &PixelRays,
     poses: &[Pose<f64>],
-    board: &BoardPattern,
+    board: &impl PrintedTarget,
     settings: &RenderSettings,
 ) -> GrayImage {
     let (w, h) = (rays.width, rays.height);
@@ -205,13 +230,11 @@ pub fn render_exposure(
 fn board_region(
     camera: &Camera<f64>,
     poses: &[Pose<f64>],
-    board: &BoardPattern,
+    board: &impl PrintedTarget,
 ) -> (usize, usize, usize, usize) {
     let (w, h) = (camera.resolution.0 as usize, camera.resolution.1 as usize);
     let whole = (0, w, 0, h);
-    let (rs, cs, m) = (board.row_spacing_m, board.col_spacing_m, board.margin_m);
-    let (ax, bx) = (-rs - m, board.rows as f64 * rs + m);
-    let (ay, by) = (-cs - m, board.cols as f64 * cs + m);
+    let [ax, bx, ay, by] = board.outline();
     let steps = 64;
     let (mut lo, mut hi) = (Vector2::repeat(f64::MAX), Vector2::repeat(f64::MIN));
     for pose in poses {
@@ -266,7 +289,7 @@ fn shade_pixel(
     classes: &[Class],
     x: usize,
     y: usize,
-    board: &BoardPattern,
+    board: &impl PrintedTarget,
     settings: &RenderSettings,
 ) -> f32 {
     let value = |c: Class| match c {

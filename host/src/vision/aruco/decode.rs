@@ -40,7 +40,7 @@ pub fn apply(h: &Matrix3<f64>, p: Vector2<f64>) -> Vector2<f64> {
 /// The bits of a candidate with `bits` inner bits per side: `(code, border errors)`, code
 /// row-major from the canonical top-left (corner 0), first bit most significant; `None`
 /// when the unwarp is degenerate.
-pub(super) fn read_bits(
+pub(crate) fn read_bits(
     img: &GrayImage,
     corners: &[Vector2<f64>; 4],
     bits: usize,

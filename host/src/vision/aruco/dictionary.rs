@@ -72,23 +72,7 @@ impl Dictionary {
     /// grid equals the marker's code turned `k` quarter turns clockwise, when the distance
     /// is at most `max_errors`.
     pub fn identify(self, read: u64, max_errors: usize) -> Option<(usize, usize, usize)> {
-        let n = self.bits();
-        let mut rotated = [read; 4];
-        // rotated[k]: the read grid turned k quarter turns anticlockwise, i.e. the marker in
-        // rotation 0 when it appears turned k clockwise.
-        for k in 1..4 {
-            rotated[k] = rotate_ccw(rotated[k - 1], n);
-        }
-        let mut best: Option<(usize, usize, usize)> = None;
-        for (id, &code) in self.codes().iter().enumerate() {
-            for (k, &r) in rotated.iter().enumerate() {
-                let d = (code ^ r).count_ones() as usize;
-                if d <= max_errors && best.is_none_or(|b| d < b.2) {
-                    best = Some((id, k, d));
-                }
-            }
-        }
-        best
+        identify_in(self.codes(), self.bits(), read, max_errors)
     }
 }
 
@@ -106,6 +90,31 @@ impl FromStr for Dictionary {
             .find(|d| d.name().eq_ignore_ascii_case(s.trim()))
             .ok_or_else(|| UnknownDictionary(s.to_string()))
     }
+}
+
+/// [`Dictionary::identify`] in any table of `n x n` codes (the AprilGrid's tag36h11 too).
+pub fn identify_in(
+    codes: &[u64],
+    n: usize,
+    read: u64,
+    max_errors: usize,
+) -> Option<(usize, usize, usize)> {
+    let mut rotated = [read; 4];
+    // rotated[k]: the read grid turned k quarter turns anticlockwise, i.e. the marker in
+    // rotation 0 when it appears turned k clockwise.
+    for k in 1..4 {
+        rotated[k] = rotate_ccw(rotated[k - 1], n);
+    }
+    let mut best: Option<(usize, usize, usize)> = None;
+    for (id, &code) in codes.iter().enumerate() {
+        for (k, &r) in rotated.iter().enumerate() {
+            let d = (code ^ r).count_ones() as usize;
+            if d <= max_errors && best.is_none_or(|b| d < b.2) {
+                best = Some((id, k, d));
+            }
+        }
+    }
+    best
 }
 
 /// Bit `(r, c)` of an `n x n` code.

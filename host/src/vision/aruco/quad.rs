@@ -10,7 +10,7 @@ use crate::vision::gray::GrayImage;
 
 /// A convex quadrilateral, corners clockwise on screen, integer contour points.
 #[derive(Clone, Debug, PartialEq)]
-pub(super) struct Quad {
+pub(crate) struct Quad {
     /// The corners.
     pub corners: [Vector2<f64>; 4],
     /// Boundary length of the contour it came from, pixels (contour points).
@@ -19,7 +19,7 @@ pub(super) struct Quad {
 
 /// Dark pixels: `img <= mean over a window x window box - constant`, the mean rounded
 /// to a grey level as in 8-bit images.
-pub(super) fn adaptive_threshold(img: &GrayImage, window: usize, constant: f32) -> Vec<bool> {
+pub(crate) fn adaptive_threshold(img: &GrayImage, window: usize, constant: f32) -> Vec<bool> {
     let mean = img.box_mean(window / 2);
     img.data()
         .iter()
@@ -29,7 +29,7 @@ pub(super) fn adaptive_threshold(img: &GrayImage, window: usize, constant: f32) 
 }
 
 /// Quadrilateral candidates of one binary mask.
-pub(super) fn quads_of_mask(
+pub(crate) fn quads_of_mask(
     mask: &[bool],
     width: usize,
     height: usize,
