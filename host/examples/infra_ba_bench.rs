@@ -165,6 +165,10 @@ fn solve(problem: &str, out: &str, opts: &Options) -> Result<()> {
         t.structure, t.linearise, t.eliminate, t.factor, t.pcg, t.back, t.covariance, c1 - c0, c2 - c1
     );
     println!(
+        "threads cpu s (user + sys, main first): {}",
+        thread_cpu().join(" ")
+    );
+    println!(
         "msreg read {:.2} s solve {:.2} s iterations {} (rejected {}) exact steps {} cg products {} initial cost {:.6} final cost {:.6}",
         (t1 - t0).as_secs_f64(),
         (t2 - t1).as_secs_f64(),
@@ -188,6 +192,41 @@ fn cpu_seconds() -> f64 {
     }
     let secs = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
     secs(u.ru_utime) + secs(u.ru_stime)
+}
+
+/// CPU time (user + system, seconds) of each thread of the process so far, from
+/// `/proc/self/task/*/stat`, the main thread first: with the main thread doing the
+/// serial work and the pool's threads the parallel work, `main + max(pool)` estimates the
+/// wall time on otherwise idle cores (empty where there is no `/proc`).
+fn thread_cpu() -> Vec<String> {
+    // SAFETY: `sysconf` only reads a configuration value.
+    let hz = unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64;
+    let mut out: Vec<(u64, f64)> = Vec::new();
+    for entry in std::fs::read_dir("/proc/self/task")
+        .into_iter()
+        .flatten()
+        .flatten()
+    {
+        let tid = entry
+            .file_name()
+            .to_string_lossy()
+            .parse::<u64>()
+            .unwrap_or(0);
+        let Ok(stat) = std::fs::read_to_string(entry.path().join("stat")) else {
+            continue;
+        };
+        // Fields after the parenthesised name: state is field 3, utime 14, stime 15.
+        let rest = stat.rsplit_once(')').map_or("", |r| r.1);
+        let f: Vec<&str> = rest.split_whitespace().collect();
+        let ticks = |i: usize| {
+            f.get(i - 3)
+                .and_then(|v| v.parse::<f64>().ok())
+                .unwrap_or(0.0)
+        };
+        out.push((tid, (ticks(14) + ticks(15)) / hz));
+    }
+    out.sort_by_key(|t| t.0);
+    out.iter().map(|t| format!("{:.2}", t.1)).collect()
 }
 
 /// Horizontal visibility radius giving `track` keyframes per point on average for points
