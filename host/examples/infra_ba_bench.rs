@@ -5,7 +5,7 @@
 //!
 //! ```text
 //! infra_ba_bench gen <problem.txt> [--keyframes 2000] [--points 50000] [--track 74] [--seed 1]
-//! infra_ba_bench solve <problem.txt> <state_out.txt> [--inexact]
+//! infra_ba_bench solve <problem.txt> <state_out.txt> [--exact] [--tolerance 1e-2] [--products 8]
 //! infra_ba_bench eval <problem.txt> <state.txt>...
 //! ```
 //!
@@ -23,7 +23,7 @@
 use anyhow::{bail, Context, Result};
 use msreg_estimator::camera::{Camera, Distortion, Projection};
 use msreg_host::infra::ba::{robust_cost, BaProblem, BaState, BlobObs, MarkerObs, VoObs};
-use msreg_host::infra::ba_solver::{solve_with, Steps};
+use msreg_host::infra::ba_solver::{solve_with, Options, Steps};
 use msreg_host::infra::io::MarkerDetection;
 use msreg_host::infra::scene::{self, RobotMotion, SceneConfig};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector2, Vector3};
@@ -84,10 +84,7 @@ fn main() -> Result<()> {
             );
             Ok(())
         }
-        Some("solve") if args.len() == 3 => solve(&args[1], &args[2], Steps::Exact),
-        Some("solve") if args.len() == 4 && args[3] == "--inexact" => {
-            solve(&args[1], &args[2], Steps::Inexact)
-        }
+        Some("solve") if args.len() >= 3 => solve(&args[1], &args[2], &solve_options(&args[3..])?),
         Some("eval") if args.len() >= 3 => {
             let b = read_problem(&args[1])?;
             let p = b.problem();
@@ -99,7 +96,7 @@ fn main() -> Result<()> {
             }
             Ok(())
         }
-        _ => bail!("usage: gen <out> [--keyframes N --points N --track T --seed S] | solve <problem> <state_out> [--inexact] | eval <problem> <state>..."),
+        _ => bail!("usage: gen <out> [--keyframes N --points N --track T --seed S] | solve <problem> <state_out> [--exact --tolerance T --products N] | eval <problem> <state>..."),
     }
 }
 
@@ -125,16 +122,52 @@ fn gen_args(a: &[String]) -> Result<GenArgs> {
     Ok(g)
 }
 
-/// Solves with every step exact (the default, as `calibrate infra`) or with conjugate-
-/// gradient steps (`--inexact`).
-fn solve(problem: &str, out: &str, steps: Steps) -> Result<()> {
-    let t0 = Instant::now();
+/// The solver's options from `solve`'s flags: `--exact` (every step exact), `--tolerance
+/// T`, `--products N` (the conjugate-gradient steps' limits).
+fn solve_options(a: &[String]) -> Result<Options> {
+    let mut o = Options::new(50);
+    let mut it = a.iter();
+    while let Some(flag) = it.next() {
+        let mut value = || it.next().with_context(|| format!("{flag}: no value"));
+        match flag.as_str() {
+            "--exact" => o.steps = Steps::Exact,
+            "--tolerance" => o.pcg_tolerance = value()?.parse()?,
+            "--products" => o.pcg_max_products = value()?.parse()?,
+            _ => bail!("{flag}: unknown solve option"),
+        }
+    }
+    Ok(o)
+}
+
+/// Solves with the options of [`solve_options`] (conjugate-gradient steps by default).
+fn solve(problem: &str, out: &str, opts: &Options) -> Result<()> {
+    let (t0, c0) = (Instant::now(), cpu_seconds());
     let b = read_problem(problem)?;
     let p = b.problem();
-    let t1 = Instant::now();
-    let sol = solve_with(&p, b.start.clone(), 50, steps).context("BA failed")?;
-    let t2 = Instant::now();
+    let (t1, c1) = (Instant::now(), cpu_seconds());
+    let sol = solve_with(&p, b.start.clone(), *opts).context("BA failed")?;
+    let (t2, c2) = (Instant::now(), cpu_seconds());
     std::fs::write(out, write_state(&sol.state))?;
+    for (k, it) in sol.trace.iter().enumerate() {
+        println!(
+            "iteration {} cost {:.6} lambda {:.1e} {} products {} {}",
+            k + 1,
+            it.cost,
+            it.lambda,
+            if it.exact { "exact" } else { "cg" },
+            it.products,
+            if it.accepted { "accepted" } else { "rejected" }
+        );
+    }
+    let t = &sol.timings;
+    println!(
+        "msreg wall s: structure {:.2} linearise {:.2} eliminate {:.2} factor {:.2} cg {:.2} back {:.2} covariance {:.2}; cpu s: read {:.2} solve {:.2}",
+        t.structure, t.linearise, t.eliminate, t.factor, t.pcg, t.back, t.covariance, c1 - c0, c2 - c1
+    );
+    println!(
+        "threads cpu s (user + sys, main first): {}",
+        thread_cpu().join(" ")
+    );
     println!(
         "msreg read {:.2} s solve {:.2} s iterations {} (rejected {}) exact steps {} cg products {} initial cost {:.6} final cost {:.6}",
         (t1 - t0).as_secs_f64(),
@@ -147,6 +180,53 @@ fn solve(problem: &str, out: &str, steps: Steps) -> Result<()> {
         sol.final_cost
     );
     Ok(())
+}
+
+/// CPU time (user + system) of the process so far, all threads.
+fn cpu_seconds() -> f64 {
+    // SAFETY: `getrusage` only writes the zeroed struct it is given.
+    let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: as above; RUSAGE_SELF is a valid `who`.
+    if unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut u) } != 0 {
+        return f64::NAN;
+    }
+    let secs = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    secs(u.ru_utime) + secs(u.ru_stime)
+}
+
+/// CPU time (user + system, seconds) of each thread of the process so far, from
+/// `/proc/self/task/*/stat`, the main thread first: with the main thread doing the
+/// serial work and the pool's threads the parallel work, `main + max(pool)` estimates the
+/// wall time on otherwise idle cores (empty where there is no `/proc`).
+fn thread_cpu() -> Vec<String> {
+    // SAFETY: `sysconf` only reads a configuration value.
+    let hz = unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64;
+    let mut out: Vec<(u64, f64)> = Vec::new();
+    for entry in std::fs::read_dir("/proc/self/task")
+        .into_iter()
+        .flatten()
+        .flatten()
+    {
+        let tid = entry
+            .file_name()
+            .to_string_lossy()
+            .parse::<u64>()
+            .unwrap_or(0);
+        let Ok(stat) = std::fs::read_to_string(entry.path().join("stat")) else {
+            continue;
+        };
+        // Fields after the parenthesised name: state is field 3, utime 14, stime 15.
+        let rest = stat.rsplit_once(')').map_or("", |r| r.1);
+        let f: Vec<&str> = rest.split_whitespace().collect();
+        let ticks = |i: usize| {
+            f.get(i - 3)
+                .and_then(|v| v.parse::<f64>().ok())
+                .unwrap_or(0.0)
+        };
+        out.push((tid, (ticks(14) + ticks(15)) / hz));
+    }
+    out.sort_by_key(|t| t.0);
+    out.iter().map(|t| format!("{:.2}", t.1)).collect()
 }
 
 /// Horizontal visibility radius giving `track` keyframes per point on average for points
@@ -470,12 +550,30 @@ struct Tokens {
 
 impl Tokens {
     fn read(path: &str) -> Result<Self> {
+        use rayon::prelude::*;
         let text = std::fs::read_to_string(path).with_context(|| format!("reading {path}"))?;
-        let words = text
-            .split_ascii_whitespace()
-            .map(|w| w.parse::<f64>())
+        // Parsed in parallel, in pieces cut at whitespace.
+        let pieces = 8 * rayon::current_num_threads();
+        let mut cuts = vec![0];
+        for k in 1..pieces {
+            let at = (text.len() * k / pieces).max(*cuts.last().unwrap_or(&0));
+            let end = text[at..]
+                .find(|c: char| c.is_ascii_whitespace())
+                .map_or(text.len(), |i| at + i);
+            cuts.push(end);
+        }
+        cuts.push(text.len());
+        let parts = cuts
+            .par_windows(2)
+            .map(|c| {
+                text[c[0]..c[1]]
+                    .split_ascii_whitespace()
+                    .map(|w| w.parse::<f64>())
+                    .collect::<Result<Vec<_>, _>>()
+            })
             .collect::<Result<Vec<_>, _>>()
             .with_context(|| format!("{path}: not a number"))?;
+        let words = parts.concat();
         Ok(Self {
             path: path.into(),
             words,

@@ -141,7 +141,18 @@ pub fn project_in(
     x: &Vector3<f64>,
 ) -> Option<(Vector2<f64>, Matrix2x6<f64>, Matrix2x3<f64>)> {
     let rt: Matrix3<f64> = pose.rotation.to_rotation_matrix().matrix().transpose();
-    let p = rt * (x - pose.translation.vector);
+    project_from(cam, (&rt, &pose.translation.vector), x)
+}
+
+/// [`project_in`] with the pose given as `(R^T, t)` (computed once per keyframe by the
+/// solver, which projects every keypoint of a keyframe through it).
+pub(super) fn project_from(
+    cam: &Camera<f64>,
+    (rt, t): (&Matrix3<f64>, &Vector3<f64>),
+    x: &Vector3<f64>,
+) -> Option<(Vector2<f64>, Matrix2x6<f64>, Matrix2x3<f64>)> {
+    let rt = *rt;
+    let p = rt * (x - t);
     let proj = cam.project(&p)?;
     let mut dp = nalgebra::Matrix3x6::zeros();
     dp.fixed_view_mut::<3, 3>(0, 0).copy_from(&skew(&p));
@@ -224,8 +235,25 @@ pub(super) type BlobTerm = (Vector2<f64>, Matrix2x6<f64>, Matrix2x6<f64>, f64);
 
 /// Whitened, robust-weighted terms of one VO keypoint: `(r, J_kf, J_point, rho)`.
 pub(super) fn vo_term(p: &BaProblem<'_>, s: &BaState, o: &VoObs) -> Option<VoTerm> {
-    let (px, jp, jx) = project_in(p.f, &s.kf[o.kf], &s.points[o.point])?;
-    let r = (px - o.uv) / SIGMA_VO;
+    let pose = &s.kf[o.kf];
+    let rt: Matrix3<f64> = pose.rotation.to_rotation_matrix().matrix().transpose();
+    vo_term_from(
+        p,
+        (&rt, &pose.translation.vector),
+        &s.points[o.point],
+        &o.uv,
+    )
+}
+
+/// [`vo_term`] with the keyframe pose as `(R^T, t)`, the point and the keypoint given.
+pub(super) fn vo_term_from(
+    p: &BaProblem<'_>,
+    pose: (&Matrix3<f64>, &Vector3<f64>),
+    x: &Vector3<f64>,
+    uv: &Vector2<f64>,
+) -> Option<VoTerm> {
+    let (px, jp, jx) = project_from(p.f, pose, x)?;
+    let r = (px - uv) / SIGMA_VO;
     let (rho, w) = robust(r.norm_squared());
     let k = w.sqrt() / SIGMA_VO;
     Some((r * w.sqrt(), jp * k, jx * k, rho))

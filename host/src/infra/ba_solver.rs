@@ -11,31 +11,62 @@
 //!   (supernodal) Cholesky, symbolic analysis once (in the blocks' own order when that
 //!   fills less than minimum degree), its buffers reused across iterations;
 //! - the marker, blob and epipolar terms are linearised in parallel;
-//! - optionally ([`Steps::Inexact`], not the default), a step is first tried by conjugate
-//!   gradients on the implicit reduced system (`pcg`), preconditioned by the factor of the
-//!   last exact step, and solved exactly only when they do not converge within a few
-//!   products.
+//! - by default ([`Steps::Inexact`]) the steps after the first alternate with exact ones
+//!   while the iterations move far: a step by conjugate gradients on the implicit reduced
+//!   system (`pcg`), preconditioned by the factor of the last exact step, taken as it is
+//!   when it runs out of products and then followed by an exact step; near the minimum
+//!   the conjugate gradients converge in a few products and the steps stay inexact until
+//!   the cost stalls, when one exact step confirms the stop and its factor gives the
+//!   covariance (no factorisation of its own).
 //!
 //! Damping: `lambda * diag` on the reduced-side blocks and on each point block, as
 //! Marquardt scaled; the step is accepted when the robust cost decreases.
 
-use nalgebra::{Matrix3, Matrix6, Matrix6x3, SMatrix, SVector, Vector3, Vector6};
+use nalgebra::{Matrix3, Matrix6, Matrix6x3, SMatrix, SVector, Vector2, Vector3, Vector6};
 use rayon::prelude::*;
 use std::ops::Range;
+use std::time::Instant;
 
-use super::ba::{blob_term, epipolar_term, marker_term, plus, vo_term, BaProblem, BaState};
+use super::ba::{blob_term, epipolar_term, marker_term, plus, vo_term_from, BaProblem, BaState};
 use super::blocksym::{BlockPattern, Factor, PatternBuilder};
 
 mod pcg;
 
-/// Conjugate gradients stop at this residual, relative to the reduced right-hand side's
-/// norm. With the limit below, chosen on the quarter-size benchmark problem among
-/// (1e-6, 30), (1e-3, 12) and (1e-2, 8): the CPU time fell in that order, the final cost
-/// stayed within 5e-6 of the exact steps' (docs/benchmarks.md).
-const PCG_TOLERANCE: f64 = 1e-2;
-/// Products with the reduced system before the step is solved exactly instead (one
-/// product costs about 1/25 of forming and factoring the reduced system).
-const PCG_MAX_PRODUCTS: usize = 8;
+/// How [`solve_with`] runs.
+#[derive(Clone, Copy, Debug)]
+pub struct Options {
+    /// Levenberg-Marquardt iterations (accepted + rejected) at most.
+    pub max_iterations: usize,
+    /// How the steps are solved.
+    pub steps: Steps,
+    /// Conjugate gradients stop at this residual, relative to the reduced right-hand
+    /// side's norm.
+    pub pcg_tolerance: f64,
+    /// Products with the reduced system per conjugate-gradient step at most.
+    pub pcg_max_products: usize,
+}
+
+impl Options {
+    /// Conjugate-gradient steps ([`Steps::Inexact`]) to a relative residual of 1e-2 in at
+    /// most 8 products, chosen on the quarter-size benchmark problem (docs/benchmarks.md),
+    /// not on the accuracy tests' seeds; at most `max_iterations`.
+    pub fn new(max_iterations: usize) -> Self {
+        Self {
+            max_iterations,
+            steps: Steps::Inexact,
+            pcg_tolerance: 1e-2,
+            pcg_max_products: 8,
+        }
+    }
+
+    /// Every step exact.
+    pub fn exact(max_iterations: usize) -> Self {
+        Self {
+            steps: Steps::Exact,
+            ..Self::new(max_iterations)
+        }
+    }
+}
 
 /// Solution of the bundle adjustment.
 #[derive(Clone, Debug)]
@@ -61,6 +92,54 @@ pub struct BaSolution {
     pub exact_steps: usize,
     /// Products with the implicit reduced system in the conjugate-gradient steps.
     pub pcg_products: usize,
+    /// Wall time per phase.
+    pub timings: Timings,
+    /// Each iteration's step.
+    pub trace: Vec<Iteration>,
+}
+
+/// One Levenberg-Marquardt iteration, as [`BaSolution::trace`] records it.
+#[derive(Clone, Copy, Debug)]
+pub struct Iteration {
+    /// The candidate's robust cost (NaN: no candidate, the system was not positive
+    /// definite or a projection failed).
+    pub cost: f64,
+    /// The damping of the step.
+    pub lambda: f64,
+    /// Whether the step was solved exactly (reduced system formed and factored).
+    pub exact: bool,
+    /// Conjugate-gradient products tried for the step.
+    pub products: usize,
+    /// Whether the candidate was accepted.
+    pub accepted: bool,
+}
+
+/// Wall time (seconds) spent in each phase of [`solve_with`].
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Timings {
+    /// The problem's structure: keypoints by point, the reduced system's pattern and its
+    /// symbolic factorisation.
+    pub structure: f64,
+    /// Linearisations (every term projected, `U`, `V`, `W`, gradients).
+    pub linearise: f64,
+    /// Schur complements formed (`reduced`).
+    pub eliminate: f64,
+    /// Numeric Cholesky factorisations.
+    pub factor: f64,
+    /// Conjugate-gradient solves (products and preconditioning).
+    pub pcg: f64,
+    /// Back-substitutions, triangular solves of the exact steps and state updates.
+    pub back: f64,
+    /// The covariance's solves (its elimination and factorisation counted above).
+    pub covariance: f64,
+}
+
+/// Adds the wall time of `f` to `acc`.
+fn timed<T>(acc: &mut f64, f: impl FnOnce() -> T) -> T {
+    let t = std::time::Instant::now();
+    let out = f();
+    *acc += t.elapsed().as_secs_f64();
+    out
 }
 
 /// How each Levenberg-Marquardt step is solved.
@@ -69,8 +148,12 @@ pub enum Steps {
     /// Every step exactly: Schur complement formed, factored, solved.
     Exact,
     /// By conjugate gradients on the implicit reduced system, preconditioned with the
-    /// factor of the last exact step; exactly for the first step and whenever they do not
-    /// converge.
+    /// factor of the last exact step. Exact instead: the first step; the step after a
+    /// conjugate-gradient step that ran out of products (which is taken as it is: the
+    /// iterate still decreases the quadratic model; the next exact step refreshes the
+    /// stale preconditioner); the step after a rejection; and the step after one that
+    /// decreased the cost by less than the stop threshold, so the iterations always end
+    /// on an exact step, whose factor also gives the covariance.
     Inexact,
 }
 
@@ -105,8 +188,11 @@ impl Layout {
 struct Structure {
     lay: Layout,
     pat: BlockPattern,
-    /// Keypoints per point, points in processing order (`order[k]` is the point).
-    by_point: Vec<Vec<usize>>,
+    /// The keypoints `(keyframe, pixel)` of each point, points in processing order
+    /// (`order[k]` is the point), each point's sorted by keyframe: point `j`'s are
+    /// `keypoints[kp_ptr[j]..kp_ptr[j + 1]]` (one array read in order by the linearisation).
+    keypoints: Vec<(u32, Vector2<f64>)>,
+    kp_ptr: Vec<usize>,
     order: Vec<usize>,
     chunks: Vec<Range<usize>>,
     /// The `W` entries of point `j` (processing order), one per keyframe `>= 1` that sees
@@ -159,6 +245,14 @@ fn structure(p: &BaProblem<'_>, start: &BaState) -> Option<Structure> {
         b.mark(lay.cam(o.a), lay.cam(o.b));
     }
     let chunks = split(&by_point, rayon::current_num_threads().max(1));
+    let mut kp_ptr = vec![0];
+    let mut keypoints = Vec::with_capacity(p.vo.len());
+    for list in &by_point {
+        for &o in list {
+            keypoints.push((u32::try_from(p.vo[o].kf).ok()?, p.vo[o].uv));
+        }
+        kp_ptr.push(keypoints.len());
+    }
     let (mut w_ptr, mut w_block) = (vec![0], Vec::new());
     for list in &by_point {
         let first = w_block.len();
@@ -174,7 +268,8 @@ fn structure(p: &BaProblem<'_>, start: &BaState) -> Option<Structure> {
     Some(Structure {
         lay,
         pat,
-        by_point,
+        keypoints,
+        kp_ptr,
         order,
         chunks,
         w_ptr,
@@ -275,6 +370,9 @@ struct VoSums {
     count: usize,
 }
 
+/// A keyframe pose as `(R^T, t)`, the form its keypoints are projected with.
+type Frame = (Matrix3<f64>, Vector3<f64>);
+
 /// The per-point outputs of one range of points: `V`, `g_p` and the `W` entries.
 struct VoOut<'a> {
     v: &'a mut [Matrix3<f64>],
@@ -288,7 +386,7 @@ fn vo_part(
     p: &BaProblem<'_>,
     s: &BaState,
     st: &Structure,
-    r: Range<usize>,
+    (r, frames): (Range<usize>, &[Frame]),
     out: VoOut<'_>,
 ) -> Option<VoSums> {
     let nk = st.lay.kfs;
@@ -303,21 +401,44 @@ fn vo_part(
     for (local, j) in r.enumerate() {
         let (mut v, mut gp) = (Matrix3::zeros(), Vector3::zeros());
         let mut e = st.w_ptr[j];
-        for &o in &st.by_point[j] {
-            let (res, jp, jx, rho) = vo_term(p, s, &p.vo[o])?;
+        let x = &s.points[st.order[j]];
+        for (kf, uv) in &st.keypoints[st.kp_ptr[j]..st.kp_ptr[j + 1]] {
+            let kf = *kf as usize;
+            let (rt, t) = &frames[kf];
+            let (res, jp, jx, rho) = vo_term_from(p, (rt, t), x, uv)?;
             sums.cost += rho;
             sums.count += 2;
-            v += jx.transpose() * jx;
-            gp += jx.transpose() * res;
-            if let Some(a) = st.lay.kf(p.vo[o].kf) {
+            // The keyframe Jacobian's translation columns are `-jx` (`p = R^T (X - t)`),
+            // so its products reuse the point's: the same sums as the full `J_kf^T J_kf`,
+            // `J_kf^T J_point`, `J_kf^T r` with about half the multiplications.
+            let jtj = jx.transpose() * jx;
+            let jtr = jx.transpose() * res;
+            v += jtj;
+            gp += jtr;
+            if let Some(a) = st.lay.kf(kf) {
                 if st.w_block[e] != a {
                     e += 1;
                 }
-                out.w[e - base] += jp.transpose() * jx;
-                sums.diag[a] += jp.transpose() * jp;
-                let ga = jp.transpose() * res;
-                for k in 0..6 {
-                    sums.g[6 * a + k] += ga[k];
+                let jr = jp.fixed_view::<2, 3>(0, 0);
+                let cross = jr.transpose() * jx;
+                let w = &mut out.w[e - base];
+                let mut wr = w.fixed_view_mut::<3, 3>(0, 0);
+                wr += cross;
+                let mut wt = w.fixed_view_mut::<3, 3>(3, 0);
+                wt -= jtj;
+                let d = &mut sums.diag[a];
+                let mut drr = d.fixed_view_mut::<3, 3>(0, 0);
+                drr += jr.transpose() * jr;
+                let mut drt = d.fixed_view_mut::<3, 3>(0, 3);
+                drt -= cross;
+                let mut dtr = d.fixed_view_mut::<3, 3>(3, 0);
+                dtr -= cross.transpose();
+                let mut dtt = d.fixed_view_mut::<3, 3>(3, 3);
+                dtt += jtj;
+                let gr = jr.transpose() * res;
+                for k in 0..3 {
+                    sums.g[6 * a + k] += gr[k];
+                    sums.g[6 * a + 3 + k] -= jtr[k];
                 }
             }
         }
@@ -352,9 +473,17 @@ fn linearise_vo(
         ));
         (v, gp, w) = (v1, g1, w1);
     }
+    // `(R^T, t)` of each keyframe, shared by its keypoints.
+    let frames: Vec<Frame> =
+        s.kf.iter()
+            .map(|k| {
+                let rt = k.rotation.to_rotation_matrix().matrix().transpose();
+                (rt, k.translation.vector)
+            })
+            .collect();
     let parts: Vec<Option<VoSums>> = outs
         .into_par_iter()
-        .map(|(r, out)| vo_part(p, s, st, r, out))
+        .map(|(r, out)| vo_part(p, s, st, (r, &frames), out))
         .collect();
     for part in parts {
         let Some(part) = part else { return false };
@@ -701,6 +830,11 @@ struct Work {
     exact: usize,
     /// Products with the implicit reduced system (conjugate gradients).
     products: usize,
+    time: Timings,
+    /// The damping of the kept factor.
+    factor_lambda: f64,
+    /// Whether the last step was a conjugate-gradient iterate short of its tolerance.
+    truncated: bool,
 }
 
 impl Work {
@@ -718,6 +852,9 @@ impl Work {
             factor: None,
             exact: 0,
             products: 0,
+            time: Timings::default(),
+            factor_lambda: f64::NAN,
+            truncated: false,
         }
     }
 
@@ -792,26 +929,51 @@ fn reduced_step(
     (lin, w, st): (&Lin, &[Matrix6x3<f64>], &Structure),
     lambda: f64,
     work: &mut Work,
-    steps: Steps,
+    (steps, opts): (Steps, &Options),
 ) -> Option<Vec<f64>> {
+    work.truncated = false;
     if let (Steps::Inexact, Some(f)) = (steps, work.factor.as_ref()) {
+        let t = Instant::now();
         let implicit = pcg::Implicit::new(lin, w, st, lambda);
         let b = implicit.rhs();
-        let out = implicit.solve(&b, f, PCG_TOLERANCE, PCG_MAX_PRODUCTS);
+        let out = implicit.solve(&b, f, opts.pcg_tolerance, opts.pcg_max_products);
         work.products += out.products;
-        if out.d.is_some() {
-            return out.d;
+        work.time.pcg += t.elapsed().as_secs_f64();
+        match out.end {
+            pcg::End::Converged => return Some(out.x),
+            pcg::End::Limit => {
+                work.truncated = true;
+                return Some(out.x);
+            }
+            _ => {}
         }
     }
     work.exact += 1;
-    reduced(lin, w, st, lambda, work);
-    if !work.factor(&st.pat) {
+    work.factor_lambda = lambda;
+    if !eliminate_and_factor((lin, w, st), lambda, work) {
         return None;
     }
+    let t = Instant::now();
     let rhs = &work.rhs;
     let mut x = faer::Mat::from_fn(rhs.len(), 1, |i, _| -rhs[i]);
     st.pat.solve(work.factor.as_ref()?, &mut x);
+    work.time.back += t.elapsed().as_secs_f64();
     Some((0..rhs.len()).map(|i| x[(i, 0)]).collect())
+}
+
+/// [`reduced`] and [`Work::factor`], timed; false if not positive definite.
+fn eliminate_and_factor(
+    (lin, w, st): (&Lin, &[Matrix6x3<f64>], &Structure),
+    lambda: f64,
+    work: &mut Work,
+) -> bool {
+    let t = Instant::now();
+    reduced(lin, w, st, lambda, work);
+    let t1 = Instant::now();
+    let ok = work.factor(&st.pat);
+    work.time.eliminate += (t1 - t).as_secs_f64();
+    work.time.factor += t1.elapsed().as_secs_f64();
+    ok
 }
 
 /// One damped step: `None` when the reduced system is not positive definite.
@@ -819,12 +981,13 @@ fn step(
     (lin, w, st): (&Lin, &[Matrix6x3<f64>], &Structure),
     s: &BaState,
     lambda: f64,
-    (work, steps): (&mut Work, Steps),
+    (work, steps): (&mut Work, (Steps, &Options)),
 ) -> Option<BaState> {
     let d = reduced_step((lin, w, st), lambda, work, steps)?;
     if d.iter().any(|v| !v.is_finite()) {
         return None;
     }
+    let t = Instant::now();
     let dx: Vec<Vector3<f64>> = (0..s.points.len())
         .into_par_iter()
         .map(|j| {
@@ -836,90 +999,195 @@ fn step(
             -(damped_inverse(&lin.v[j], lambda) * acc)
         })
         .collect();
-    Some(apply(s, st, &d, &dx))
+    let out = apply(s, st, &d, &dx);
+    work.time.back += t.elapsed().as_secs_f64();
+    Some(out)
 }
 
-/// Runs Levenberg-Marquardt from `start`. Each iteration linearises once (the keypoint
-/// `W` blocks are cached for the Schur complement and the back-substitution); a rejected
-/// step linearises the kept state again, as the candidate's overwrote the cache.
-/// Every step is solved exactly ([`Steps::Inexact`] stopped 4e-6 above the exact steps'
-/// final cost on the full benchmark: the stop on a small relative decrease can fire after
-/// an inexact step; docs/benchmarks.md).
+/// Runs Levenberg-Marquardt from `start` with the default [`Options::new`]. Each
+/// iteration linearises once (the keypoint `W` blocks are cached for the Schur complement
+/// and the back-substitution); a rejected step linearises the kept state again, as the
+/// candidate's overwrote the cache.
 pub fn solve(p: &BaProblem<'_>, start: BaState, max_iterations: usize) -> Option<BaSolution> {
-    solve_with(p, start, max_iterations, Steps::Exact)
+    solve_with(p, start, Options::new(max_iterations))
 }
 
-/// [`solve`] with the choice of how the steps are solved.
-pub fn solve_with(
-    p: &BaProblem<'_>,
-    start: BaState,
-    max_iterations: usize,
-    steps: Steps,
-) -> Option<BaSolution> {
+/// Relative cost decrease below which the iterations stop (after an exact step).
+const STOP_DECREASE: f64 = 1e-7;
+
+/// [`solve`] with the choice of how the steps are solved (see [`Steps::Inexact`] for
+/// when a step is exact).
+pub fn solve_with(p: &BaProblem<'_>, start: BaState, opts: Options) -> Option<BaSolution> {
+    let t = Instant::now();
     let st = structure(p, &start)?;
+    let structure_time = t.elapsed().as_secs_f64();
     let mut w = vec![Matrix6x3::zeros(); st.w_block.len()];
-    let mut work = Work::new(&st);
-    let mut s = start;
-    let mut n = linearise(p, &s, &st, &mut w, None)?;
-    let mut spare = None;
+    let mut lin_time = 0.0;
+    // The symbolic factorisation (~1 s single-threaded at the benchmark size) beside the
+    // first linearisation.
+    let (_, n) = rayon::join(
+        || st.pat.analyse(),
+        || timed(&mut lin_time, || linearise(p, &start, &st, &mut w, None)),
+    );
+    let n = n?;
     let initial_cost = n.cost;
-    let (mut lambda, mut iterations, mut rejected) = (1e-4, 0, 0);
-    while iterations < max_iterations {
-        iterations += 1;
-        let Some(c) = step((&n, &w, &st), &s, lambda, (&mut work, steps)) else {
-            rejected += 1;
-            lambda *= 10.0;
-            if lambda > 1e6 {
-                break;
-            }
-            continue;
-        };
-        match linearise(p, &c, &st, &mut w, spare.take()) {
-            Some(m) if m.cost < n.cost => {
-                let done = n.cost - m.cost < 1e-7 * n.cost;
-                s = c;
-                spare = Some(std::mem::replace(&mut n, m));
-                lambda = (lambda * 0.2).max(1e-10);
-                if done {
-                    break;
-                }
-            }
-            candidate => {
-                rejected += 1;
-                n = linearise(p, &s, &st, &mut w, candidate)?;
-                lambda *= 10.0;
-                if lambda > 1e6 {
-                    break;
-                }
-            }
-        }
-    }
+    let mut lm = Lm {
+        p,
+        st: &st,
+        w,
+        work: Work::new(&st),
+        s: start,
+        n,
+        spare: None,
+        lambda: 1e-4,
+        rejected: 0,
+        trace: Vec::new(),
+        force_exact: false,
+        lin_time,
+    };
+    let converged = lm.run(&opts)?;
+    let Lm {
+        s, n, w, mut work, ..
+    } = lm;
     let unknowns = 6 * st.lay.blocks() + 3 * s.points.len();
     let variance_factor = (n.cost / n.count.saturating_sub(unknowns).max(1) as f64).max(1e-12);
-    let camera_covariances = covariances((&n, &w, &st), variance_factor, &mut work)?;
+    let camera_covariances = covariances((&n, &w, &st), variance_factor, &mut work, converged)?;
     Some(BaSolution {
         state: s,
         camera_covariances,
         initial_cost,
         final_cost: n.cost,
-        iterations,
-        rejected,
+        iterations: lm.trace.len(),
+        rejected: lm.rejected,
         variance_factor,
         exact_steps: work.exact,
         pcg_products: work.products,
+        timings: Timings {
+            structure: structure_time,
+            linearise: lm.lin_time,
+            ..work.time
+        },
+        trace: lm.trace,
     })
 }
 
-/// Camera blocks of the inverse reduced (undamped) system.
+/// The Levenberg-Marquardt iterations' state: the current state `s` and its
+/// linearisation `n` (with the cached `W` entries `w`), a spare linearisation's buffers.
+struct Lm<'a> {
+    p: &'a BaProblem<'a>,
+    st: &'a Structure,
+    w: Vec<Matrix6x3<f64>>,
+    work: Work,
+    s: BaState,
+    n: Lin,
+    spare: Option<Lin>,
+    lambda: f64,
+    rejected: usize,
+    trace: Vec<Iteration>,
+    /// Whether the next step is exact whatever the options say.
+    force_exact: bool,
+    lin_time: f64,
+}
+
+impl Lm<'_> {
+    /// Iterates until the cost stalls after an exact step (`Some(true)`), the damping
+    /// runs away or the iterations run out (`Some(false)`); `None` when the kept state
+    /// no longer projects.
+    fn run(&mut self, opts: &Options) -> Option<bool> {
+        while self.trace.len() < opts.max_iterations {
+            let kind = if self.force_exact {
+                Steps::Exact
+            } else {
+                opts.steps
+            };
+            let (exact0, products0) = (self.work.exact, self.work.products);
+            let c = step(
+                (&self.n, &self.w, self.st),
+                &self.s,
+                self.lambda,
+                (&mut self.work, (kind, opts)),
+            );
+            let exact = self.work.exact > exact0;
+            self.trace.push(Iteration {
+                cost: f64::NAN,
+                lambda: self.lambda,
+                exact,
+                products: self.work.products - products0,
+                accepted: false,
+            });
+            let Some(c) = c else {
+                // Not positive definite: the cache is intact.
+                if self.reject() {
+                    return Some(false);
+                }
+                continue;
+            };
+            let (p, st, spare) = (self.p, self.st, self.spare.take());
+            let m = timed(&mut self.lin_time, || {
+                linearise(p, &c, st, &mut self.w, spare)
+            });
+            match m {
+                Some(m) if m.cost < self.n.cost => {
+                    if self.accept(c, m, exact) {
+                        return Some(true);
+                    }
+                }
+                candidate => {
+                    if let (Some(m), Some(t)) = (&candidate, self.trace.last_mut()) {
+                        t.cost = m.cost;
+                    }
+                    // The candidate's linearisation overwrote the cached `W` entries.
+                    let s = &self.s;
+                    self.n = timed(&mut self.lin_time, || {
+                        linearise(p, s, st, &mut self.w, candidate)
+                    })?;
+                    if self.reject() {
+                        return Some(false);
+                    }
+                }
+            }
+        }
+        Some(false)
+    }
+
+    /// Takes the candidate `c` (linearised as `m`); true when the iterations stop there.
+    fn accept(&mut self, c: BaState, m: Lin, exact: bool) -> bool {
+        let t = self.trace.last_mut().expect("pushed by run");
+        (t.cost, t.accepted) = (m.cost, true);
+        let small = self.n.cost - m.cost < STOP_DECREASE * self.n.cost;
+        self.s = c;
+        self.spare = Some(std::mem::replace(&mut self.n, m));
+        self.lambda = (self.lambda * 0.2).max(1e-10);
+        self.force_exact = self.work.truncated || small;
+        small && exact
+    }
+
+    /// Counts a rejected step and raises the damping; true when it ran away.
+    fn reject(&mut self) -> bool {
+        self.rejected += 1;
+        (self.lambda, self.force_exact) = (self.lambda * 10.0, true);
+        self.lambda > 1e6
+    }
+}
+
+/// Damping up to which the factor of the last exact step serves the covariance.
+const COVARIANCE_REUSE_LAMBDA: f64 = 1e-6;
+
+/// Camera blocks of the inverse reduced system. When the iterations `converged` (the
+/// last step was exact and moved the cost by less than [`STOP_DECREASE`]) with little
+/// damping, from that step's factor (the system one step before the end, which changed
+/// the cost by under 1e-7 of itself); otherwise from the undamped system at the end.
 fn covariances(
     (n, w, st): (&Lin, &[Matrix6x3<f64>], &Structure),
     factor: f64,
     work: &mut Work,
+    converged: bool,
 ) -> Option<Vec<Matrix6<f64>>> {
-    reduced(n, w, st, 0.0, work);
-    if !work.factor(&st.pat) {
+    let reuse = converged && work.factor_lambda <= COVARIANCE_REUSE_LAMBDA;
+    if !reuse && !eliminate_and_factor((n, w, st), 0.0, work) {
         return None;
     }
+    let t = Instant::now();
     let dim = 6 * st.lay.blocks();
     let first = 6 * st.lay.cam(0);
     let mut x = faer::Mat::from_fn(
@@ -934,6 +1202,7 @@ fn covariances(
         },
     );
     st.pat.solve(work.factor.as_ref()?, &mut x);
+    work.time.covariance += t.elapsed().as_secs_f64();
     Some(
         (0..st.lay.cams)
             .map(|c| Matrix6::from_fn(|i, j| x[(first + 6 * c + i, 6 * c + j)] * factor))

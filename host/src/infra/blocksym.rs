@@ -7,7 +7,9 @@
 //! and with the blocks in their own order, and the one with the smaller factor is kept.
 //! The bundle adjustment numbers its blocks keyframe by keyframe in time, then the
 //! cameras: a band (plus the loop closure's border), for which that order gives a factor
-//! of less than half the entries of the minimum-degree one (docs/benchmarks.md).
+//! of less than half the entries of the minimum-degree one (docs/benchmarks.md). The
+//! analysis runs on first use ([`BlockPattern::analyse`] may start it early, e.g. beside
+//! other work), so building a pattern is cheap.
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
@@ -17,12 +19,15 @@ use faer::sparse::linalg::cholesky::{
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::Conj;
 use nalgebra::Matrix6;
+use std::sync::OnceLock;
 
 /// Collects the block pairs of a pattern (a bit per block pair).
 pub struct PatternBuilder {
     nb: usize,
     words: usize,
     bits: Vec<u64>,
+    /// Scratch of [`Self::mark_all`]: the marked set as bits.
+    set: Vec<u64>,
 }
 
 impl PatternBuilder {
@@ -33,6 +38,7 @@ impl PatternBuilder {
             nb,
             words,
             bits: vec![0; nb * words],
+            set: Vec::new(),
         };
         for k in 0..nb {
             b.mark(k, k);
@@ -48,14 +54,29 @@ impl PatternBuilder {
 
     /// Marks every pair of `blocks`.
     pub fn mark_all(&mut self, blocks: &[usize]) {
-        for (i, &a) in blocks.iter().enumerate() {
-            for &b in &blocks[i..] {
-                self.mark(a, b);
+        let (Some(&lo), Some(&hi)) = (blocks.iter().min(), blocks.iter().max()) else {
+            return;
+        };
+        // Row `a` receives every member `c >= a`: the set's words from `a`'s on, a word at a
+        // time (a bundle adjustment point's keyframes span a few words, so this is linear
+        // in the members instead of quadratic).
+        let (lo, hi) = (lo / 64, hi / 64);
+        self.set.clear();
+        self.set.resize(hi - lo + 1, 0);
+        for &b in blocks {
+            self.set[b / 64 - lo] |= 1 << (b % 64);
+        }
+        for &a in blocks {
+            let first = a / 64;
+            let row = &mut self.bits[a * self.words + first..a * self.words + hi + 1];
+            for (k, (word, &m)) in row.iter_mut().zip(&self.set[first - lo..]).enumerate() {
+                *word |= if k == 0 { m & (!0u64 << (a % 64)) } else { m };
             }
         }
     }
 
-    /// The pattern, with its symbolic Cholesky factorisation; `None` if faer refuses it.
+    /// The pattern (its symbolic Cholesky factorisation follows on first use); `None` if
+    /// faer refuses it.
     pub fn finish(self) -> Option<BlockPattern> {
         let mut row_ptr = vec![0usize];
         let mut cols = Vec::new();
@@ -84,7 +105,8 @@ pub struct BlockPattern {
     row_idx: Vec<usize>,
     /// Per CSC entry: `36 * slot + i + 6 * j` into the column-major blocks.
     src: Vec<usize>,
-    symbolic: SymbolicCholesky<usize>,
+    /// The symbolic factorisation, `None` inside if faer refused both orderings.
+    symbolic: OnceLock<Option<SymbolicCholesky<usize>>>,
 }
 
 /// A numeric Cholesky factor of a [`BlockPattern`] matrix; its buffers are reused by
@@ -120,16 +142,7 @@ impl BlockPattern {
             }
         }
         let n = 6 * nb;
-        let sym = SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &row_idx);
-        let analyse =
-            |ord| factorize_symbolic_cholesky(sym, faer::Side::Upper, ord, Default::default()).ok();
-        let own = analyse(SymmetricOrdering::Identity)?;
-        let amd = analyse(SymmetricOrdering::Amd)?;
-        let symbolic = if amd.len_val() < own.len_val() {
-            amd
-        } else {
-            own
-        };
+        SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &row_idx);
         Some(Self {
             nb,
             row_ptr,
@@ -137,8 +150,32 @@ impl BlockPattern {
             col_ptr,
             row_idx,
             src,
-            symbolic,
+            symbolic: OnceLock::new(),
         })
+    }
+
+    /// The symbolic factorisation in the ordering with the smaller factor, computed on the
+    /// first call; `None` if faer refuses both orderings.
+    pub fn analyse(&self) -> Option<&SymbolicCholesky<usize>> {
+        self.symbolic
+            .get_or_init(|| {
+                let n = 6 * self.nb;
+                let sym =
+                    SymbolicSparseColMatRef::new_checked(n, n, &self.col_ptr, None, &self.row_idx);
+                let analyse = |ord| {
+                    factorize_symbolic_cholesky(sym, faer::Side::Upper, ord, Default::default())
+                        .ok()
+                };
+                match (
+                    analyse(SymmetricOrdering::Identity),
+                    analyse(SymmetricOrdering::Amd),
+                ) {
+                    (Some(own), Some(amd)) if amd.len_val() < own.len_val() => Some(amd),
+                    (Some(own), _) => Some(own),
+                    (None, amd) => amd,
+                }
+            })
+            .as_ref()
     }
 
     /// Number of block rows.
@@ -167,19 +204,19 @@ impl BlockPattern {
 
     /// Entries of the Cholesky factor (the chosen ordering's fill included).
     pub fn factor_len(&self) -> usize {
-        self.symbolic.len_val()
+        self.analyse().map_or(0, |s| s.len_val())
     }
 
     /// Cholesky factor of the matrix whose upper blocks are `blocks` (one per slot);
     /// `None` when it is not positive definite.
     pub fn factor(&self, blocks: &[Matrix6<f64>]) -> Option<Factor> {
         let par = faer::get_global_parallelism();
-        let scratch = self
-            .symbolic
+        let symbolic = self.analyse()?;
+        let scratch = symbolic
             .factorize_numeric_llt_scratch::<f64>(par, Default::default())
-            .or(self.symbolic.solve_in_place_scratch::<f64>(1, par));
+            .or(symbolic.solve_in_place_scratch::<f64>(1, par));
         let mut f = Factor {
-            l: vec![0.0; self.symbolic.len_val()],
+            l: vec![0.0; symbolic.len_val()],
             vals: vec![0.0; self.src.len()],
             scratch: MemBuffer::try_new(scratch).ok()?,
         };
@@ -189,13 +226,16 @@ impl BlockPattern {
     /// [`Self::factor`] into the buffers of an earlier factor `f` of this pattern; false
     /// (and `f` unusable until the next success) when the matrix is not positive definite.
     pub fn refactor(&self, blocks: &[Matrix6<f64>], f: &mut Factor) -> bool {
+        let Some(symbolic) = self.analyse() else {
+            return false;
+        };
         for (v, &k) in f.vals.iter_mut().zip(&self.src) {
             *v = blocks[k / 36].as_slice()[k % 36];
         }
         let n = 6 * self.nb;
         let sym = SymbolicSparseColMatRef::new_checked(n, n, &self.col_ptr, None, &self.row_idx);
         let mat = SparseColMatRef::new(sym, &f.vals);
-        self.symbolic
+        symbolic
             .factorize_numeric_llt(
                 &mut f.l,
                 mat,
@@ -210,10 +250,14 @@ impl BlockPattern {
 
     /// Solves `A x = b` in place for the columns of `b`, `f` the factor of `A`.
     pub fn solve(&self, f: &Factor, b: &mut faer::Mat<f64>) {
+        // A factor exists only once the analysis succeeded.
+        let Some(symbolic) = self.analyse() else {
+            return;
+        };
         let par = faer::get_global_parallelism();
-        let req = self.symbolic.solve_in_place_scratch::<f64>(b.ncols(), par);
+        let req = symbolic.solve_in_place_scratch::<f64>(b.ncols(), par);
         let mut buf = MemBuffer::new(req);
-        LltRef::new(&self.symbolic, &f.l).solve_in_place_with_conj(
+        LltRef::new(symbolic, &f.l).solve_in_place_with_conj(
             Conj::No,
             b.as_mut(),
             par,
@@ -225,6 +269,33 @@ impl BlockPattern {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The word-at-a-time `mark_all` against marking every pair of the list.
+    #[test]
+    fn mark_all_marks_every_pair() {
+        let nb = 300;
+        let (mut fast, mut pairs) = (PatternBuilder::new(nb), PatternBuilder::new(nb));
+        let mut seed = 7u64;
+        let mut next = |n: usize| {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 33) as usize % n
+        };
+        for _ in 0..200 {
+            let (start, len) = (next(nb), 1 + next(90));
+            let mut list: Vec<usize> = (0..len).map(|_| (start + next(150)).min(nb - 1)).collect();
+            list.push(next(nb));
+            fast.mark_all(&list);
+            for &a in &list {
+                for &b in &list {
+                    pairs.mark(a, b);
+                }
+            }
+        }
+        assert_eq!(fast.bits, pairs.bits);
+        assert!(fast.bits.iter().map(|w| w.count_ones()).sum::<u32>() > 10 * nb as u32);
+    }
     use nalgebra::DMatrix;
 
     /// A random symmetric positive definite block matrix with a sparse pattern: the

@@ -22,9 +22,21 @@ pub(super) struct Implicit<'a> {
 }
 
 /// How a conjugate-gradient solve ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum End {
+    /// The residual reached the tolerance.
+    Converged,
+    /// The product limit came first.
+    Limit,
+    /// `p^T S p` was not positive (or not finite).
+    Breakdown,
+}
+
+/// The outcome of a conjugate-gradient solve.
 pub(super) struct PcgOutcome {
-    /// The step of the reduced unknowns (`None`: no convergence within the limit).
-    pub d: Option<Vec<f64>>,
+    /// The last iterate (the step of the reduced unknowns when converged).
+    pub x: Vec<f64>,
+    pub end: End,
     /// Products with `S` used.
     pub products: usize,
 }
@@ -153,7 +165,11 @@ impl<'a> Implicit<'a> {
             let q = self.apply(&p);
             let pq = dot(&p, &q);
             if !(pq > 0.0 && rz.is_finite()) {
-                break;
+                return PcgOutcome {
+                    x,
+                    end: End::Breakdown,
+                    products,
+                };
             }
             let alpha = rz / pq;
             for i in 0..x.len() {
@@ -162,7 +178,8 @@ impl<'a> Implicit<'a> {
             }
             if dot(&r, &r).sqrt() <= goal {
                 return PcgOutcome {
-                    d: Some(x),
+                    x,
+                    end: End::Converged,
                     products,
                 };
             }
@@ -175,7 +192,8 @@ impl<'a> Implicit<'a> {
             }
         }
         PcgOutcome {
-            d: None,
+            x,
+            end: End::Limit,
             products: max_products,
         }
     }
