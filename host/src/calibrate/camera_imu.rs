@@ -220,7 +220,7 @@ pub(crate) fn motion_calibration<T: Scalar>(
         .pixel_sigma
         .unwrap_or_else(|| pixel_sigma_from_pnp(poses));
     let odometry: Vec<PoseRecord> = poses.iter().map(camera_in_target).collect();
-    let noise = increment_noise(poses, pixel_sigma);
+    let noise = increment_noise(poses, MIN_PIXEL_SIGMA);
     let motion = pose_imu::calibrate::<T>(
         &pose_imu::PoseImuInput {
             imu: input.imu,

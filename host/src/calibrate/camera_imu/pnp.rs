@@ -86,20 +86,22 @@ pub(crate) fn frame_pixel_sigma(pose: &FramePose) -> Option<f64> {
 
 /// MoCal's odometry noise per increment: two independent PnP poses, each with the median
 /// of the frames' largest per-axis sigma of `T_T_C`. Each PnP covariance is
-/// `own^2 (J^T J)^-1` with the frame's own residual sigma; it is rescaled to the corner noise
-/// RepErrCal assumes for that frame, `max(pixel_sigma, own)`. Without that, exact corners
-/// (the simulator's truth, `own` ~ 1e-3 px) made MoCal's odometry noise ~50x too small:
-/// MoCal then locked onto its first IMU-noise-biased estimate and RepErrCal's prior around
-/// it held the result 0.10 deg / 1.2 mm off, four times outside its 3 sigma (seed 11,
-/// AprilGrid; docs/aprilgrid.md).
-pub(crate) fn increment_noise(poses: &[FramePose], pixel_sigma: f64) -> PoseSensorYaml {
+/// `own^2 (J^T J)^-1` with the frame's own residual sigma; it is rescaled to
+/// `max(floor, own)`, `floor` the smallest corner noise any image is credited with. Without
+/// that, exact corners (the simulator's truth, `own` ~ 1e-3 px) made MoCal's odometry noise
+/// ~50x too small: MoCal then locked onto its first IMU-noise-biased estimate and RepErrCal's
+/// prior around it held the result 0.10 deg / 1.2 mm off, four times outside its 3 sigma
+/// (seed 11, AprilGrid; docs/aprilgrid.md). A floor at the recording's median instead
+/// widened the sharper half of EuRoC's images and took MoCal from 33 to 58 mm off Kalibr
+/// (docs/camera_imu.md).
+pub(crate) fn increment_noise(poses: &[FramePose], floor: f64) -> PoseSensorYaml {
     let mut rotation = Vec::with_capacity(poses.len());
     let mut translation = Vec::with_capacity(poses.len());
     for p in poses {
         let Some(own) = frame_pixel_sigma(p).filter(|s| *s > 0.0) else {
             continue;
         };
-        let scale = (pixel_sigma.max(own) / own).powi(2);
+        let scale = (floor.max(own) / own).powi(2);
         let t_c_t = convert::isometry(&p.pnp.t_cam_target);
         let (_, cov) = invert_with_covariance(&t_c_t, &(p.pnp.covariance * scale));
         let max_sd = |b: usize| {
