@@ -149,7 +149,10 @@ fn nees_by_factor() {
             .collect()
     });
     let (lo, hi) = chi_square_band(6.0 * seeds.len() as f64);
-    for rate in rates {
+    // The nominal variants (at rest, moving) pooled over the rates: a consistent filter
+    // keeps each pooled sum inside chi-square(6 x seeds x rates)'s 95 % band.
+    let mut pooled = [0.0; 2];
+    for &rate in &rates {
         let runs: Vec<Vec<Run>> = par_map(&seeds, |seed| {
             VARIANTS.iter().map(|v| run(seed, rate, *v)).collect()
         });
@@ -175,6 +178,11 @@ fn nees_by_factor() {
                 trans += block(3);
                 z2 += (r.offset_error_s / r.offset_sigma_s).powi(2);
             }
+            match v.label {
+                "nominal" => pooled[0] += total,
+                "nominal, cut at peak motion" => pooled[1] += total,
+                _ => {}
+            }
             let seeds_txt: Vec<String> = per_seed.iter().map(|n| format!("{n:.1}")).collect();
             println!(
                 "  {:<34} NEES sum {total:6.1} (rotation {rot:6.1}, translation {trans:6.1}), \
@@ -183,5 +191,16 @@ fn nees_by_factor() {
                 seeds_txt.join(", ")
             );
         }
+    }
+    let (lo, hi) = chi_square_band(6.0 * (seeds.len() * rates.len()) as f64);
+    println!(
+        "pooled nominal NEES: at rest {:.1}, moving {:.1} (band {lo:.1}-{hi:.1})",
+        pooled[0], pooled[1]
+    );
+    for sum in pooled {
+        assert!(
+            (lo..=hi).contains(&sum),
+            "pooled NEES {sum:.1} outside {lo:.1}-{hi:.1}"
+        );
     }
 }
