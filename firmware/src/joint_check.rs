@@ -148,7 +148,8 @@ fn print_sensor(name: &str, r: &SensorResult, true_offset: f32) {
     let n = &r.normalized;
     hprintln!(
         "{} error: rotation {:.3} -> {:.3} deg, translation {:.4} -> {:.4} m; error / sigma \
-         ({:.2}, {:.2}, {:.2}, {:.2}, {:.2}, {:.2}); t_d {:.3} ms (truth {:.3}, error / sigma {:.2})",
+         ({:.2}, {:.2}, {:.2}, {:.2}, {:.2}, {:.2}), NEES {:.2} (6 dof); t_d {:.3} ms (truth {:.3}, \
+         error / sigma {:.2})",
         name,
         r.initial_error.rotation.to_degrees(),
         r.final_error.rotation.to_degrees(),
@@ -160,6 +161,7 @@ fn print_sensor(name: &str, r: &SensorResult, true_offset: f32) {
         n[3],
         n[4],
         n[5],
+        r.nees,
         r.time_offset * 1e3,
         true_offset * 1e3,
         r.time_offset_normalized

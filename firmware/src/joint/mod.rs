@@ -95,15 +95,13 @@ fn assess(
     }
 }
 
-/// Largest `|error| / sigma` the consistency checks allow: 3 sigma per axis.
-pub const MAX_NORMALIZED: f32 = 3.0;
 /// Convergence: final errors at most this fraction of the prior's (as the pose self-test).
 pub const MAX_ERROR_FRACTION: f32 = 0.25;
 
 /// Named pass/fail checks of a [`JointReport`].
 pub struct JointChecks {
     /// `(name, passed)` per check.
-    pub items: [(&'static str, bool); 7],
+    pub items: [(&'static str, bool); 6],
 }
 
 impl JointChecks {
@@ -116,11 +114,6 @@ impl JointChecks {
 fn converged(r: &SensorResult) -> bool {
     r.final_error.rotation <= MAX_ERROR_FRACTION * r.initial_error.rotation
         && r.final_error.translation <= MAX_ERROR_FRACTION * r.initial_error.translation
-}
-
-fn consistent(r: &SensorResult) -> bool {
-    r.normalized.iter().all(|e| e.abs() <= MAX_NORMALIZED)
-        && r.time_offset_normalized.abs() <= MAX_NORMALIZED
 }
 
 impl JointReport {
@@ -157,13 +150,12 @@ impl JointReport {
                     "camera extrinsic errors at most a quarter of the prior's",
                     converged(&self.camera),
                 ),
-                // The camera and the board are reported, not checked, against 3 sigma:
-                // from the 3 deg camera prior they end over-confident (docs/firmware.md,
-                // "Joint layout"), an open finding for the estimator.
-                (
-                    "LiDAR extrinsic and time offset inside 3 sigma per axis",
-                    consistent(&self.lidar),
-                ),
+                // Both extrinsics and the board are reported, not checked, against their
+                // sigmas: one draw cannot tell a consistent filter (the relinearising image
+                // update this replaced passed a LiDAR 3-sigma check here while 25 of 40 noise
+                // seeds failed it). hil-tests/tests/joint_consistency.rs runs these modules
+                // over 40 seeds on the host; what is left from the 3 deg camera prior is an
+                // open finding (docs/firmware.md, "Joint layout: consistency over 40 seeds").
                 (
                     "joint covariance symmetric, finite, positive diagonal; board estimated",
                     self.covariance.passed() && board_finite,

@@ -6,7 +6,7 @@ use core::mem::MaybeUninit;
 
 use msreg_estimator::camera::Camera;
 use msreg_estimator::lie;
-use msreg_estimator::na::{Vector3, Vector6};
+use msreg_estimator::na::{Cholesky, Matrix6, Vector3, Vector6};
 use msreg_estimator::state::imu;
 use msreg_estimator::update::board_plane::BoardPlane;
 use msreg_estimator::{
@@ -316,6 +316,9 @@ pub struct SensorResult {
     pub final_error: ExtrinsicError,
     /// Error per axis divided by its 1-sigma (rotation x, y, z; translation x, y, z).
     pub normalized: Vector6<f32>,
+    /// NEES of the 6-dof extrinsic error over the extrinsic's covariance (NaN when that
+    /// covariance is not positive definite).
+    pub nees: f32,
     /// Estimated time offset, s.
     pub time_offset: f32,
     /// Its error against the truth divided by its 1-sigma.
@@ -333,6 +336,15 @@ fn normalized_error(estimate: &Pose<f32>, truth: &Pose<f32>, sigma: &Vector6<f32
         e[k + 3] = d_trans[k] / sigma[k + 3];
     }
     e
+}
+
+/// `e^T P^-1 e` of the extrinsic error `e` (as [`normalized_error`]) over its 6 x 6
+/// covariance `cov`; NaN when `cov` is not positive definite.
+fn extrinsic_nees(estimate: &Pose<f32>, truth: &Pose<f32>, cov: &Matrix6<f32>) -> f32 {
+    let d_rot = lie::log(&(estimate.rotation.inverse() * truth.rotation));
+    let d_trans = truth.translation - estimate.translation;
+    let e = Vector6::new(d_rot.x, d_rot.y, d_rot.z, d_trans.x, d_trans.y, d_trans.z);
+    Cholesky::new(*cov).map_or(f32::NAN, |c| e.dot(&c.solve(&e)))
 }
 
 /// Sensor `s`'s result at the end of the run.
@@ -353,6 +365,7 @@ pub fn sensor_result(filter: &JointFilter, config: &JointConfig, s: usize) -> Se
         initial_error: ExtrinsicError::between(&prior(config, s), &truth),
         final_error: ExtrinsicError::between(&estimate, &truth),
         normalized: normalized_error(&estimate, &truth, &sigma),
+        nees: extrinsic_nees(&estimate, &truth, &filter.extrinsic_covariance(s)),
         time_offset,
         time_offset_normalized: (time_offset - true_offset) / filter.time_offset_sigma(s),
     }
@@ -366,6 +379,18 @@ pub fn board_normalized(filter: &JointFilter, config: &JointConfig) -> Option<Ve
     let cov = filter.frame_covariance(BOARD_FRAME);
     let sigma = Vector6::from_fn(|k, _| libm::sqrtf(cov[(k, k)].max(0.0)));
     Some(normalized_error(&estimate, &truth, &sigma))
+}
+
+/// NEES of the board pose's 6-dof error over its covariance.
+pub fn board_nees(filter: &JointFilter, config: &JointConfig) -> Option<f32> {
+    let estimate = filter.frame(BOARD_FRAME)?;
+    let t = config.t_g_t;
+    let truth = Pose::new(t.rotation, t.translation.vector);
+    Some(extrinsic_nees(
+        &estimate,
+        &truth,
+        &filter.frame_covariance(BOARD_FRAME),
+    ))
 }
 
 /// Covariance health over the whole joint state: positive diagonal on the IMU, both
