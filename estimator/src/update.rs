@@ -3,6 +3,7 @@
 //! update, NIS record).
 
 pub mod board_plane;
+pub mod compress;
 pub mod relative_pose;
 pub mod reprojection;
 mod sparse;

@@ -207,14 +207,6 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         Ok(())
     }
 
-    /// Injects an error-state correction `dx` whose covariance update has already been
-    /// applied (several rows fused against one linearisation point) into the nominal state.
-    pub(super) fn inject(&mut self, dx: &SVector<T, N>) -> Result<(), Error> {
-        let corrected = self.corrected(dx)?;
-        self.commit(corrected);
-        Ok(())
-    }
-
     /// Records an update's NIS `(nis, dof, threshold)` with the health monitor of its
     /// sensor (none for a sensor-less update), reacts to what it detects, and builds the
     /// report.

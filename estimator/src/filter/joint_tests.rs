@@ -327,3 +327,132 @@ fn f32_follows_f64_through_a_joint_sequence() {
     }
     assert!((td64 - f64::from(td32)).abs() < 1e-6);
 }
+
+/// The corners of [`corners_seen`] with a deterministic per-corner disturbance of about
+/// `px` pixels (so the image is not explained exactly by any state).
+fn corners_disturbed<T: Scalar>(ekf: &JointEkf<f64>, px: f64) -> [CornerObservation<T>; 30] {
+    let seen = corners_seen(ekf);
+    core::array::from_fn(|k| {
+        let d = Vector2::new((k as f64 * 1.7).sin(), (k as f64 * 2.3).cos()) * px;
+        CornerObservation {
+            point_in_target: seen[k].point_in_target.map(T::lit),
+            pixel: (seen[k].pixel + d).map(T::lit),
+        }
+    })
+}
+
+/// The textbook update of the image's stacked rows (all 30 corners, 60 x 19 Jacobian, one
+/// linearisation point) in f64: the filter after it and its NIS.
+fn stacked_update(ekf: &JointEkf<f64>, obs: &[CornerObservation<f64>; 30]) -> (JointEkf<f64>, f64) {
+    let mut e = at_measurement(ekf, CAMERA);
+    e.flush_transition();
+    let gyro = e.imu_now.expect("imu").gyro;
+    let mut values = SMatrix::<f64, 60, 19>::zeros();
+    let mut residual = SVector::<f64, 60>::zeros();
+    let mut columns = [0; 19];
+    for (k, corner) in obs.iter().enumerate() {
+        let lin = crate::update::reprojection::linearize(
+            &camera(),
+            &e.imu().pose(),
+            &e.extrinsic(CAMERA),
+            &e.frame(0).expect("frame"),
+            &corner.point_in_target,
+            &corner.pixel,
+        )
+        .expect("in view");
+        let h = e.reprojection_jacobian(CAMERA, 0, &lin, &gyro);
+        columns = h.columns;
+        values.fixed_rows_mut::<2>(2 * k).copy_from(&h.values);
+        residual.fixed_rows_mut::<2>(2 * k).copy_from(&lin.residual);
+    }
+    let meas = crate::update::Measurement {
+        residual,
+        jacobian: crate::update::SparseJacobian { columns, values },
+        noise: SMatrix::<f64, 60, 60>::identity() * 0.25,
+    };
+    let gain = crate::update::Gain::compute(&e.cov, &meas, f64::INFINITY, &[]).expect("gain");
+    e.correct(&gain).expect("correct");
+    (e, gain.nis)
+}
+
+#[test]
+fn compressed_image_update_equals_the_stacked_update() {
+    // Given the joint filter and an image of 30 corners, each disturbed by ~0.4 px
+    let ekf = joint_filter(0.001f64);
+    let obs = corners_disturbed::<f64>(&ekf, 0.4);
+    // When it is fused compressed (60 rows folded into 19) and, for reference, stacked
+    let mut compressed = ekf.clone();
+    let corners = CornerSet {
+        stamp_ns: STAMP,
+        corners: &obs,
+        pixel_sigma: 0.5,
+    };
+    let report = compressed
+        .update_reprojection(CAMERA, 0, &camera(), &corners)
+        .expect("corners");
+    let (stacked, nis) = stacked_update(&ekf, &obs);
+    // Then NIS, dof, state and covariance agree to rounding
+    assert!(report.accepted);
+    assert_eq!(report.dof, 60);
+    assert!(
+        (report.nis - nis).abs() < 1e-9 * nis,
+        "{} vs {nis}",
+        report.nis
+    );
+    let p = stacked.covariance();
+    let dp = (compressed.covariance() - p).amax() / p.amax();
+    assert!(
+        dp < 1e-12,
+        "covariance differs by {dp:e} of its largest entry"
+    );
+    for s in [LIDAR, CAMERA] {
+        let (a, b) = (compressed.extrinsic(s), stacked.extrinsic(s));
+        assert!(a.rotation.angle_to(&b.rotation) < 1e-13);
+        assert!((a.translation - b.translation).norm() < 1e-13);
+        assert!((compressed.time_offset(s) - stacked.time_offset(s)).abs() < 1e-15);
+    }
+    let (a, b) = (
+        compressed.frame(0).expect("f"),
+        stacked.frame(0).expect("f"),
+    );
+    assert!(a.rotation.angle_to(&b.rotation) < 1e-13);
+    assert!((a.translation - b.translation).norm() < 1e-13);
+    assert!((compressed.imu().position - stacked.imu().position).norm() < 1e-13);
+}
+
+#[test]
+fn compressed_image_update_in_f32_follows_the_stacked_f64_one() {
+    let ekf = joint_filter(0.001f64);
+    let obs64 = corners_disturbed::<f64>(&ekf, 0.4);
+    let (stacked, nis) = stacked_update(&ekf, &obs64);
+    let mut e32 = joint_filter(0.001f32);
+    let obs = corners_disturbed::<f32>(&ekf, 0.4);
+    let corners = CornerSet {
+        stamp_ns: STAMP,
+        corners: &obs,
+        pixel_sigma: 0.5,
+    };
+    let report = e32
+        .update_reprojection(CAMERA, 0, &camera(), &corners)
+        .expect("corners");
+    assert!(
+        (f64::from(report.nis) - nis).abs() < 1e-3 * nis,
+        "{} vs {nis}",
+        report.nis
+    );
+    let (a, b) = (e32.extrinsic(CAMERA), stacked.extrinsic(CAMERA));
+    let b32 = Pose::new(b.rotation.cast::<f32>(), b.translation.cast::<f32>());
+    assert!(a.rotation.angle_to(&b32.rotation) < 1e-5);
+    assert!((a.translation - b32.translation).norm() < 1e-5);
+    // Relative to each variance (the empty clone slots' are zero in both).
+    let (p32, p64) = (e32.covariance(), stacked.covariance());
+    let mut worst = 0.0f64;
+    for i in 0..N {
+        let (a, b) = (f64::from(p32[(i, i)]), p64[(i, i)]);
+        let rel = if b == 0.0 { a.abs() } else { (a - b).abs() / b };
+        worst = worst.max(rel);
+    }
+    extern crate std;
+    std::eprintln!("f32 vs f64 stacked: worst relative variance {worst:e}");
+    assert!(worst < 5e-5, "worst relative variance difference {worst:e}");
+}

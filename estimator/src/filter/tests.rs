@@ -508,6 +508,32 @@ mod reprojection {
     }
 
     #[test]
+    fn an_outlying_corner_is_dropped_and_the_rest_of_the_image_fused() {
+        let mut ekf = camera_filter(0.0);
+        let mut obs = observations(&ekf, 0.3);
+        // 300 px: far outside that corner's own predicted spread (~50 px).
+        obs[7].pixel.x += 300.0;
+        let meas = CornerSet {
+            stamp_ns: STAMP,
+            corners: &obs,
+            pixel_sigma: 0.5,
+        };
+        let report = ekf
+            .update_reprojection(0, 0, &camera(), &meas)
+            .expect("update");
+        assert!(report.accepted, "nis {} > {}", report.nis, report.threshold);
+        assert_eq!(report.dof, 58);
+        let residual = |k: usize| (obs[k].pixel - predicted(&ekf, &obs[k].point_in_target)).norm();
+        assert!(
+            residual(6) < 0.5 && residual(8) < 0.5,
+            "{} {}",
+            residual(6),
+            residual(8)
+        );
+        assert!(residual(7) > 250.0);
+    }
+
+    #[test]
     fn outlying_image_is_gated_and_leaves_the_estimate() {
         let mut ekf = camera_filter(0.0);
         // Every corner 45 px off, alternately one way and the other: each alone is inside

@@ -2,14 +2,13 @@
 //! filter, without copying the filter: "every error leaves the state untouched".
 //!
 //! - [`StepUndo`] + [`ColumnsUndo`]: a relative-pose update propagates to its end stamp and
-//!   clones the IMU pose before it linearises. The propagation itself writes only the small state and `P_II`, so [`StepUndo`]
+//!   clones the IMU pose before it linearises; an image propagates and brings `P_IX` up to
+//!   date. The propagation itself writes only the small state and `P_II`, so [`StepUndo`]
 //!   (`O(1)` in `N`) is all that is held across its deep call chain; the `N x 15` IMU columns
 //!   (and the clone slot's `N x 6`) are saved after it, in [`ColumnsUndo`], O(N m).
-//! - [`PropagationUndo`]: a single update at the measurement's IMU time (a board plane)
-//!   propagates first; it saves the small state and the IMU columns, `N x 15`.
-//! - [`Checkpoint`]: a reprojection update fuses its corners one by one and gates the image as
-//!   a whole afterwards, so a rejected image takes back 2 K corner steps; it keeps the
-//!   covariance itself (`N^2` entries, fewer than the `N x 2K` of the image's gain at K = 42).
+//! - [`PropagationUndo`]: a single update at the measurement's IMU time (a board plane, an
+//!   image's compressed corners) propagates first; it saves the small state and the IMU
+//!   columns, `N x 15`.
 
 use super::Ekf;
 use crate::propagate::ImuSample;
@@ -176,35 +175,5 @@ impl<T: Scalar, const N: usize> ColumnsUndo<T, N> {
             let c = Layout::<S, C>::clone_orientation(slot).idx;
             ekf.restore_columns(c, &self.slot_columns);
         }
-    }
-}
-
-/// The whole filter state but the health monitor.
-pub(super) struct Checkpoint<
-    T: Scalar,
-    const S: usize,
-    const C: usize,
-    const N: usize,
-    const F: usize,
-> {
-    small: Small<T, S, C, F>,
-    cov: SMatrix<T, N, N>,
-}
-
-impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize>
-    Checkpoint<T, S, C, N, F>
-{
-    /// Saves the state.
-    pub(super) fn save(ekf: &Ekf<T, S, C, N, F>) -> Self {
-        Self {
-            small: ekf.small(),
-            cov: ekf.cov,
-        }
-    }
-
-    /// Puts the filter back as it was at [`Checkpoint::save`].
-    pub(super) fn restore(&self, ekf: &mut Ekf<T, S, C, N, F>) {
-        ekf.restore_small(&self.small);
-        ekf.cov = self.cov;
     }
 }

@@ -64,18 +64,6 @@ impl<T: Scalar, const M: usize, const L: usize> SparseJacobian<T, M, L> {
         h
     }
 
-    /// `H x` for an `N`-vector `x` (a column outside `N` contributes nothing; [`Gain::compute`]
-    /// rejects such a Jacobian).
-    pub fn times<const N: usize>(&self, x: &SVector<T, N>) -> SVector<T, M> {
-        let mut out = SVector::<T, M>::zeros();
-        for (l, &c) in self.columns.iter().enumerate() {
-            if let Some(&xc) = x.as_slice().get(c) {
-                out += self.values.column(l) * xc;
-            }
-        }
-        out
-    }
-
     /// The covariance of the stored columns, `P[columns, columns]` (`L x L`; a column
     /// listed twice appears twice, so `H P_sub H^T` is still `H P H^T`). Errors on a
     /// column outside `N`.
