@@ -303,7 +303,7 @@ fn targetless_refinement_on_real_data_runs_and_reports_finite_errors() {
 }
 
 #[test]
-#[ignore = "20-draw acceptance run (~15 s): cargo test --release -p msreg --test mi_targetless_real -- --ignored --nocapture"]
+#[ignore = "20-draw acceptance run (3-6 min on 2 loaded cores): cargo test --release -p msreg --test mi_targetless_real -- --ignored --nocapture"]
 fn targetless_refinement_returns_to_the_reference_on_18_of_20() {
     let Some(draws) = run(20, 20) else {
         eprintln!("SKIP: ../shared/data/real/calibanything-1 absent");
@@ -320,7 +320,7 @@ fn targetless_refinement_returns_to_the_reference_on_18_of_20() {
 /// maximum, ~0.5 deg in roll from the marking-aligned pose); rotation error <= 0.72 deg,
 /// translation over the axes not held <= 10.7 cm; held axes unchanged. Bounds about 3x.
 #[test]
-#[ignore = "diagnostic (~20-50 s): cargo test --release -p msreg --test mi_targetless_real -- --ignored --nocapture"]
+#[ignore = "marking-aligned draws (3-6 min): cargo test --release -p msreg --test mi_targetless_real targetless_refinement_around -- --ignored --nocapture"]
 fn targetless_refinement_around_the_marking_aligned_pose() {
     let Some(draws) = run_around(20, 20, Centre::MarkingAligned) else {
         eprintln!("SKIP: ../shared/data/real/calibanything-1 absent");

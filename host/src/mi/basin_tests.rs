@@ -115,5 +115,6 @@ fn basin_search_then_refinement_recovers_the_simulated_camera_from_2_deg_and_10_
         d.as_slice(),
         dr.to_degrees()
     );
-    assert!(d.norm() < 0.02 && dr.to_degrees() < 0.1, "{d:?} {dr}");
+    // Measured 7.2 mm / 0.052 deg; about 3x.
+    assert!(d.norm() < 0.02 && dr.to_degrees() < 0.15, "{d:?} {dr}");
 }
