@@ -8,10 +8,13 @@
 //!   bilinear sampling, the pose parametrisations and the analytic MI gradient.
 //! - [`search`]: the parallel coarse-to-fine grid, the continuous 6-DoF refinement and
 //!   the curvature sigmas with a per-DoF observability statement.
+//! - [`basin`]: the wider-basin search (multi-candidate coarse-to-fine lattice on blurred
+//!   images, flatness probes of the other DoFs) before the refinement.
 //! - [`targetless`]: the LiDAR-camera dataset, run and overlay; [`cli`]: the command.
 //! - [`markings`]: lane-marking crossings, an independent geometric check of an extrinsic
 //!   on a road scene (used to judge the real reference).
 
+pub mod basin;
 pub mod histogram;
 pub mod markings;
 pub mod prior_map;
@@ -20,6 +23,8 @@ pub mod search;
 pub mod synthetic;
 pub mod targetless;
 
+#[cfg(test)]
+mod basin_tests;
 #[cfg(test)]
 mod tests;
 

@@ -23,6 +23,13 @@ use rand_chacha::ChaCha8Rng;
 struct Draw {
     rot_err_deg: f64,
     trans_err_m: f64,
+    /// Translation error per camera axis (x right, y down, z forward), m.
+    trans_err_axes: Vector3<f64>,
+    /// DoFs the refinement held (not determined by the MI).
+    held: [bool; 6],
+    seconds: f64,
+    start: Isometry3<f64>,
+    end: Isometry3<f64>,
     start_rot_deg: f64,
     start_trans_m: f64,
     mi_start: f64,
@@ -68,6 +75,39 @@ fn run(draws: usize, seed: u64) -> Option<Vec<Draw>> {
     run_around(draws, seed, Centre::Reference)
 }
 
+/// `TargetlessOptions` with overrides from `MSREG_BASIN` (tuning runs only), e.g.
+/// `blur=8,4,2;keep=4;sub=2;dofs=111110;rot=2;trans=0.1;hp=30;band=0.25;cand=2;steps=2`.
+fn tuning_options() -> TargetlessOptions {
+    let mut o = TargetlessOptions::default();
+    let Ok(spec) = std::env::var("MSREG_BASIN") else {
+        return o;
+    };
+    let mut b = o.basin.clone().unwrap_or_default();
+    for kv in spec.split(';').filter(|s| !s.is_empty()) {
+        let (k, v) = kv.split_once('=').expect("key=value");
+        let f = |v: &str| v.parse::<f64>().expect("number");
+        match k {
+            "blur" => b.blur_px = v.split(',').map(f).collect(),
+            "keep" => b.keep = f(v) as usize,
+            "sub" => b.subsample = f(v) as usize,
+            "steps" => b.steps = f(v) as usize,
+            "tsteps" => b.trans_steps = f(v) as usize,
+            "dofs" => b.grid_dofs = std::array::from_fn(|i| v.as_bytes()[i] == b'1'),
+            "rot" => b.rot_deg = f(v),
+            "trans" => b.trans_m = f(v),
+            "hp" => o.highpass_px = f(v),
+            "band" => o.ground_band_m = (f(v) > 0.0).then(|| f(v)),
+            "cand" => o.refine_candidates = f(v) as usize,
+            "margin" => o.margin_px = f(v),
+            "refblur" => o.refine_blur_px = v.split(',').map(f).collect(),
+            _ => panic!("unknown key {k}"),
+        }
+    }
+    o.basin = (!b.blur_px.is_empty()).then_some(b);
+    println!("options {o:?}");
+    o
+}
+
 fn run_around(draws: usize, seed: u64, centre: Centre) -> Option<Vec<Draw>> {
     let dir = dir_or_skip("real/calibanything-1")?;
     let camera = read_camera_yaml(&dir.join("cam0/camera.yaml")).expect("camera.yaml");
@@ -93,7 +133,11 @@ fn run_around(draws: usize, seed: u64, centre: Centre) -> Option<Vec<Draw>> {
             .t_cam_lidar
         }
     };
-    let options = TargetlessOptions::default();
+    let options = if seed == 7 {
+        tuning_options()
+    } else {
+        TargetlessOptions::default()
+    };
     // The MI of the final image level at any pose, on the points visible at the reference.
     let (p, i) = visible_points(&cloud, &camera, &reference, options.margin_px);
     let (p, i) = match options.ground_band_m {
@@ -111,25 +155,49 @@ fn run_around(draws: usize, seed: u64, centre: Centre) -> Option<Vec<Draw>> {
     let mut out = Vec::new();
     for k in 0..draws {
         let start = PoseParam::CamFromSource.retract(&reference, &perturbation(&mut rng));
+        let clock = std::time::Instant::now();
         let r = calibrate_targetless(&cloud, &image, &camera, &start, &options).expect("runs");
+        let seconds = clock.elapsed().as_secs_f64();
         let (re, te) = errors(&reference, &r.refined.x);
+        let axes = r.refined.x.translation.vector - reference.translation.vector;
+        let rot_axes = (reference.rotation.inverse() * r.refined.x.rotation)
+            .scaled_axis()
+            .map(f64::to_degrees);
+        if let Some(b) = &r.basin {
+            for p in &b.probes {
+                println!(
+                    "  probe dof {}: mi {:.4?} sigma {:.2} px flat {}",
+                    p.dof, p.mi, p.sigma_px, p.flat
+                );
+            }
+        }
         let (rs, ts) = errors(&reference, &start);
         let sig = r.refined.covariance.diagonal().map(|v| v.max(0.0).sqrt());
         println!(
-            "draw {k:2}: start {rs:.2} deg {:.1} cm -> {re:.3} deg {:.1} cm; MI start {:.4} \
-             end {:.4} ref {:.4}; sigma rot {:.3?} deg trans {:.1?} cm; {:?}",
+            "draw {k:2}: start {rs:.2} deg {:.1} cm -> {re:.3} deg {:.1} cm (LiDAR x y z {:.2?} \
+             deg; camera x y z {:.1?} cm); \
+             MI start {:.4} end {:.4} ref {:.4}; sigma rot {:.3?} deg trans {:.1?} cm; {:?}; \
+             held {:?}; {seconds:.1} s",
             ts * 100.0,
             te * 100.0,
+            rot_axes.as_slice(),
+            (axes * 100.0).as_slice(),
             mi(&start),
             mi(&r.refined.x),
             mi(&reference),
             sig.fixed_rows::<3>(0).map(f64::to_degrees).as_slice(),
             (sig.fixed_rows::<3>(3) * 100.0).as_slice(),
-            r.refined.observability
+            r.refined.observability,
+            r.refined.held
         );
         out.push(Draw {
             rot_err_deg: re,
             trans_err_m: te,
+            trans_err_axes: axes,
+            held: r.refined.held,
+            seconds,
+            start,
+            end: r.refined.x,
             start_rot_deg: rs,
             start_trans_m: ts,
             mi_start: mi(&start),
@@ -138,6 +206,56 @@ fn run_around(draws: usize, seed: u64, centre: Centre) -> Option<Vec<Draw>> {
         });
     }
     Some(out)
+}
+
+/// Translation error (m) over the camera axes the refinement did not hold.
+fn observable_trans_err(d: &Draw) -> f64 {
+    (0..3)
+        .filter(|&a| !d.held[3 + a])
+        .map(|a| d.trans_err_axes[a].powi(2))
+        .sum::<f64>()
+        .sqrt()
+}
+
+/// Within 0.3 deg and, over the translation axes reported observable (not held), 5 cm.
+fn observable_ok(d: &Draw) -> bool {
+    d.rot_err_deg <= 0.3 && observable_trans_err(d) <= 0.05
+}
+
+/// Prints the judge on the observable DoFs and the worst cases; returns the count.
+fn observable_summary(draws: &[Draw]) -> usize {
+    let ok = draws.iter().filter(|d| observable_ok(d)).count();
+    let worst = |f: fn(&Draw) -> f64| draws.iter().map(f).fold(0.0, f64::max);
+    println!(
+        "{ok} of {} within 0.3 deg and 5 cm over the observable translation axes; worst \
+         {:.3} deg, {:.1} cm observable, {:.1} cm total; held z on {} of {}; {:.1} s max",
+        draws.len(),
+        worst(|d| d.rot_err_deg),
+        worst(observable_trans_err) * 100.0,
+        worst(|d| d.trans_err_m) * 100.0,
+        draws.iter().filter(|d| d.held[5]).count(),
+        draws.len(),
+        worst(|d| d.seconds)
+    );
+    ok
+}
+
+/// The draw with the highest final MI (the best maximum the searches found), and per draw
+/// its rotation (deg) and translation (m) from it.
+fn spread_about_best(draws: &[Draw]) -> Vec<(f64, f64)> {
+    let best = draws
+        .iter()
+        .max_by(|a, b| a.mi_end.total_cmp(&b.mi_end))
+        .expect("draws");
+    draws.iter().map(|d| errors(&best.end, &d.end)).collect()
+}
+
+/// Held camera-frame translation axes end exactly where they started.
+fn held_axes_unchanged(d: &Draw) -> bool {
+    (0..3).all(|a| {
+        !d.held[3 + a]
+            || d.end.translation.vector[a].to_bits() == d.start.translation.vector[a].to_bits()
+    })
 }
 
 fn summary(draws: &[Draw]) -> usize {
@@ -178,11 +296,14 @@ fn targetless_refinement_on_real_data_runs_and_reports_finite_errors() {
     for d in &draws {
         assert!(d.rot_err_deg.is_finite() && d.trans_err_m.is_finite());
         assert!(d.mi_end.is_finite() && d.mi_start.is_finite());
+        // The search ends higher than it started, and a held DoF does not move.
+        assert!(d.mi_end > d.mi_start, "MI {} -> {}", d.mi_start, d.mi_end);
+        assert!(held_axes_unchanged(d));
     }
 }
 
 #[test]
-#[ignore = "20-draw acceptance run (~15 s): cargo test --release -p msreg --test mi_targetless_real -- --ignored --nocapture"]
+#[ignore = "20-draw acceptance run (3-6 min on 2 loaded cores): cargo test --release -p msreg --test mi_targetless_real -- --ignored --nocapture"]
 fn targetless_refinement_returns_to_the_reference_on_18_of_20() {
     let Some(draws) = run(20, 20) else {
         eprintln!("SKIP: ../shared/data/real/calibanything-1 absent");
@@ -192,18 +313,44 @@ fn targetless_refinement_returns_to_the_reference_on_18_of_20() {
     assert!(ok >= 18, "only {ok} of 20 within 0.3 deg / 5 cm");
 }
 
-/// Diagnostic, not the acceptance: the same draws around the marking-aligned pose (the
-/// reference is 0.27 deg off in pitch by the lane markings, docs/prior_map.md). Prints the
-/// same summary; asserts only that it runs.
+/// Not the acceptance: the same draws around the marking-aligned pose (the reference is
+/// 0.27 deg off in pitch by the lane markings, docs/prior_map.md), with the basin search.
+/// Asserts what it measured (docs/prior_map.md, seed 20): 19 of 20 end at a higher MI than
+/// the marking-aligned pose; those end within 0.27 deg of the highest-MI end (the MI's
+/// maximum, ~0.5 deg in roll from the marking-aligned pose); rotation error <= 0.72 deg,
+/// translation over the axes not held <= 10.7 cm; held axes unchanged. Bounds about 3x.
 #[test]
-#[ignore = "diagnostic (~20-50 s): cargo test --release -p msreg --test mi_targetless_real -- --ignored --nocapture"]
+#[ignore = "marking-aligned draws (3-6 min): cargo test --release -p msreg --test mi_targetless_real targetless_refinement_around -- --ignored --nocapture"]
 fn targetless_refinement_around_the_marking_aligned_pose() {
     let Some(draws) = run_around(20, 20, Centre::MarkingAligned) else {
         eprintln!("SKIP: ../shared/data/real/calibanything-1 absent");
         return;
     };
     summary(&draws);
-    assert!(draws.iter().all(|d| d.rot_err_deg.is_finite()));
+    observable_summary(&draws);
+    let above = draws.iter().filter(|d| d.mi_end > d.mi_ref).count();
+    assert!(above >= 18, "{above} of 20 end above the centre's MI");
+    for (d, (spread, _)) in draws.iter().zip(spread_about_best(&draws)) {
+        if d.mi_end > d.mi_ref {
+            assert!(spread < 0.8, "{spread} deg from the highest-MI end");
+        }
+        assert!(d.rot_err_deg < 2.2, "rotation error {} deg", d.rot_err_deg);
+        assert!(observable_trans_err(d) < 0.32);
+        assert!(held_axes_unchanged(d));
+    }
+}
+
+/// The draws the basin search's constants (blur levels, spacing, candidates kept) were
+/// chosen on: seed 7, not the tests' 15 / 20. Prints the same summaries.
+#[test]
+#[ignore = "tuning draws (seed 7): cargo test --release -p msreg --test mi_targetless_real tuning -- --ignored --nocapture"]
+fn tuning_draws_around_the_marking_aligned_pose() {
+    let Some(draws) = run_around(20, 7, Centre::MarkingAligned) else {
+        eprintln!("SKIP: ../shared/data/real/calibanything-1 absent");
+        return;
+    };
+    summary(&draws);
+    observable_summary(&draws);
 }
 
 #[test]

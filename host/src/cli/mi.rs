@@ -53,6 +53,7 @@ pub struct RefinedSummary {
     sigma_rot_deg: [f64; 3],
     sigma_trans_m: [f64; 3],
     observability: Vec<(String, Observability)>,
+    held: Vec<String>,
 }
 
 impl RefinedSummary {
@@ -74,8 +75,19 @@ impl RefinedSummary {
                 .zip(&r.observability)
                 .map(|(n, o)| (n.to_string(), *o))
                 .collect(),
+            held: held_names(r),
         }
     }
+}
+
+/// Names of the DoFs the refinement held at their starting value.
+fn held_names(r: &Refined) -> Vec<String> {
+    DOF_NAMES
+        .iter()
+        .zip(&r.held)
+        .filter(|(_, h)| **h)
+        .map(|(n, _)| n.to_string())
+        .collect()
 }
 
 /// Exit code 0 or 1 of a refinement: not converged, or a DoF without a clear maximum.
@@ -89,9 +101,19 @@ pub fn outcome_of(refined: &Refined) -> Outcome {
     if !refined.converged {
         Outcome::NotConverged("the MI refinement hit its iteration limit".into())
     } else if !poor.is_empty() {
+        let held = held_names(refined);
+        let held = if held.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "; {} held at the initial value (the MI is flat along it within the search \
+                 range: unobservable from this pair)",
+                held.join(", ")
+            )
+        };
         Outcome::NotConverged(format!(
             "the MI has no clear maximum along {} (flat or not a maximum there; see \
-             docs/prior_map.md)",
+             docs/prior_map.md){held}",
             poor.join(", ")
         ))
     } else {
@@ -204,14 +226,15 @@ pub fn mi_section(name: &str, r: &Refined) -> String {
         .collect();
     format!(
         "{name}:\n  mi: {}\n  nmi: {}\n  mi_hard: {}\n  nmi_hard: {}\n  samples: {}\n  \
-         n_eff: {}\n  observability: {{{}}}\n",
+         n_eff: {}\n  observability: {{{}}}\n  held_at_initial: [{}]\n",
         r.smoothed.mi,
         r.smoothed.nmi,
         r.hard.mi,
         r.hard.nmi,
         r.smoothed.samples,
         r.n_eff,
-        obs.join(", ")
+        obs.join(", "),
+        held_names(r).join(", ")
     )
 }
 
@@ -223,14 +246,17 @@ fn print_summary(output: &Path, result: &TargetlessResult, seconds: f64) {
         .map(|(n, o)| format!("{n} {o:?}"))
         .collect();
     eprintln!(
-        "msreg: wrote {} (MI {:.4} nats, NMI {:.4}, {} points, {} iterations, {:.1} s; {})",
+        "msreg: wrote {} (MI {:.4} nats, NMI {:.4}, {} points, {} grid candidates, {} \
+         iterations, {:.1} s; {}; held at the initial value: [{}])",
         output.display(),
         r.smoothed.mi,
         r.smoothed.nmi,
         result.points_used,
+        result.grid_evaluations,
         r.iterations,
         seconds,
-        names.join(", ")
+        names.join(", "),
+        held_names(r).join(", ")
     );
 }
 

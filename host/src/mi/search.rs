@@ -105,6 +105,107 @@ where
     }
 }
 
+/// A scored parameter vector of [`grid_search_multi`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Candidate {
+    /// Parameters (one per axis).
+    pub params: Vec<f64>,
+    /// Score (higher is better).
+    pub score: f64,
+}
+
+/// Result of [`grid_search_multi`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct MultiResult {
+    /// The kept candidates of the last level, best first.
+    pub best: Vec<Candidate>,
+    /// Candidates evaluated over all levels.
+    pub evaluations: usize,
+}
+
+/// Coarse-to-fine lattice that keeps several candidates: level 0 is the lattice of `axes`
+/// around zero; each next level halves the spacing and lays a 3-per-axis lattice around
+/// each of the `keep` best distinct candidates of the level before (distinct: not lattice
+/// neighbours of a better kept one). `score(level, params)` is evaluated in parallel over
+/// the candidates of a level (the level lets the caller coarsen the objective, e.g. blur).
+pub fn grid_search_multi<F>(axes: &[GridAxis], levels: usize, keep: usize, score: F) -> MultiResult
+where
+    F: Fn(usize, &[f64]) -> f64 + Sync,
+{
+    let mut spacing: Vec<f64> = axes
+        .iter()
+        .map(|a| a.half_range / a.steps.max(1) as f64)
+        .collect();
+    let mut candidates = lattice(&vec![0.0; axes.len()], &spacing, axes);
+    let (mut evaluations, mut best) = (0, Vec::new());
+    for level in 0..levels.max(1) {
+        evaluations += candidates.len();
+        let scores: Vec<f64> = candidates.par_iter().map(|c| score(level, c)).collect();
+        best = distinct_best(&candidates, &scores, &spacing, keep.max(1));
+        for s in &mut spacing {
+            *s /= 2.0;
+        }
+        let one: Vec<GridAxis> = axes
+            .iter()
+            .map(|a| GridAxis {
+                half_range: a.half_range,
+                steps: 1,
+            })
+            .collect();
+        candidates = best
+            .iter()
+            .flat_map(|c| lattice(&c.params, &spacing, &one))
+            .collect();
+        dedup_candidates(&mut candidates, &spacing);
+    }
+    MultiResult { best, evaluations }
+}
+
+/// The `keep` best candidates, skipping any within one `spacing` on every axis of a better
+/// kept one (its lattice neighbour: the same maximum).
+fn distinct_best(
+    candidates: &[Vec<f64>],
+    scores: &[f64],
+    spacing: &[f64],
+    keep: usize,
+) -> Vec<Candidate> {
+    let mut order: Vec<usize> = (0..candidates.len().min(scores.len())).collect();
+    order.sort_by(|&a, &b| scores[b].total_cmp(&scores[a]).then(a.cmp(&b)));
+    let mut kept: Vec<Candidate> = Vec::with_capacity(keep);
+    for i in order {
+        if kept.len() == keep {
+            break;
+        }
+        let c = &candidates[i];
+        let neighbour = kept.iter().any(|k| {
+            k.params
+                .iter()
+                .zip(c)
+                .zip(spacing)
+                .all(|((a, b), s)| (a - b).abs() <= 1.5 * s)
+        });
+        if !neighbour {
+            kept.push(Candidate {
+                params: c.clone(),
+                score: scores[i],
+            });
+        }
+    }
+    kept
+}
+
+/// Removes repeated lattice points (overlapping lattices around nearby centres).
+fn dedup_candidates(candidates: &mut Vec<Vec<f64>>, spacing: &[f64]) {
+    let key = |c: &Vec<f64>| -> Vec<i64> {
+        c.iter()
+            .zip(spacing)
+            .map(|(v, s)| (v / (s * 1e-3)).round() as i64)
+            .collect()
+    };
+    let mut seen = std::collections::HashSet::new();
+    candidates.retain(|c| seen.insert(key(c)));
+}
+
 /// Every combination of `centre + k * spacing`, `|k| <= steps` per axis.
 fn lattice(centre: &[f64], spacing: &[f64], axes: &[GridAxis]) -> Vec<Vec<f64>> {
     let mut out = vec![Vec::with_capacity(axes.len())];
@@ -139,6 +240,9 @@ pub struct RefineOptions {
     pub cell_px: f64,
     /// Recompute the finite-difference Hessian every this many iterations.
     pub hessian_every: usize,
+    /// DoFs of `delta` held at the starting value (not stepped; reported unconstrained and
+    /// `poor`): those the MI does not determine.
+    pub held: [bool; 6],
 }
 
 impl Default for RefineOptions {
@@ -150,6 +254,7 @@ impl Default for RefineOptions {
             tolerance_px: 0.02,
             cell_px: 3.0,
             hessian_every: 4,
+            held: [false; 6],
         }
     }
 }
@@ -189,6 +294,8 @@ pub struct Refined {
     pub iterations: usize,
     /// True when the step tolerance was reached before the iteration limit.
     pub converged: bool,
+    /// DoFs held at the starting value ([`RefineOptions::held`]).
+    pub held: [bool; 6],
 }
 
 /// Central finite-difference Hessian of the analytic gradient, symmetrised.
@@ -218,7 +325,21 @@ fn positive_curvature(h: &Matrix6<f64>) -> Matrix6<f64> {
     eig.eigenvectors * Matrix6::from_diagonal(&floored) * eig.eigenvectors.transpose()
 }
 
-/// Maximises the smoothed MI over all 6 DoF from state `x0`.
+/// `m` with the rows and columns of the held DoFs replaced by those of `diagonal * I`.
+fn mask_held(m: &Matrix6<f64>, held: &[bool; 6], diagonal: f64) -> Matrix6<f64> {
+    Matrix6::from_fn(|i, j| match (held[i] || held[j], i == j) {
+        (false, _) => m[(i, j)],
+        (true, true) => diagonal,
+        (true, false) => 0.0,
+    })
+}
+
+/// `v` with the held DoFs zeroed.
+fn zero_held(v: &Vector6<f64>, held: &[bool; 6]) -> Vector6<f64> {
+    Vector6::from_fn(|k, _| if held[k] { 0.0 } else { v[k] })
+}
+
+/// Maximises the smoothed MI over the DoFs not held from state `x0`.
 pub fn refine(
     scene: &MiScene,
     param: PoseParam,
@@ -235,13 +356,18 @@ pub fn refine(
     while iterations < options.max_iterations && !converged {
         // The curvature (12 gradient evaluations) is refreshed every few iterations only.
         if iterations % options.hessian_every.max(1) == 0 {
-            a = positive_curvature(&hessian(scene, param, &x, &fd));
+            a = mask_held(
+                &positive_curvature(&hessian(scene, param, &x, &fd)),
+                &options.held,
+                1.0,
+            );
         }
         iterations += 1;
         let mut accepted = false;
         while lambda < 1e8 {
             let damped = a + Matrix6::from_diagonal(&a.diagonal()) * lambda;
-            let Some(step) = damped.cholesky().map(|c| c.solve(&current.gradient)) else {
+            let gradient = zero_held(&current.gradient, &options.held);
+            let Some(step) = damped.cholesky().map(|c| c.solve(&gradient)) else {
                 lambda *= 10.0;
                 continue;
             };
@@ -296,13 +422,15 @@ fn finish(
     let t = param.t_cam_src(&x);
     let h = hessian(scene, param, &x, fd);
     let n_eff = scene.occupied_cells(&t, options.cell_px).max(1);
-    let information = -h * n_eff as f64;
+    // Held DoFs carry no information (their rows and columns are zeroed).
+    let information = mask_held(&(-h * n_eff as f64), &options.held, 0.0);
     let covariance = covariance_of(&information);
     let ppu = scene.pixels_per_unit(param, &x);
-    let definite = SymmetricEigen::new(information).eigenvalues.min() > 0.0;
+    let free_block = mask_held(&information, &options.held, 1.0);
+    let definite = SymmetricEigen::new(free_block).eigenvalues.min() > 0.0;
     let observability = std::array::from_fn(|k| {
         let px = covariance[(k, k)].max(0.0).sqrt() * ppu[k];
-        if !definite || !px.is_finite() || px > 3.0 {
+        if options.held[k] || !definite || !px.is_finite() || px > 3.0 {
             Observability::Poor
         } else if px > 0.5 {
             Observability::Weak
@@ -321,5 +449,6 @@ fn finish(
         observability,
         iterations,
         converged,
+        held: options.held,
     }
 }

@@ -1,12 +1,16 @@
 //! Targetless LiDAR-camera calibration: the MI of LiDAR intensity and image intensity
-//! over `T_cam_lidar` (Pandey et al.), from a rough initial guess: a coarse-to-fine 6-DoF
-//! grid on a blurred image, then the continuous refinement on finer blurs.
+//! over `T_cam_lidar` (Pandey et al.), from a rough initial guess: the wider-basin search
+//! of [`super::basin`] (a multi-candidate coarse-to-fine lattice over the three rotations
+//! and the two translations across the optical axis, on blurred images; a flatness probe of
+//! the optical-axis translation), then the continuous refinement on finer blurs from the
+//! best candidates, holding the DoFs the MI does not determine.
 
 use msreg_estimator::camera::Camera;
-use nalgebra::{Isometry3, Vector3, Vector6};
+use nalgebra::{Isometry3, Vector3};
 
+use super::basin::{basin_search, BasinOptions, BasinResult};
 use super::scene::{highpass, MiScene, PoseParam};
-use super::search::{grid_search, refine, GridAxis, GridScore, RefineOptions, Refined};
+use super::search::{refine, RefineOptions, Refined};
 use crate::pointcloud::PointCloud;
 use crate::vision::GrayImage;
 
@@ -28,16 +32,12 @@ pub enum TargetlessError {
 /// Settings.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TargetlessOptions {
-    /// Grid half range of each rotation axis (deg).
-    pub grid_rot_deg: f64,
-    /// Grid half range of each translation axis (m).
-    pub grid_trans_m: f64,
-    /// Grid levels (3 values per axis each); 0 skips the grid.
-    pub grid_levels: usize,
-    /// Image blur of the grid (px).
-    pub grid_blur_px: f64,
-    /// Every n-th point in the grid.
-    pub grid_subsample: usize,
+    /// The wider-basin search before the refinement; `None` refines from the guess alone
+    /// (all six DoF free).
+    pub basin: Option<BasinOptions>,
+    /// Refine from this many of the basin search's best candidates and keep the highest
+    /// final MI.
+    pub refine_candidates: usize,
     /// Image blurs of the successive refinements (px), coarse to fine.
     pub refine_blur_px: Vec<f64>,
     /// Refinement settings.
@@ -56,16 +56,14 @@ pub struct TargetlessOptions {
 impl Default for TargetlessOptions {
     fn default() -> Self {
         Self {
-            grid_rot_deg: 3.0,
-            grid_trans_m: 0.15,
-            // The 6-DoF grid finds higher-MI poses degrees away on real single-pair data
-            // (docs/prior_map.md); off by default, the refinement stays local.
-            grid_levels: 0,
-            grid_blur_px: 8.0,
-            grid_subsample: 4,
+            basin: Some(BasinOptions::default()),
+            refine_candidates: 2,
             refine_blur_px: vec![2.0, 1.0],
             refine: RefineOptions::default(),
-            margin_px: -50.0,
+            // Inside by 100 px at the guess (chosen on seed 7 with the basin): the points
+            // stay in view over the basin, so the MI cannot rise by dropping points at the
+            // border.
+            margin_px: 100.0,
             min_points: 500,
             highpass_px: 30.0,
             ground_band_m: Some(0.25),
@@ -78,8 +76,10 @@ impl Default for TargetlessOptions {
 pub struct TargetlessResult {
     /// The initial guess.
     pub initial: Isometry3<f64>,
-    /// After the grid.
+    /// The basin search's best candidate (the guess without it).
     pub after_grid: Isometry3<f64>,
+    /// The basin search (candidates, probes, held DoFs), when run.
+    pub basin: Option<BasinResult>,
     /// The final refinement (its `x` is `T_cam_lidar`).
     pub refined: Refined,
     /// LiDAR points used.
@@ -171,45 +171,63 @@ pub fn calibrate_targetless(
         });
     }
     let points_used = points.len();
-    let scene = MiScene::new(points, &intensities, image, *camera, options.grid_blur_px);
+    let first_blur = options.refine_blur_px.first().copied().unwrap_or(1.0);
+    let scene = MiScene::new(points, &intensities, image, *camera, first_blur);
     let param = PoseParam::CamFromSource;
-    let r = options.grid_rot_deg.to_radians();
-    let t = options.grid_trans_m;
-    let axes: Vec<GridAxis> = [r, r, r, t, t, t]
-        .iter()
-        .map(|&half_range| GridAxis {
-            half_range,
-            steps: 1,
-        })
-        .collect();
-    let (after_grid, grid_evaluations) = if options.grid_levels == 0 {
-        (*initial, 0)
-    } else {
-        let coarse = scene.subsampled(options.grid_subsample);
-        let grid = grid_search(
-            &coarse,
-            &axes,
-            options.grid_levels,
-            GridScore::Smoothed,
-            |v| param.retract(initial, &Vector6::from_column_slice(v)),
-        );
-        let x = param.retract(initial, &Vector6::from_column_slice(&grid.best));
-        (x, grid.evaluations)
+    let basin = options
+        .basin
+        .as_ref()
+        .map(|b| basin_search(&scene, image, param, initial, b, options.refine.cell_px));
+    let (starts, held, grid_evaluations) = match &basin {
+        Some(b) if !b.candidates.is_empty() => (
+            b.candidates
+                .iter()
+                .take(options.refine_candidates.max(1))
+                .copied()
+                .collect(),
+            b.held,
+            b.evaluations,
+        ),
+        _ => (vec![*initial], [false; 6], 0),
     };
-    let mut x = after_grid;
-    let mut refined = None;
-    for &blur in &options.refine_blur_px {
-        let level = scene.with_image(image, blur);
-        let r = refine(&level, param, &x, &options.refine);
-        x = r.x;
-        refined = Some(r);
-    }
-    let refined = refined.unwrap_or_else(|| refine(&scene, param, &x, &options.refine));
+    let refine_options = RefineOptions {
+        held,
+        ..options.refine
+    };
+    let levels: Vec<MiScene> = options
+        .refine_blur_px
+        .iter()
+        .map(|&blur| scene.with_image(image, blur))
+        .collect();
+    let refined = starts
+        .iter()
+        .map(|start| refine_levels(&scene, &levels, param, start, &refine_options))
+        .max_by(|a, b| a.smoothed.mi.total_cmp(&b.smoothed.mi))
+        .unwrap_or_else(|| refine(&scene, param, initial, &refine_options));
     Ok(TargetlessResult {
         initial: *initial,
-        after_grid,
+        after_grid: starts[0],
+        basin,
         refined,
         points_used,
         grid_evaluations,
     })
+}
+
+/// The refinement on each image level in turn from `start` (on `scene` when no levels).
+fn refine_levels(
+    scene: &MiScene,
+    levels: &[MiScene],
+    param: PoseParam,
+    start: &Isometry3<f64>,
+    options: &RefineOptions,
+) -> Refined {
+    let mut x = *start;
+    let mut refined = None;
+    for level in levels {
+        let r = refine(level, param, &x, options);
+        x = r.x;
+        refined = Some(r);
+    }
+    refined.unwrap_or_else(|| refine(scene, param, &x, options))
 }
