@@ -46,6 +46,7 @@ pub mod prior_map;
 pub mod prior_map_scene;
 mod signal;
 mod trajectory;
+pub mod wheel;
 pub mod write;
 
 #[cfg(test)]
@@ -91,6 +92,7 @@ enum Stream {
     DriveMounting = 11,
     DriveOdometry0 = 12,
     DriveOdometry1 = 13,
+    WheelOdometry = 14,
 }
 
 fn rng_for(seed: u64, stream: Stream) -> ChaCha8Rng {

@@ -26,6 +26,7 @@ use super::gyro_bias::{self, GyroBiasEstimate};
 use super::init::{self, RotationIncrement, RotationInit};
 use crate::dataset::{ImuRecord, PoseRecord};
 
+pub mod heading;
 pub mod tilt;
 
 /// Largest second / first eigenvalue of the IMU rotation scatter treated as planar motion:

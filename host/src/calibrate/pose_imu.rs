@@ -124,7 +124,12 @@ pub fn calibrate<T: Scalar>(
     }
     calibration.report.planar = planar.as_ref().map_or_else(String::new, |p| p.describe());
     if let Some(problem) = scale_problem {
-        trust::refuse_rotation(&mut calibration, &problem, planar.is_some(), (imu, poses));
+        trust::refuse_rotation(
+            &mut calibration,
+            &problem,
+            (planar.is_some(), &bias),
+            (imu, poses),
+        );
     }
     calibration.report.moving_start = describe_moving_start(&moving_start);
     calibration.report.gyro_bias_init = gyro_bias_init;

@@ -7,17 +7,18 @@ use nalgebra::{Isometry3, Matrix6, Vector3, Vector6};
 use super::super::driver::report::PoseImuCalibration;
 use super::super::init;
 use super::super::observability::DofObservability;
-use super::super::planar::{self, tilt};
+use super::super::planar::{self, heading, tilt};
 use crate::dataset::{ImuRecord, PoseRecord};
 
 /// Refuses the result (not converged) because the pose sensor's rotation disagrees with the
 /// gyro's (`problem`, from [`rotation_scale_problem`]). Under `planar` motion against level
-/// 2-D odometry the tilt of the mounting is still measured ([`tilt_only`]); otherwise every
-/// rotation row is marked `not trusted`.
+/// 2-D odometry the rotation of the mounting is still measured ([`tilt_only`]: the tilt
+/// from gravity, the yaw from the wheel speed and the non-holonomic constraint, starting
+/// from `gyro_bias`); otherwise every rotation row is marked `not trusted`.
 pub(super) fn refuse_rotation(
     calibration: &mut PoseImuCalibration,
     problem: &str,
-    planar: bool,
+    (planar, gyro_bias): (bool, &Vector3<f64>),
     (imu, poses): (&[ImuRecord], &[PoseRecord]),
 ) {
     let level = planar && tilt::is_level(poses);
@@ -25,7 +26,10 @@ pub(super) fn refuse_rotation(
         .then(|| tilt::gravity_tilt(imu, accel_bias_prior_sigma()))
         .flatten()
     {
-        Some(t) => tilt_only(calibration, &t, problem),
+        Some(t) => {
+            let yaw = heading::nonholonomic_yaw(imu, poses, gyro_bias, &t.rotation());
+            tilt_only(calibration, (&t, yaw.as_ref()), problem);
+        }
         None => {
             distrust_rotation(&mut calibration.report.observability);
             calibration.report.reasons.insert(0, problem.to_string());
@@ -45,10 +49,16 @@ const TILT_ONLY_REASON: &str = "the pose sensor's rotation disagrees with the gy
 
 /// The honest result when the pose sensor's rotation is not the body's but the motion is
 /// planar against level 2-D odometry: roll and pitch of `R_I_S` from gravity
-/// ([`tilt::gravity_tilt`]), everything the filter took from the odometry's rotation (the
-/// yaw about the axis, the lever arm across it through `w x p`, the time offset) back at
-/// its prior, marked `not trusted`, and the reasons naming each.
-fn tilt_only(calibration: &mut PoseImuCalibration, tilt: &tilt::GravityTilt, problem: &str) {
+/// ([`tilt::gravity_tilt`]), the yaw about the vertical from the wheel speed and the
+/// non-holonomic constraint ([`heading::nonholonomic_yaw`]) when it is found, else at the
+/// prior of an unknown yaw; what the filter took from the odometry's rotation (the lever arm
+/// across the axis through `w x p`, the time offset, and without a heading fit the yaw) back
+/// at its prior, marked `not trusted`, and the reasons naming each.
+fn tilt_only(
+    calibration: &mut PoseImuCalibration,
+    (tilt, yaw): (&tilt::GravityTilt, Option<&heading::HeadingFit>),
+    problem: &str,
+) {
     let report = &mut calibration.report;
     let prior = |dof: &str| {
         report
@@ -59,12 +69,15 @@ fn tilt_only(calibration: &mut PoseImuCalibration, tilt: &tilt::GravityTilt, pro
     };
     let (sigma_t, sigma_td_s) = (prior("translation x"), prior("time offset") * 1e-3);
     let [sr, sp] = tilt.sigma_rad;
-    let yaw = planar::UNKNOWN_YAW_SIGMA_RAD;
-    calibration.t_imu_sensor = Isometry3::from_parts(Default::default(), tilt.rotation());
+    let sy = yaw.map_or(planar::UNKNOWN_YAW_SIGMA_RAD, |h| h.sigma_rad);
+    calibration.t_imu_sensor = Isometry3::from_parts(
+        Default::default(),
+        yaw.map_or(tilt.rotation(), |h| h.rotation(&tilt.rotation())),
+    );
     calibration.covariance = Matrix6::from_diagonal(&Vector6::new(
         sr * sr,
         sp * sp,
-        yaw * yaw,
+        sy * sy,
         sigma_t * sigma_t,
         sigma_t * sigma_t,
         sigma_t * sigma_t,
@@ -79,35 +92,66 @@ fn tilt_only(calibration: &mut PoseImuCalibration, tilt: &tilt::GravityTilt, pro
         tilt.spread_rad[0].to_degrees(),
         tilt.spread_rad[1].to_degrees()
     );
-    tilt_only_rows(&mut report.observability, tilt.sigma_rad, &from_gravity);
+    let from_wheels = yaw.map(|h| {
+        format!(
+            "from the wheel speed along the base's forward axis and the non-holonomic \
+             constraint (jackknife over {} windows of {} s; IMU speed {:.3}x the wheels')",
+            h.windows,
+            heading::HEADING_WINDOW_S,
+            h.speed_scale()
+        )
+    });
+    tilt_only_rows(
+        &mut report.observability,
+        [sr, sp, sy],
+        (&from_gravity, from_wheels.as_deref()),
+    );
     report
         .reasons
         .retain(|r| !r.starts_with("rotation about") && !r.starts_with("translation along"));
-    report.reasons.insert(
-        0,
-        format!(
-            "rotation z (the yaw of the mounting about the planar axis), the lever arm across \
-             the axis and the time offset are not trusted: {problem}; only roll {:.2} deg and \
-             pitch {:.2} deg (sigma {:.2}, {:.2} deg) are reported, {from_gravity}",
-            tilt.roll_rad.to_degrees(),
-            tilt.pitch_rad.to_degrees(),
-            sr.to_degrees(),
-            sp.to_degrees()
-        ),
+    let tilt_words = format!(
+        "roll {:.2} deg and pitch {:.2} deg (sigma {:.2}, {:.2} deg) {from_gravity}",
+        tilt.roll_rad.to_degrees(),
+        tilt.pitch_rad.to_degrees(),
+        sr.to_degrees(),
+        sp.to_degrees()
     );
+    let reason = match (yaw, &from_wheels) {
+        (Some(h), Some(wheels)) => format!(
+            "the lever arm across the axis and the time offset are not trusted: {problem}; \
+             the rotation is reported: {tilt_words}, yaw {:.2} deg (sigma {:.2} deg) {wheels}",
+            h.yaw_rad.to_degrees(),
+            sy.to_degrees()
+        ),
+        _ => format!(
+            "rotation z (the yaw of the mounting about the planar axis), the lever arm across \
+             the axis and the time offset are not trusted: {problem}; only {tilt_words} are \
+             reported"
+        ),
+    };
+    report.reasons.insert(0, reason);
     report.planar = format!(
-        "{}; roll {:.2} deg, pitch {:.2} deg of the mounting {from_gravity}",
+        "{}; roll {:.2} deg, pitch {:.2} deg of the mounting {from_gravity}{}",
         report.planar,
         tilt.roll_rad.to_degrees(),
-        tilt.pitch_rad.to_degrees()
+        tilt.pitch_rad.to_degrees(),
+        yaw.map_or(String::new(), |h| format!(
+            "; yaw {:.2} deg {}",
+            h.yaw_rad.to_degrees(),
+            from_wheels.as_deref().unwrap_or_default()
+        ))
     );
 }
 
-/// The observability rows of [`tilt_only`]: roll and pitch (`sigma_rad`) observed
-/// `from_gravity`, the yaw at the prior of an unknown yaw, the lever arm across the axis and
-/// the time offset at their priors, all three `not trusted`.
-fn tilt_only_rows(rows: &mut [DofObservability], [sr, sp]: [f64; 2], from_gravity: &str) {
-    let yaw = planar::UNKNOWN_YAW_SIGMA_RAD.to_degrees();
+/// The observability rows of [`tilt_only`]: roll and pitch observed `from_gravity`, the yaw
+/// observed `from_wheels` or at the prior of an unknown yaw and `not trusted`, the lever arm
+/// across the axis and the time offset at their priors, `not trusted`; sigmas in rad.
+fn tilt_only_rows(
+    rows: &mut [DofObservability],
+    [sr, sp, sy]: [f64; 3],
+    (from_gravity, from_wheels): (&str, Option<&str>),
+) {
+    let unknown = planar::UNKNOWN_YAW_SIGMA_RAD.to_degrees();
     for row in rows.iter_mut() {
         let (sigma, prior, status, reason) = match row.dof.as_str() {
             "rotation x" => (
@@ -122,12 +166,15 @@ fn tilt_only_rows(rows: &mut [DofObservability], [sr, sp]: [f64; 2], from_gravit
                 "observed",
                 from_gravity.into(),
             ),
-            "rotation z" => (
-                yaw,
-                yaw,
-                "not trusted",
-                format!("{TILT_ONLY_REASON}; held at the prior of an unknown yaw"),
-            ),
+            "rotation z" => match from_wheels {
+                Some(wheels) => (sy.to_degrees(), unknown, "observed", wheels.into()),
+                None => (
+                    unknown,
+                    unknown,
+                    "not trusted",
+                    format!("{TILT_ONLY_REASON}; held at the prior of an unknown yaw"),
+                ),
+            },
             "translation x" | "translation y" | "time offset" => (
                 row.prior_sigma,
                 row.prior_sigma,
