@@ -589,7 +589,7 @@ fn linearise(
 ) -> Option<Lin> {
     let mut lin = match reuse {
         Some(mut lin) => {
-            lin.u.fill(Matrix6::zeros());
+            lin.u.par_iter_mut().for_each(|u| *u = Matrix6::zeros());
             lin.g.fill(0.0);
             (lin.cost, lin.count) = (0.0, 0);
             lin
@@ -893,7 +893,10 @@ impl Work {
 /// The damped reduced system `S = U + lambda diag U - W V^-1 W^T` and its right-hand side
 /// `g - W V^-1 g_p`, into `work.blocks` and `work.rhs`.
 fn reduced(lin: &Lin, w: &[Matrix6x3<f64>], st: &Structure, lambda: f64, work: &mut Work) {
-    work.blocks.copy_from_slice(&lin.u);
+    work.blocks
+        .par_chunks_mut(4096)
+        .zip(lin.u.par_chunks(4096))
+        .for_each(|(b, u)| b.copy_from_slice(u));
     for b in 0..st.lay.blocks() {
         let slot = st.pat.slot(b, b).expect("diagonal");
         for k in 0..6 {

@@ -22,6 +22,7 @@ use faer::sparse::linalg::cholesky::{
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Accum, Conj};
 use nalgebra::Matrix6;
+use rayon::prelude::*;
 use std::sync::OnceLock;
 
 /// Collects the block pairs of a pattern (a bit per block pair).
@@ -232,9 +233,14 @@ impl BlockPattern {
         let Some(symbolic) = self.analyse() else {
             return false;
         };
-        for (v, &k) in f.vals.iter_mut().zip(&self.src) {
-            *v = blocks[k / 36].as_slice()[k % 36];
-        }
+        f.vals
+            .par_chunks_mut(1 << 16)
+            .zip(self.src.par_chunks(1 << 16))
+            .for_each(|(vals, src)| {
+                for (v, &k) in vals.iter_mut().zip(src) {
+                    *v = blocks[k / 36].as_slice()[k % 36];
+                }
+            });
         let n = 6 * self.nb;
         let sym = SymbolicSparseColMatRef::new_checked(n, n, &self.col_ptr, None, &self.row_idx);
         let mat = SparseColMatRef::new(sym, &f.vals);
