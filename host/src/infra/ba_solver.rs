@@ -419,7 +419,7 @@ fn vo_part(
         for (kf, uv) in &st.keypoints[st.kp_ptr[j]..st.kp_ptr[j + 1]] {
             let kf = *kf as usize;
             let (rt, t) = &frames[kf];
-            let (res, jp, jx, rho) = vo_term_from(p, (rt, t), x, uv)?;
+            let (res, jr, jx, rho) = vo_term_from(p, (rt, t), x, uv)?;
             sums.cost += rho;
             sums.count += 2;
             // The keyframe Jacobian's translation columns are `-jx` (`p = R^T (X - t)`),
@@ -433,7 +433,6 @@ fn vo_part(
                 if st.w_block[e] != a {
                     e += 1;
                 }
-                let jr = jp.fixed_view::<2, 3>(0, 0);
                 let cross = jr.transpose() * jx;
                 let w = &mut out.w[e - base];
                 if e == fresh {
