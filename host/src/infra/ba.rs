@@ -237,26 +237,41 @@ pub(super) type BlobTerm = (Vector2<f64>, Matrix2x6<f64>, Matrix2x6<f64>, f64);
 pub(super) fn vo_term(p: &BaProblem<'_>, s: &BaState, o: &VoObs) -> Option<VoTerm> {
     let pose = &s.kf[o.kf];
     let rt: Matrix3<f64> = pose.rotation.to_rotation_matrix().matrix().transpose();
-    vo_term_from(
+    let (r, jr, jx, rho) = vo_term_from(
         p,
         (&rt, &pose.translation.vector),
         &s.points[o.point],
         &o.uv,
-    )
+    )?;
+    let mut jp = Matrix2x6::zeros();
+    jp.fixed_view_mut::<2, 3>(0, 0).copy_from(&jr);
+    jp.fixed_view_mut::<2, 3>(0, 3).copy_from(&(-jx));
+    Some((r, jp, jx, rho))
 }
 
-/// [`vo_term`] with the keyframe pose as `(R^T, t)`, the point and the keypoint given.
+/// Whitened, weighted residual, Jacobians w.r.t. the keyframe's rotation and the point,
+/// and `rho` (the keyframe's translation columns are `-J_point`, not formed).
+pub(super) type VoLean = (Vector2<f64>, Matrix2x3<f64>, Matrix2x3<f64>, f64);
+
+/// [`vo_term`] with the keyframe pose as `(R^T, t)`, the point and the keypoint given, in
+/// the lean form [`VoLean`] (`p = R^T (X - t)`: `d p / d t = -R^T = -d p / d X`).
 pub(super) fn vo_term_from(
     p: &BaProblem<'_>,
-    pose: (&Matrix3<f64>, &Vector3<f64>),
+    (rt, t): (&Matrix3<f64>, &Vector3<f64>),
     x: &Vector3<f64>,
     uv: &Vector2<f64>,
-) -> Option<VoTerm> {
-    let (px, jp, jx) = project_from(p.f, pose, x)?;
-    let r = (px - uv) / SIGMA_VO;
+) -> Option<VoLean> {
+    let pc = rt * (x - t);
+    let proj = p.f.project(&pc)?;
+    let r = (proj.pixel - uv) / SIGMA_VO;
     let (rho, w) = robust(r.norm_squared());
     let k = w.sqrt() / SIGMA_VO;
-    Some((r * w.sqrt(), jp * k, jx * k, rho))
+    Some((
+        r * w.sqrt(),
+        proj.jacobian * skew(&pc) * k,
+        proj.jacobian * rt * k,
+        rho,
+    ))
 }
 
 /// Whitened, robust-weighted terms of one blob: `(r, J_kf, J_cam, rho)`.

@@ -210,27 +210,23 @@ fn structure(p: &BaProblem<'_>, start: &BaState) -> Option<Structure> {
         kfs: start.kf.len(),
         cams: start.cams.len(),
     };
-    let mut by_point = vec![Vec::new(); start.points.len()];
-    for (o, obs) in p.vo.iter().enumerate() {
-        by_point.get_mut(obs.point)?.push(o);
-    }
-    for list in &mut by_point {
-        list.sort_by_key(|&o| p.vo[o].kf);
-    }
-    // Points in the order of their first keyframe: neighbouring points update
-    // neighbouring blocks of the reduced system (cache reuse in the Schur complement).
-    let mut order: Vec<usize> = (0..by_point.len()).collect();
-    order.sort_by_key(|&j| by_point[j].first().map_or(usize::MAX, |&o| p.vo[o].kf));
-    let by_point: Vec<Vec<usize>> = order
-        .iter()
-        .map(|&j| std::mem::take(&mut by_point[j]))
-        .collect();
+    let (order, keypoints, kp_ptr) = keypoints_by_point(p, start.points.len())?;
     let mut b = PatternBuilder::new(lay.blocks());
+    let (mut w_ptr, mut w_block) = (vec![0], Vec::new());
     let mut blocks = Vec::new();
-    for list in &by_point {
+    for j in 0..order.len() {
+        // A point's keypoints are sorted by keyframe: its `W` entries are the distinct ones.
         blocks.clear();
-        blocks.extend(list.iter().filter_map(|&o| lay.kf(p.vo[o].kf)));
+        for (kf, _) in &keypoints[kp_ptr[j]..kp_ptr[j + 1]] {
+            if let Some(a) = lay.kf(*kf as usize) {
+                if blocks.last() != Some(&a) {
+                    blocks.push(a);
+                }
+            }
+        }
         b.mark_all(&blocks);
+        w_block.extend_from_slice(&blocks);
+        w_ptr.push(w_block.len());
     }
     for o in &p.blobs {
         if let Some(k) = lay.kf(o.kf) {
@@ -244,25 +240,7 @@ fn structure(p: &BaProblem<'_>, start: &BaState) -> Option<Structure> {
     for o in &p.epipolar {
         b.mark(lay.cam(o.a), lay.cam(o.b));
     }
-    let chunks = split(&by_point, rayon::current_num_threads().max(1));
-    let mut kp_ptr = vec![0];
-    let mut keypoints = Vec::with_capacity(p.vo.len());
-    for list in &by_point {
-        for &o in list {
-            keypoints.push((u32::try_from(p.vo[o].kf).ok()?, p.vo[o].uv));
-        }
-        kp_ptr.push(keypoints.len());
-    }
-    let (mut w_ptr, mut w_block) = (vec![0], Vec::new());
-    for list in &by_point {
-        let first = w_block.len();
-        for a in list.iter().filter_map(|&o| lay.kf(p.vo[o].kf)) {
-            if w_block.len() == first || w_block.last() != Some(&a) {
-                w_block.push(a);
-            }
-        }
-        w_ptr.push(w_block.len());
-    }
+    let chunks = split(&kp_ptr, rayon::current_num_threads().max(1));
     let pat = b.finish()?;
     let u_slots = u_slots(p, &lay, &pat)?;
     Some(Structure {
@@ -276,6 +254,40 @@ fn structure(p: &BaProblem<'_>, start: &BaState) -> Option<Structure> {
         w_block,
         u_slots,
     })
+}
+
+/// Processing order of the points (by their first keyframe: neighbouring points update
+/// neighbouring blocks of the reduced system, cache reuse in the Schur complement) and
+/// their keypoints `(keyframe, pixel)` in that order, each point's sorted by keyframe
+/// (stable: equal keyframes in input order), with the offsets. Counting sorts reading the
+/// observations in their order (indexing them by point is a cache miss per keypoint).
+type ByPoint = (Vec<usize>, Vec<(u32, Vector2<f64>)>, Vec<usize>);
+
+fn keypoints_by_point(p: &BaProblem<'_>, points: usize) -> Option<ByPoint> {
+    let (mut count, mut first) = (vec![0usize; points], vec![usize::MAX; points]);
+    for o in &p.vo {
+        *count.get_mut(o.point)? += 1;
+        first[o.point] = first[o.point].min(o.kf);
+        u32::try_from(o.kf).ok()?;
+    }
+    let mut order: Vec<usize> = (0..points).collect();
+    order.sort_by_key(|&j| first[j]);
+    let mut kp_ptr = Vec::with_capacity(points + 1);
+    kp_ptr.push(0);
+    let mut cursor = vec![0; points];
+    for &j in &order {
+        cursor[j] = *kp_ptr.last()?;
+        kp_ptr.push(cursor[j] + count[j]);
+    }
+    let mut keypoints = vec![(0u32, Vector2::zeros()); p.vo.len()];
+    for o in &p.vo {
+        keypoints[cursor[o.point]] = (o.kf as u32, o.uv);
+        cursor[o.point] += 1;
+    }
+    for j in 0..points {
+        keypoints[kp_ptr[j]..kp_ptr[j + 1]].sort_by_key(|k| k.0);
+    }
+    Some((order, keypoints, kp_ptr))
 }
 
 /// The slots of `U` that other terms than the keypoints fill, and the diagonal.
@@ -307,9 +319,10 @@ fn u_slots(
     Some(out)
 }
 
-/// Contiguous ranges of points with about equal numbers of pairs of keypoints.
-fn split(by_point: &[Vec<usize>], parts: usize) -> Vec<Range<usize>> {
-    let work: Vec<usize> = by_point.iter().map(|l| l.len() * l.len() + 1).collect();
+/// Contiguous ranges of points (keypoints `ptr[j]..ptr[j + 1]` each) with about equal
+/// numbers of pairs of keypoints.
+fn split(ptr: &[usize], parts: usize) -> Vec<Range<usize>> {
+    let work: Vec<usize> = ptr.windows(2).map(|w| (w[1] - w[0]).pow(2) + 1).collect();
     let total: usize = work.iter().sum();
     let mut out = Vec::new();
     let (mut start, mut acc) = (0, 0);
@@ -320,7 +333,7 @@ fn split(by_point: &[Vec<usize>], parts: usize) -> Vec<Range<usize>> {
             start = j + 1;
         }
     }
-    out.push(start..by_point.len());
+    out.push(start..work.len());
     out
 }
 
@@ -397,15 +410,16 @@ fn vo_part(
         count: 0,
     };
     let base = st.w_ptr[r.start];
-    out.w.fill(Matrix6x3::zeros());
     for (local, j) in r.enumerate() {
         let (mut v, mut gp) = (Matrix3::zeros(), Vector3::zeros());
-        let mut e = st.w_ptr[j];
+        // `W` entries from `fresh` on are not written yet (cleared on first use: clearing
+        // the whole array first is one more pass over it).
+        let (mut e, mut fresh) = (st.w_ptr[j], st.w_ptr[j]);
         let x = &s.points[st.order[j]];
         for (kf, uv) in &st.keypoints[st.kp_ptr[j]..st.kp_ptr[j + 1]] {
             let kf = *kf as usize;
             let (rt, t) = &frames[kf];
-            let (res, jp, jx, rho) = vo_term_from(p, (rt, t), x, uv)?;
+            let (res, jr, jx, rho) = vo_term_from(p, (rt, t), x, uv)?;
             sums.cost += rho;
             sums.count += 2;
             // The keyframe Jacobian's translation columns are `-jx` (`p = R^T (X - t)`),
@@ -419,9 +433,12 @@ fn vo_part(
                 if st.w_block[e] != a {
                     e += 1;
                 }
-                let jr = jp.fixed_view::<2, 3>(0, 0);
                 let cross = jr.transpose() * jx;
                 let w = &mut out.w[e - base];
+                if e == fresh {
+                    *w = Matrix6x3::zeros();
+                    fresh += 1;
+                }
                 let mut wr = w.fixed_view_mut::<3, 3>(0, 0);
                 wr += cross;
                 let mut wt = w.fixed_view_mut::<3, 3>(3, 0);
@@ -571,7 +588,7 @@ fn linearise(
 ) -> Option<Lin> {
     let mut lin = match reuse {
         Some(mut lin) => {
-            lin.u.fill(Matrix6::zeros());
+            lin.u.par_iter_mut().for_each(|u| *u = Matrix6::zeros());
             lin.g.fill(0.0);
             (lin.cost, lin.count) = (0.0, 0);
             lin
@@ -875,7 +892,10 @@ impl Work {
 /// The damped reduced system `S = U + lambda diag U - W V^-1 W^T` and its right-hand side
 /// `g - W V^-1 g_p`, into `work.blocks` and `work.rhs`.
 fn reduced(lin: &Lin, w: &[Matrix6x3<f64>], st: &Structure, lambda: f64, work: &mut Work) {
-    work.blocks.copy_from_slice(&lin.u);
+    work.blocks
+        .par_chunks_mut(4096)
+        .zip(lin.u.par_chunks(4096))
+        .for_each(|(b, u)| b.copy_from_slice(u));
     for b in 0..st.lay.blocks() {
         let slot = st.pat.slot(b, b).expect("diagonal");
         for k in 0..6 {
@@ -1188,26 +1208,13 @@ fn covariances(
         return None;
     }
     let t = Instant::now();
-    let dim = 6 * st.lay.blocks();
-    let first = 6 * st.lay.cam(0);
-    let mut x = faer::Mat::from_fn(
-        dim,
-        6 * st.lay.cams,
-        |i, j| {
-            if i == first + j {
-                1.0
-            } else {
-                0.0
-            }
-        },
-    );
-    st.pat.solve(work.factor.as_ref()?, &mut x);
+    let first = st.lay.cam(0);
+    let f = work.factor.as_ref()?;
+    let blocks = st
+        .pat
+        .inverse_diagonal_blocks(f, first..first + st.lay.cams);
     work.time.covariance += t.elapsed().as_secs_f64();
-    Some(
-        (0..st.lay.cams)
-            .map(|c| Matrix6::from_fn(|i, j| x[(first + 6 * c + i, 6 * c + j)] * factor))
-            .collect(),
-    )
+    (blocks.len() == st.lay.cams).then(|| blocks.iter().map(|b| b * factor).collect())
 }
 
 #[cfg(all(test, target_arch = "x86_64"))]

@@ -13,12 +13,16 @@
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
+use faer::linalg::{matmul, triangular_solve};
+use faer::prelude::{Reborrow, ReborrowMut};
+use faer::sparse::linalg::cholesky::supernodal::SupernodalLltRef;
 use faer::sparse::linalg::cholesky::{
-    factorize_symbolic_cholesky, LltRef, SymbolicCholesky, SymmetricOrdering,
+    factorize_symbolic_cholesky, LltRef, SymbolicCholesky, SymbolicCholeskyRaw, SymmetricOrdering,
 };
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
-use faer::Conj;
+use faer::{Accum, Conj};
 use nalgebra::Matrix6;
+use rayon::prelude::*;
 use std::sync::OnceLock;
 
 /// Collects the block pairs of a pattern (a bit per block pair).
@@ -229,9 +233,14 @@ impl BlockPattern {
         let Some(symbolic) = self.analyse() else {
             return false;
         };
-        for (v, &k) in f.vals.iter_mut().zip(&self.src) {
-            *v = blocks[k / 36].as_slice()[k % 36];
-        }
+        f.vals
+            .par_chunks_mut(1 << 16)
+            .zip(self.src.par_chunks(1 << 16))
+            .for_each(|(vals, src)| {
+                for (v, &k) in vals.iter_mut().zip(src) {
+                    *v = blocks[k / 36].as_slice()[k % 36];
+                }
+            });
         let n = 6 * self.nb;
         let sym = SymbolicSparseColMatRef::new_checked(n, n, &self.col_ptr, None, &self.row_idx);
         let mat = SparseColMatRef::new(sym, &f.vals);
@@ -263,6 +272,65 @@ impl BlockPattern {
             par,
             MemStack::new(&mut buf),
         );
+    }
+}
+
+impl BlockPattern {
+    /// The diagonal blocks `(A^-1)_bb` of the blocks `b` in `blocks` (consecutive), `f` the
+    /// factor of `A`. With `P A P^T = L L^T`, `E^T A^-1 E = (L^-1 P E)^T (L^-1 P E)` for the
+    /// unit columns `E` of those blocks: forward solves only, and (supernodal factor) only
+    /// the supernodes where `L^-1 P E` is not yet zero, which for blocks at the end of the
+    /// blocks' own order is the trailing corner of `L`. A simplicial factor (small systems)
+    /// takes full solves.
+    pub fn inverse_diagonal_blocks(
+        &self,
+        f: &Factor,
+        blocks: std::ops::Range<usize>,
+    ) -> Vec<Matrix6<f64>> {
+        let Some(symbolic) = self.analyse() else {
+            return Vec::new();
+        };
+        let (first, k) = (6 * blocks.start, 6 * blocks.len());
+        let n = 6 * self.nb;
+        let SymbolicCholeskyRaw::Supernodal(sn) = symbolic.raw() else {
+            let mut x = faer::Mat::from_fn(n, k, |i, j| if i == first + j { 1.0 } else { 0.0 });
+            self.solve(f, &mut x);
+            return (0..blocks.len())
+                .map(|c| Matrix6::from_fn(|i, j| x[(first + 6 * c + i, 6 * c + j)]))
+                .collect();
+        };
+        // Row of each unknown in the factor's order.
+        let row = |i: usize| symbolic.perm().map_or(i, |p| p.arrays().1[i]);
+        let mut x = faer::Mat::<f64>::zeros(n, k);
+        for j in 0..k {
+            x[(row(first + j), j)] = 1.0;
+        }
+        let par = faer::get_global_parallelism();
+        let l = SupernodalLltRef::new(sn, &f.l);
+        let mut tmp = faer::Mat::<f64>::zeros(0, k);
+        for s in 0..sn.n_supernodes() {
+            let s = l.supernode(s);
+            let size = s.val().ncols();
+            let (top, bottom) = s.val().split_at_row(size);
+            let mut xt = x.as_mut().subrows_mut(s.start(), size);
+            if xt.rb().col_iter().all(|c| c.iter().all(|&v| v == 0.0)) {
+                continue;
+            }
+            triangular_solve::solve_lower_triangular_in_place(top, xt.rb_mut(), par);
+            tmp.resize_with(s.pattern().len(), k, |_, _| 0.0);
+            matmul::matmul(tmp.as_mut(), Accum::Replace, bottom, xt.rb(), 1.0, par);
+            for j in 0..k {
+                for (t, &i) in s.pattern().iter().enumerate() {
+                    x[(i, j)] -= tmp[(t, j)];
+                }
+            }
+        }
+        (0..blocks.len())
+            .map(|c| {
+                let y = x.as_ref().subcols(6 * c, 6);
+                Matrix6::from_fn(|i, j| y.col(i).transpose() * y.col(j))
+            })
+            .collect()
     }
 }
 
@@ -298,27 +366,28 @@ mod tests {
     }
     use nalgebra::DMatrix;
 
-    /// A random symmetric positive definite block matrix with a sparse pattern: the
-    /// factor's solution matches a dense solve.
-    #[test]
-    fn sparse_factor_solves_like_dense() {
-        let nb = 7;
-        let pairs = [(0, 3), (1, 2), (2, 6), (4, 5), (3, 6)];
+    /// A random positive definite block matrix on the pattern of `pairs` (and the
+    /// diagonal), as blocks and dense.
+    fn random_system(
+        nb: usize,
+        pairs: &[(usize, usize)],
+        seed: u64,
+    ) -> (BlockPattern, Vec<Matrix6<f64>>, DMatrix<f64>) {
         let mut b = PatternBuilder::new(nb);
-        for &(r, c) in &pairs {
+        for &(r, c) in pairs {
             b.mark(c, r);
         }
         let pat = b.finish().expect("pattern");
         let mut blocks = vec![Matrix6::zeros(); pat.slots()];
         let mut dense = DMatrix::<f64>::zeros(6 * nb, 6 * nb);
-        let mut seed = 1u64;
+        let mut seed = seed;
         let mut rnd = || {
             seed = seed
                 .wrapping_mul(6364136223846793005)
                 .wrapping_add(1442695040888963407);
             ((seed >> 11) as f64 / (1u64 << 53) as f64) - 0.5
         };
-        for &(r, c) in &pairs {
+        for &(r, c) in pairs {
             let m = Matrix6::from_fn(|_, _| rnd());
             blocks[pat.slot(r, c).expect("slot")] = m;
             dense.view_mut((6 * r, 6 * c), (6, 6)).copy_from(&m);
@@ -328,10 +397,53 @@ mod tests {
         }
         for k in 0..nb {
             let a = Matrix6::from_fn(|_, _| rnd());
-            let d = a * a.transpose() + Matrix6::identity() * 8.0;
+            let d = a * a.transpose() + Matrix6::identity() * (8.0 + nb as f64);
             blocks[pat.slot(k, k).expect("diag")] = d;
             dense.view_mut((6 * k, 6 * k), (6, 6)).copy_from(&d);
         }
+        (pat, blocks, dense)
+    }
+
+    /// The diagonal blocks of the inverse from forward solves equal the dense inverse's,
+    /// for a small system (simplicial factor, full solves) and a banded one with a dense
+    /// border (supernodal factor, the bundle adjustment's shape: the border blocks last).
+    #[test]
+    fn inverse_diagonal_blocks_equal_the_dense_inverse() {
+        let small = [(0, 3), (1, 2), (2, 6), (4, 5), (3, 6)];
+        let nb = 90;
+        let mut banded = Vec::new();
+        for a in 0..nb - 6 {
+            banded.extend((a + 1..(a + 12).min(nb - 6)).map(|b| (a, b)));
+            banded.extend((nb - 6..nb).filter(|_| a % 7 == 0).map(|c| (a, c)));
+        }
+        banded.extend((nb - 6..nb).flat_map(|a| (a + 1..nb).map(move |b| (a, b))));
+        let mut kinds = Vec::new();
+        for (nb, pairs, range) in [(7, &small[..], 2..5), (nb, &banded[..], nb - 6..nb)] {
+            let (pat, blocks, dense) = random_system(nb, pairs, 5);
+            let f = pat.factor(&blocks).expect("pd");
+            kinds.push(matches!(
+                pat.analyse().expect("analysed").raw(),
+                SymbolicCholeskyRaw::Supernodal(_)
+            ));
+            let inv = dense.try_inverse().expect("invertible");
+            let got = pat.inverse_diagonal_blocks(&f, range.clone());
+            assert_eq!(got.len(), range.len());
+            for (b, g) in range.zip(&got) {
+                let want = inv.view((6 * b, 6 * b), (6, 6));
+                let err = (g - want).amax();
+                assert!(err < 1e-12 * want.amax().max(1e-300), "block {b}: {err:e}");
+            }
+        }
+        assert_eq!(kinds, [false, true], "both factor kinds exercised");
+    }
+
+    /// A random symmetric positive definite block matrix with a sparse pattern: the
+    /// factor's solution matches a dense solve.
+    #[test]
+    fn sparse_factor_solves_like_dense() {
+        let nb = 7;
+        let pairs = [(0, 3), (1, 2), (2, 6), (4, 5), (3, 6)];
+        let (pat, blocks, dense) = random_system(nb, &pairs, 1);
         let rhs = faer::Mat::from_fn(6 * nb, 2, |i, j| (i + 3 * j) as f64 * 0.1 - 1.0);
         let mut x = rhs.clone();
         pat.solve(&pat.factor(&blocks).expect("pd"), &mut x);

@@ -81,7 +81,7 @@ impl<'a> Implicit<'a> {
                     let mut t = Vector3::zeros();
                     if let Some(x) = x {
                         for (we, &a) in pairs() {
-                            t += we.transpose() * Vector6::from_column_slice(&x[6 * a..6 * a + 6]);
+                            t += we.tr_mul(&Vector6::from_column_slice(&x[6 * a..6 * a + 6]));
                         }
                     }
                     let u = per_point(j, t);
