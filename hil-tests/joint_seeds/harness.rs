@@ -82,8 +82,7 @@ pub struct Run {
     pub all_accepted: bool,
 }
 
-fn ratios(filter: &JointFilter, c: &JointConfig, s: usize) -> [f32; 7] {
-    let r = jst::sensor_result(filter, c, s);
+fn ratios(r: &jst::SensorResult) -> [f32; 7] {
     let mut out = [r.time_offset_normalized; 7];
     out[..6].copy_from_slice(r.normalized.as_slice());
     out
@@ -139,20 +138,24 @@ pub fn run(k: u32, o: &Options) -> Result<Run, String> {
                 "{n:3} {:?} NIS/dof {:5.2} | LiDAR [{}] | camera [{}] | board [{}]",
                 report.kind,
                 report.nis / report.dof as f32,
-                row(&ratios(f, &c, LIDAR)),
-                row(&ratios(f, &c, CAMERA)),
+                row(&ratios(&jst::sensor_result(f, &c, LIDAR))),
+                row(&ratios(&jst::sensor_result(f, &c, CAMERA))),
                 row(&board(f, &c))
             );
         }
     });
     let t = [counts.relative_poses, counts.images, counts.planes];
+    let (lidar, camera) = (
+        jst::sensor_result(filter, &c, LIDAR),
+        jst::sensor_result(filter, &c, CAMERA),
+    );
     Ok(Run {
-        lidar: ratios(filter, &c, LIDAR),
-        camera: ratios(filter, &c, CAMERA),
+        lidar: ratios(&lidar),
+        camera: ratios(&camera),
         board: board(filter, &c),
         nees: [
-            jst::sensor_result(filter, &c, LIDAR).nees,
-            jst::sensor_result(filter, &c, CAMERA).nees,
+            lidar.nees,
+            camera.nees,
             jst::board_nees(filter, &c).unwrap_or(f32::NAN),
         ],
         all_accepted: counts.errors == 0 && t.iter().all(|t| t.accepted == t.calls),

@@ -452,7 +452,5 @@ fn compressed_image_update_in_f32_follows_the_stacked_f64_one() {
         let rel = if b == 0.0 { a.abs() } else { (a - b).abs() / b };
         worst = worst.max(rel);
     }
-    extern crate std;
-    std::eprintln!("f32 vs f64 stacked: worst relative variance {worst:e}");
     assert!(worst < 5e-5, "worst relative variance difference {worst:e}");
 }

@@ -50,6 +50,18 @@ struct Image<T: Scalar> {
     outlier_nis: T,
 }
 
+/// What every pass over one image reads: camera sensor `s`, target frame `f` at `target`
+/// (its estimate when the image arrived), the camera model, the corners, and the gyro
+/// reading held over the last IMU interval.
+struct ImageView<'a, T: Scalar> {
+    s: usize,
+    f: usize,
+    target: Pose<T>,
+    camera: &'a Camera<T>,
+    meas: &'a CornerSet<'a, T>,
+    held_gyro: Vector3<T>,
+}
+
 /// What fusing an image did: the first pass's `(nis, dof, threshold)`, whether a pass was
 /// accepted, and its innovation on the extrinsic.
 struct Outcome<T: Scalar> {
@@ -140,11 +152,18 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     ) -> Result<Outcome<T>, Error> {
         let last = self.imu_now.ok_or(Error::NotInitialized)?;
         self.flush_transition();
-        let target = self.frames[f].ok_or(Error::FrameNotInitialized)?;
+        let view = ImageView {
+            s,
+            f,
+            target: self.frames[f].ok_or(Error::FrameNotInitialized)?,
+            camera,
+            meas,
+            held_gyro: last.gyro,
+        };
         let mut scale = T::one();
         let mut first = None;
         loop {
-            let pass = self.image_pass(s, f, &target, camera, meas, &last.gyro, scale)?;
+            let pass = self.image_pass(&view, scale)?;
             let stats = *first.get_or_insert(pass.stats);
             if pass.accepted {
                 return Ok(Outcome { stats, ..pass });
@@ -162,18 +181,8 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     /// and apply when accepted. Out of line, so that its gain (`N x 19` twice) is one
     /// frame's, popped before another pass.
     #[inline(never)]
-    #[allow(clippy::too_many_arguments)]
-    fn image_pass(
-        &mut self,
-        s: usize,
-        f: usize,
-        target: &Pose<T>,
-        camera: &Camera<T>,
-        meas: &CornerSet<'_, T>,
-        held_gyro: &Vector3<T>,
-        scale: T,
-    ) -> Result<Outcome<T>, Error> {
-        let image = self.compress_image(s, f, target, camera, meas, held_gyro, scale)?;
+    fn image_pass(&mut self, view: &ImageView<'_, T>, scale: T) -> Result<Outcome<T>, Error> {
+        let image = self.compress_image(view, scale)?;
         let rows = image.rows.rows();
         if rows == 0 {
             // Every corner an outlier: the image is rejected on their NIS.
@@ -206,17 +215,15 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     /// Linearises every corner at the current state with pixel sigma `meas.pixel_sigma *
     /// scale`, drops those whose own NIS fails the 2-dof gate, and compresses the rest.
     #[inline(never)]
-    #[allow(clippy::too_many_arguments)]
-    fn compress_image(
-        &self,
-        s: usize,
-        f: usize,
-        target: &Pose<T>,
-        camera: &Camera<T>,
-        meas: &CornerSet<'_, T>,
-        held_gyro: &Vector3<T>,
-        scale: T,
-    ) -> Result<Image<T>, Error> {
+    fn compress_image(&self, view: &ImageView<'_, T>, scale: T) -> Result<Image<T>, Error> {
+        let ImageView {
+            s,
+            f,
+            ref target,
+            camera,
+            meas,
+            ref held_gyro,
+        } = *view;
         let sigma = meas.pixel_sigma * scale;
         let corner_gate = chi2::quantile::<T>(2, self.config.gate);
         let (pose, extrinsic) = (self.imu.pose(), self.sensors[s].extrinsic);

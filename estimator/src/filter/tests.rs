@@ -262,7 +262,7 @@ mod reprojection {
     use crate::camera::{radtan::RadTan, Camera, Distortion, Intrinsics, Projection};
     use crate::filter::CameraImuEkf;
     use crate::update::reprojection::{CornerObservation, CornerSet};
-    use crate::update::UpdateKind;
+    use crate::update::{UpdateKind, UpdateReport};
     use crate::Error;
     use nalgebra::Vector2;
 
@@ -357,6 +357,17 @@ mod reprojection {
         camera().project(&p_c).expect("in view").pixel
     }
 
+    /// Fuses `obs` as the image stamped `STAMP` with 0.5 px corners.
+    fn fuse(ekf: &mut CameraImuEkf<f64>, obs: &[CornerObservation<f64>]) -> UpdateReport<f64> {
+        let meas = CornerSet {
+            stamp_ns: STAMP,
+            corners: obs,
+            pixel_sigma: 0.5,
+        };
+        ekf.update_reprojection(0, 0, &camera(), &meas)
+            .expect("update")
+    }
+
     fn observations(ekf: &CameraImuEkf<f64>, offset_px: f64) -> [CornerObservation<f64>; 30] {
         let mut out = [CornerObservation {
             point_in_target: Vector3::zeros(),
@@ -422,14 +433,7 @@ mod reprojection {
         let mut ekf = camera_filter(0.0);
         let obs = observations(&ekf, 0.3);
         let before = ekf.extrinsic_sigma(0);
-        let meas = CornerSet {
-            stamp_ns: STAMP,
-            corners: &obs,
-            pixel_sigma: 0.5,
-        };
-        let report = ekf
-            .update_reprojection(0, 0, &camera(), &meas)
-            .expect("update");
+        let report = fuse(&mut ekf, &obs);
         assert_eq!(report.kind, UpdateKind::Reprojection);
         assert_eq!(report.dof, 60);
         assert!(report.accepted, "nis {} > {}", report.nis, report.threshold);
@@ -479,14 +483,7 @@ mod reprojection {
         let dx = k * r;
         let p_batch = (SMatrix::<f64, 28, 28>::identity() - k * h) * p0;
         // Then the corner-by-corner update gives the same covariance, correction and NIS
-        let meas = CornerSet {
-            stamp_ns: STAMP,
-            corners: &obs,
-            pixel_sigma: 0.5,
-        };
-        let report = ekf
-            .update_reprojection(0, 0, &camera(), &meas)
-            .expect("update");
+        let report = fuse(&mut ekf, &obs);
         assert!(report.accepted);
         assert!((report.nis - r.dot(&(s_inv * r))).abs() < 1e-8 * report.nis);
         let scale = p0.amax();
@@ -513,14 +510,7 @@ mod reprojection {
         let mut obs = observations(&ekf, 0.3);
         // 300 px: far outside that corner's own predicted spread (~50 px).
         obs[7].pixel.x += 300.0;
-        let meas = CornerSet {
-            stamp_ns: STAMP,
-            corners: &obs,
-            pixel_sigma: 0.5,
-        };
-        let report = ekf
-            .update_reprojection(0, 0, &camera(), &meas)
-            .expect("update");
+        let report = fuse(&mut ekf, &obs);
         assert!(report.accepted, "nis {} > {}", report.nis, report.threshold);
         assert_eq!(report.dof, 58);
         let residual = |k: usize| (obs[k].pixel - predicted(&ekf, &obs[k].point_in_target)).norm();
@@ -545,14 +535,7 @@ mod reprojection {
             o.pixel -= Vector2::new(80.0, -40.0);
         }
         let before = ekf.clone();
-        let meas = CornerSet {
-            stamp_ns: STAMP,
-            corners: &obs,
-            pixel_sigma: 0.5,
-        };
-        let report = ekf
-            .update_reprojection(0, 0, &camera(), &meas)
-            .expect("update");
+        let report = fuse(&mut ekf, &obs);
         assert!(!report.accepted);
         assert_eq!(ekf.imu(), before.imu());
         assert_eq!(ekf.extrinsic(0), before.extrinsic(0));
