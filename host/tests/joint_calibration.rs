@@ -76,8 +76,43 @@ struct Outcome {
     lidar_offset_ms: (f64, f64),
     converged: bool,
     planes_fused: usize,
-    /// Chained pairwise `T_cam_lidar` errors (deg, mm), when run.
-    chained: Option<(f64, f64)>,
+    /// The joint `T_cam_lidar` covariance `[dtheta; dp]`.
+    cam_lidar_covariance: Matrix6<f64>,
+    /// Chained pairwise `T_cam_lidar` judged against its own (independent-runs)
+    /// covariance, and that covariance, when run.
+    chained: Option<(Error6, Matrix6<f64>)>,
+}
+
+/// The probability that the joint `T_cam_lidar` is at least as accurate as the chained one
+/// in both rotation and translation, if both are consistent and the joint run is the
+/// efficient one: then the chained error is the joint error plus an independent part of
+/// covariance `chained - joint` (the less informed of two efficient estimates differs
+/// from the better one by noise uncorrelated with it). Monte Carlo over `samples` draws.
+fn win_probability(joint: &Matrix6<f64>, chained: &Matrix6<f64>, samples: usize) -> f64 {
+    let root = |m: Matrix6<f64>| {
+        let e = m.symmetric_eigen();
+        let d = e.eigenvalues.map(|l| l.max(0.0).sqrt());
+        e.eigenvectors * Matrix6::from_diagonal(&d)
+    };
+    let (a, b) = (root(*joint), root(chained - joint));
+    let mut rng = ChaCha8Rng::seed_from_u64(0x3177);
+    let mut draw = || Vector6::from_fn(|_, _| rng.sample::<f64, _>(rand_distr::StandardNormal));
+    let wins = (0..samples)
+        .filter(|_| {
+            let e = a * draw();
+            let c = e + b * draw();
+            e.fixed_rows::<3>(0).norm() <= c.fixed_rows::<3>(0).norm()
+                && e.fixed_rows::<3>(3).norm() <= c.fixed_rows::<3>(3).norm()
+        })
+        .count();
+    wins as f64 / samples as f64
+}
+
+/// RMS over the three axes of a `[dtheta; dp]` covariance's rotation sigma, deg.
+fn rotation_sigma_deg(covariance: &Matrix6<f64>) -> f64 {
+    (covariance.fixed_view::<3, 3>(0, 0).trace() / 3.0)
+        .sqrt()
+        .to_degrees()
 }
 
 fn judge(seed: u64, sim: &JointSim, c: &JointCalibration) -> Outcome {
@@ -95,6 +130,7 @@ fn judge(seed: u64, sim: &JointSim, c: &JointCalibration) -> Outcome {
             &sim.lidar.t_imu_lidar,
         ),
         cam_lidar: error6(&c.t_cam_lidar, &c.cam_lidar_covariance, &sim.t_cam_lidar()),
+        cam_lidar_covariance: c.cam_lidar_covariance,
         camera_offset_ms: offset(
             c.camera.time_offset_s,
             c.camera.time_offset_sigma_s,
@@ -169,13 +205,15 @@ fn run(seed: u64, duration_s: f64, pairwise: bool) -> Outcome {
 }
 
 /// `T_cam_lidar` from the camera-IMU and LiDAR-IMU pipelines run separately on the same
-/// data, chained: its rotation (deg) and translation (mm) errors.
-fn chained_pairwise(sim: &JointSim, input: &JointInput<'_>) -> (f64, f64) {
+/// data, chained: judged against the composed covariance, with its RMS rotation sigma.
+fn chained_pairwise(sim: &JointSim, input: &JointInput<'_>) -> (Error6, Matrix6<f64>) {
     let runs = joint::chained_pairwise(input, &JointOptions::default(), &mut |_| {})
         .expect("the pairwise pipelines run");
-    let (chained, _) = runs.t_cam_lidar();
-    let e = error6(&chained, &Matrix6::identity(), &sim.t_cam_lidar());
-    (e.rotation_deg, e.translation_mm)
+    let (chained, covariance) = runs.t_cam_lidar();
+    (
+        error6(&chained, &covariance, &sim.t_cam_lidar()),
+        covariance,
+    )
 }
 
 fn print(o: &Outcome) {
@@ -190,7 +228,7 @@ fn print(o: &Outcome) {
     };
     println!(
         "seed {}: {}; {}; {}; t_d cam {:+.3} ms (sigma {:.3}), lidar {:+.3} ms (sigma {:.3}); \
-         planes {}; converged {}; chained pairwise {:?}",
+         planes {}; converged {}; rotation sigma joint {:.4} deg; chained pairwise {}",
         o.seed,
         row("cam", &o.camera),
         row("lidar", &o.lidar),
@@ -201,7 +239,12 @@ fn print(o: &Outcome) {
         o.lidar_offset_ms.1,
         o.planes_fused,
         o.converged,
-        o.chained
+        rotation_sigma_deg(&o.cam_lidar_covariance),
+        o.chained.map_or("not run".to_string(), |(e, p)| format!(
+            "{} (rotation sigma {:.4} deg)",
+            row("cam_lidar", &e),
+            rotation_sigma_deg(&p)
+        ))
     );
 }
 
@@ -252,8 +295,9 @@ fn ten_seeds_joint_against_chained_pairwise() {
     let better = outcomes
         .iter()
         .filter(|o| {
-            o.chained.is_some_and(|(r, t)| {
-                o.cam_lidar.rotation_deg <= r && o.cam_lidar.translation_mm <= t
+            o.chained.is_some_and(|(e, _)| {
+                o.cam_lidar.rotation_deg <= e.rotation_deg
+                    && o.cam_lidar.translation_mm <= e.translation_mm
             })
         })
         .count();
@@ -265,6 +309,55 @@ fn ten_seeds_joint_against_chained_pairwise() {
         nees(|o| o.cam_lidar.nees),
         outcomes.len()
     );
+    // What the covariances say the win count can be: the per-seed win probability, its
+    // sum, and the chance of 8 or more wins (Poisson-binomial).
+    let p_win: Vec<f64> = outcomes
+        .iter()
+        .filter_map(|o| {
+            o.chained
+                .map(|(_, p)| win_probability(&o.cam_lidar_covariance, &p, 20_000))
+        })
+        .collect();
+    let expected: f64 = p_win.iter().sum();
+    let spread = p_win.iter().map(|p| p * (1.0 - p)).sum::<f64>().sqrt();
+    let mut count = vec![1.0];
+    for p in &p_win {
+        let mut next = vec![0.0; count.len() + 1];
+        for (k, c) in count.iter().enumerate() {
+            next[k] += c * (1.0 - p);
+            next[k + 1] += c * p;
+        }
+        count = next;
+    }
+    let eight_or_more: f64 = count.iter().skip(8).sum();
+    println!(
+        "win probability per seed {:?}; expected wins {expected:.1} +- {spread:.1}; \
+         P(>= 8 wins) {eight_or_more:.2}",
+        p_win
+            .iter()
+            .map(|p| (p * 100.0).round() / 100.0)
+            .collect::<Vec<_>>()
+    );
+    assert!(
+        better as f64 >= expected - 3.0 * spread,
+        "{better} wins against {expected:.1} +- {spread:.1} expected"
+    );
+    // The joint run is the better informed on every seed, in rotation and translation.
+    for o in &outcomes {
+        let (_, p) = o.chained.expect("pairwise run");
+        let j = &o.cam_lidar_covariance;
+        assert!(
+            j.fixed_view::<3, 3>(0, 0).trace() < p.fixed_view::<3, 3>(0, 0).trace()
+                && j.fixed_view::<3, 3>(3, 3).trace() < p.fixed_view::<3, 3>(3, 3).trace(),
+            "seed {}: joint covariance not below the chained one",
+            o.seed
+        );
+    }
+    let chained_nees: f64 = outcomes
+        .iter()
+        .filter_map(|o| o.chained.map(|(e, _)| e.nees))
+        .sum();
+    println!("chained pairwise T_cam_lidar NEES sum {chained_nees:.1} (independent runs assumed)");
     for o in &outcomes {
         assert!(o.converged, "{o:?}");
         assert!(
