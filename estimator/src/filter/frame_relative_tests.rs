@@ -35,6 +35,18 @@ pub(super) fn measurement_cov<T: Scalar>() -> SMatrix<T, 6, 6> {
     m.map(T::lit)
 }
 
+/// Places the camera filter's target from the PnP-like [`target_in_sensor`] with
+/// [`measurement_cov`] at [`STAMP`], as the pipeline does.
+pub(super) fn place_target<T: Scalar>(ekf: &mut CameraImuEkf<T>) -> Result<(), Error> {
+    ekf.init_frame_relative(
+        TARGET_FRAME,
+        SOLE_SENSOR,
+        STAMP,
+        &target_in_sensor(),
+        &measurement_cov(),
+    )
+}
+
 /// A spinning, accelerating camera-IMU filter standing at `T0 + 240 ms`, reach to 260 ms.
 pub(super) fn camera_filter<T: Scalar>(time_offset: f64) -> CameraImuEkf<T> {
     let mut init = InitialState::<T, 1>::at_rest(Vector3::new(T::zero(), T::zero(), T::lit(9.81)))
@@ -108,14 +120,7 @@ fn frame_covariance_is_the_dense_linear_transform_of_the_state() {
     before.advance_to(t).expect("advance");
     let p = before.covariance();
     let mut ekf = camera_filter::<f64>(0.004);
-    ekf.init_frame_relative(
-        TARGET_FRAME,
-        SOLE_SENSOR,
-        STAMP,
-        &target_in_sensor(),
-        &measurement_cov(),
-    )
-    .expect("frame");
+    place_target(&mut ekf).expect("frame");
     let jac = compose_frame(
         &before.imu().pose(),
         &before.extrinsic(SOLE_SENSOR),
@@ -152,14 +157,7 @@ fn frame_time_offset_column_matches_central_differences() {
     let (td, h) = (0.004, 1e-4);
     let frame_at = |td: f64| {
         let mut ekf = camera_filter::<f64>(td);
-        ekf.init_frame_relative(
-            TARGET_FRAME,
-            SOLE_SENSOR,
-            STAMP,
-            &target_in_sensor(),
-            &measurement_cov(),
-        )
-        .expect("frame");
+        place_target(&mut ekf).expect("frame");
         ekf.frame(TARGET_FRAME).expect("frame")
     };
     let (plus, minus) = (frame_at(td + h), frame_at(td - h));
@@ -171,14 +169,7 @@ fn frame_time_offset_column_matches_central_differences() {
         .fixed_rows_mut::<3>(3)
         .copy_from(&((plus.translation - minus.translation) / (2.0 * h)));
     let mut ekf = camera_filter::<f64>(td);
-    ekf.init_frame_relative(
-        TARGET_FRAME,
-        SOLE_SENSOR,
-        STAMP,
-        &target_in_sensor(),
-        &measurement_cov(),
-    )
-    .expect("frame");
+    place_target(&mut ekf).expect("frame");
     let t = Layout::<1, 0>::time_offset(SOLE_SENSOR).idx;
     let fr = Layout::<1, 0>::frame_orientation(TARGET_FRAME).idx;
     let cov = ekf.covariance();
@@ -251,23 +242,8 @@ fn every_error_leaves_the_filter_unchanged() {
 fn f32_agrees_with_f64() {
     let mut wide = camera_filter::<f64>(0.004);
     let mut narrow = camera_filter::<f32>(0.004);
-    wide.init_frame_relative(
-        TARGET_FRAME,
-        SOLE_SENSOR,
-        STAMP,
-        &target_in_sensor(),
-        &measurement_cov(),
-    )
-    .expect("f64");
-    narrow
-        .init_frame_relative(
-            TARGET_FRAME,
-            SOLE_SENSOR,
-            STAMP,
-            &target_in_sensor(),
-            &measurement_cov(),
-        )
-        .expect("f32");
+    place_target(&mut wide).expect("f64");
+    place_target(&mut narrow).expect("f32");
     let (a, b) = (
         wide.frame(TARGET_FRAME).expect("f64"),
         narrow.frame(TARGET_FRAME).expect("f32"),

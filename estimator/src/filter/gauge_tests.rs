@@ -3,7 +3,7 @@
 //! gauge-invariant blocks kept exactly, every error leaving the filter unchanged, f32
 //! against f64.
 
-use super::frame_relative_tests::{camera_filter, measurement_cov, target_in_sensor, STAMP};
+use super::frame_relative_tests::{camera_filter, place_target, STAMP};
 use super::joint_tests::joint_filter;
 use super::*;
 use crate::lie::{exp, log, Pose};
@@ -87,14 +87,7 @@ fn gauge_directions_match_a_finite_yaw_and_translation_of_every_pose() {
 /// the IMU pose, the extrinsic and the time offset, as the pipeline does it).
 fn placed() -> CameraImuEkf<f64> {
     let mut ekf = camera_filter::<f64>(0.003);
-    ekf.init_frame_relative(
-        TARGET_FRAME,
-        SOLE_SENSOR,
-        STAMP,
-        &target_in_sensor(),
-        &measurement_cov(),
-    )
-    .expect("frame");
+    place_target(&mut ekf).expect("frame");
     ekf
 }
 
@@ -186,15 +179,7 @@ fn errors_leave_the_filter_unchanged() {
 fn f32_follows_f64() {
     let mut wide = placed();
     let mut narrow = camera_filter::<f32>(0.003);
-    narrow
-        .init_frame_relative(
-            TARGET_FRAME,
-            SOLE_SENSOR,
-            STAMP,
-            &target_in_sensor(),
-            &measurement_cov::<f32>(),
-        )
-        .expect("frame");
+    place_target(&mut narrow).expect("frame");
     wide.fix_gauge(TARGET_FRAME).expect("f64");
     narrow.fix_gauge(TARGET_FRAME).expect("f32");
     let (a, b) = (wide.covariance(), narrow.covariance().map(f64::from));
