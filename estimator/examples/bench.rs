@@ -10,6 +10,7 @@ use std::time::Instant;
 use msreg_estimator::na::Vector3;
 use msreg_estimator::{
     FilterConfig, ImuNoise, ImuSample, InitialState, Pose, PoseImuEkf, RelativePose, Scalar,
+    SOLE_SENSOR,
 };
 
 const T0: u64 = 1_700_000_000_000_000_000;
@@ -18,8 +19,8 @@ const IMU_DT_NS: u64 = 2_500_000;
 fn filter<T: Scalar>() -> PoseImuEkf<T> {
     let init = InitialState::<T, 1>::at_rest(Vector3::new(T::zero(), T::zero(), T::lit(9.81)))
         .expect("gravity")
-        .with_extrinsic(0, Pose::identity(), T::lit(0.05), T::lit(0.3))
-        .with_time_offset(0, T::zero(), T::zero());
+        .with_extrinsic(SOLE_SENSOR, Pose::identity(), T::lit(0.05), T::lit(0.3))
+        .with_time_offset(SOLE_SENSOR, T::zero(), T::zero());
     PoseImuEkf::new(&FilterConfig::new(ImuNoise::vn300()), &init).expect("prior")
 }
 
@@ -71,7 +72,8 @@ fn run<T: Scalar>() -> Row {
             ekf.propagate(&sample::<T>(k)).expect("propagate");
             k += 1;
         }
-        ekf.anchor(0, T0 + (k - 1) * IMU_DT_NS).expect("anchor");
+        ekf.anchor(SOLE_SENSOR, T0 + (k - 1) * IMU_DT_NS)
+            .expect("anchor");
         let mut total = Vec::new();
         for _ in 0..15 {
             let mut ns = 0.0;
@@ -89,10 +91,10 @@ fn run<T: Scalar>() -> Row {
                     T::lit(0.5),
                 );
                 let start = Instant::now();
-                let r = ekf.update_relative_pose(0, black_box(&m));
+                let r = ekf.update_relative_pose(SOLE_SENSOR, black_box(&m));
                 ns += start.elapsed().as_nanos() as f64;
                 if r.is_err() {
-                    let _ = ekf.anchor(0, to);
+                    let _ = ekf.anchor(SOLE_SENSOR, to);
                 }
             }
             total.push(ns / 200.0);

@@ -4,7 +4,7 @@ use msreg_estimator::camera::{radtan::RadTan, Camera, Distortion, Intrinsics, Pr
 use msreg_estimator::na::{UnitQuaternion, Vector2, Vector3};
 use msreg_estimator::{
     CameraImuEkf, CornerObservation, CornerSet, FilterConfig, ImuNoise, ImuSample, InitialState,
-    Pose,
+    Pose, SOLE_SENSOR, TARGET_FRAME,
 };
 
 const BOARD: (usize, usize) = (6, 7);
@@ -18,8 +18,8 @@ fn run() -> Option<()> {
     };
     let gravity = Vector3::new(0.0, 0.0, 9.81);
     let init = InitialState::<f32, 1>::at_rest(gravity)?
-        .with_extrinsic(0, Pose::identity(), 0.01, 0.01)
-        .with_time_offset(0, 0.0, 0.005);
+        .with_extrinsic(SOLE_SENSOR, Pose::identity(), 0.01, 0.01)
+        .with_time_offset(SOLE_SENSOR, 0.0, 0.005);
     let mut ekf = CameraImuEkf::<f32>::new(&FilterConfig::new(noise), &init).ok()?;
     let stamp_ns = 1_000_000_000;
     ekf.propagate(&ImuSample {
@@ -47,8 +47,9 @@ fn run() -> Option<()> {
     )
     .ok()?;
     let t_c_t = Pose::new(UnitQuaternion::identity(), Vector3::new(-0.1, -0.12, 0.8));
-    let t_g_c = ekf.imu().pose().compose(&ekf.extrinsic(0));
-    ekf.init_frame(0, t_g_c.compose(&t_c_t), 0.05, 0.05).ok()?;
+    let t_g_c = ekf.imu().pose().compose(&ekf.extrinsic(SOLE_SENSOR));
+    ekf.init_frame(TARGET_FRAME, t_g_c.compose(&t_c_t), 0.05, 0.05)
+        .ok()?;
     let mut corners = [CornerObservation {
         point_in_target: Vector3::zeros(),
         pixel: Vector2::zeros(),
@@ -66,7 +67,9 @@ fn run() -> Option<()> {
         pixel_sigma: 0.1,
     };
     for _ in 0..100 {
-        let r = ekf.update_reprojection(0, 0, &camera, &meas).ok()?;
+        let r = ekf
+            .update_reprojection(SOLE_SENSOR, TARGET_FRAME, &camera, &meas)
+            .ok()?;
         if !r.accepted {
             return None;
         }

@@ -10,6 +10,7 @@
 
 use crate::chi2::Confidence;
 use crate::health::{HealthConfig, HealthMonitor};
+use crate::ids::{FrameId, SensorId};
 use crate::lie::Pose;
 use crate::propagate::{self, ImuNoise, ImuSample, ImuSignal};
 use crate::scalar::Scalar;
@@ -29,6 +30,15 @@ pub type MonitorEkf<T> = Ekf<T, 2, 4, 53>;
 /// Filter for a camera and an IMU observing one static target (RepErrCal): the target pose
 /// is a state, no clones are needed.
 pub type CameraImuEkf<T> = Ekf<T, 1, 0, 28, 1>;
+
+/// The sensor of the one-sensor layouts ([`PoseImuEkf`], [`CameraImuEkf`]).
+pub const SOLE_SENSOR: SensorId = SensorId::at::<0, 1>();
+/// The static target frame of the one-frame layouts ([`CameraImuEkf`], [`JointEkf`]).
+pub const TARGET_FRAME: FrameId = FrameId::at::<0, 1>();
+/// The LiDAR of the joint layout ([`JointEkf`]; the first pose sensor of [`MonitorEkf`]).
+pub const JOINT_LIDAR: SensorId = SensorId::at::<0, 2>();
+/// The camera of the joint layout ([`JointEkf`]; the second pose sensor of [`MonitorEkf`]).
+pub const JOINT_CAMERA: SensorId = SensorId::at::<1, 2>();
 
 /// Filter tuning.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -131,7 +141,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         set(imu::GYRO_BIAS, init.sigma_gyro_bias);
         set(imu::ACCEL_BIAS, init.sigma_accel_bias);
         let mut prior_sigma = [[T::zero(); 7]; S];
-        for (s, p) in init.sensors.iter().enumerate() {
+        for (s, p) in SensorId::all::<S>().into_iter().zip(&init.sensors) {
             set(Layout::<S, C>::extrinsic_rotation(s), p.sigma_rotation);
             set(
                 Layout::<S, C>::extrinsic_translation(s),
@@ -140,7 +150,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
             set(Layout::<S, C>::time_offset(s), p.sigma_time_offset);
             let r = p.sigma_rotation;
             let t = p.sigma_translation;
-            prior_sigma[s] = [r, r, r, t, t, t, p.sigma_time_offset];
+            prior_sigma[s.index()] = [r, r, r, t, t, t, p.sigma_time_offset];
         }
         Ok(Self {
             config: *config,
@@ -162,6 +172,24 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         })
     }
 
+    // ----- ids ---------------------------------------------------------------------------
+
+    /// The id of sensor `index` of this layout; [`Error::UnknownSensor`] unless `index < S`.
+    pub const fn sensor_id(index: usize) -> Result<SensorId, Error> {
+        SensorId::new::<S>(index)
+    }
+
+    /// The id of static frame `index` of this layout; [`Error::UnknownFrame`] unless
+    /// `index < F`.
+    pub const fn frame_id(index: usize) -> Result<FrameId, Error> {
+        FrameId::new::<F>(index)
+    }
+
+    /// The ids of every sensor of this layout, in order.
+    pub fn sensor_ids() -> [SensorId; S] {
+        SensorId::all::<S>()
+    }
+
     // ----- read access -------------------------------------------------------------------
 
     /// Filter time, ns (IMU clock). Zero before the first IMU sample.
@@ -175,26 +203,23 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     }
 
     /// Calibration state of sensor `s`.
-    pub fn sensor(&self, s: usize) -> Option<&SensorState<T>> {
-        self.sensors.get(s)
+    pub fn sensor(&self, s: SensorId) -> Option<&SensorState<T>> {
+        self.sensors.get(s.index())
     }
 
     /// Extrinsic `T_I_S` of sensor `s` (identity for an unknown sensor).
-    pub fn extrinsic(&self, s: usize) -> Pose<T> {
-        self.sensors.get(s).map(|x| x.extrinsic).unwrap_or_default()
+    pub fn extrinsic(&self, s: SensorId) -> Pose<T> {
+        self.sensor(s).map(|x| x.extrinsic).unwrap_or_default()
     }
 
     /// Time offset `t_d` of sensor `s`, seconds.
-    pub fn time_offset(&self, s: usize) -> T {
-        self.sensors
-            .get(s)
-            .map(|x| x.time_offset)
-            .unwrap_or_default()
+    pub fn time_offset(&self, s: SensorId) -> T {
+        self.sensor(s).map(|x| x.time_offset).unwrap_or_default()
     }
 
     /// 1-sigma of the extrinsic of sensor `s`: (rotation axes, rad; translation, m).
-    pub fn extrinsic_sigma(&self, s: usize) -> (Vector3<T>, Vector3<T>) {
-        if s >= S {
+    pub fn extrinsic_sigma(&self, s: SensorId) -> (Vector3<T>, Vector3<T>) {
+        if s.checked(S).is_err() {
             return (Vector3::zeros(), Vector3::zeros());
         }
         let r = Layout::<S, C>::extrinsic_rotation(s).idx;
@@ -207,8 +232,8 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     }
 
     /// 1-sigma of the time offset of sensor `s`, seconds.
-    pub fn time_offset_sigma(&self, s: usize) -> T {
-        if s >= S {
+    pub fn time_offset_sigma(&self, s: SensorId) -> T {
+        if s.checked(S).is_err() {
             return T::zero();
         }
         let i = Layout::<S, C>::time_offset(s).idx;
@@ -216,8 +241,8 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     }
 
     /// 6x6 covariance of the extrinsic of sensor `s` (`[rotation; translation]`).
-    pub fn extrinsic_covariance(&self, s: usize) -> SMatrix<T, 6, 6> {
-        if s >= S {
+    pub fn extrinsic_covariance(&self, s: SensorId) -> SMatrix<T, 6, 6> {
+        if s.checked(S).is_err() {
             return SMatrix::zeros();
         }
         let b = Layout::<S, C>::extrinsic(s).idx;
@@ -226,20 +251,23 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
 
     /// Prior 1-sigma of sensor `s` (rotation x, y, z in rad, translation x, y, z in m,
     /// time offset in s), as the filter was started; zeros for an unknown sensor.
-    pub fn prior_sigma(&self, s: usize) -> [T; 7] {
-        self.prior_sigma.get(s).copied().unwrap_or([T::zero(); 7])
+    pub fn prior_sigma(&self, s: SensorId) -> [T; 7] {
+        self.prior_sigma
+            .get(s.index())
+            .copied()
+            .unwrap_or([T::zero(); 7])
     }
 
     /// Per-DoF excitation of sensor `s`: `1 - sigma / sigma_prior` for rotation x, y, z,
     /// translation x, y, z and time offset (0 = nothing learned, -> 1 = well observed).
-    pub fn excitation(&self, s: usize) -> [T; 7] {
+    pub fn excitation(&self, s: SensorId) -> [T; 7] {
         let mut out = [T::zero(); 7];
-        if s >= S {
+        let Ok(i) = s.checked(S) else {
             return out;
-        }
+        };
         let base = Layout::<S, C>::extrinsic_rotation(s).idx;
         for (k, o) in out.iter_mut().enumerate() {
-            let prior = self.prior_sigma[s][k];
+            let prior = self.prior_sigma[i][k];
             if prior > T::zero() {
                 let sd = self.cov[(base + k, base + k)].max(T::zero()).sqrt();
                 *o = (T::one() - sd / prior).max(T::zero());
@@ -334,8 +362,8 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     /// IMU time `stamp + t_d` of sensor `s`'s measurement stamped `stamp_ns` (sensor clock),
     /// with the current time-offset estimate. This is the one rule for "when did this
     /// measurement happen on the IMU clock" that every pipeline and the firmware use.
-    pub fn imu_time(&self, s: usize, stamp_ns: u64) -> Result<u64, Error> {
-        let sensor = self.sensors.get(s).ok_or(Error::UnknownSensor)?;
+    pub fn imu_time(&self, s: SensorId, stamp_ns: u64) -> Result<u64, Error> {
+        let sensor = self.sensor(s).ok_or(Error::UnknownSensor)?;
         // Offset rounded to ns and added in integer space: stamps near 1.7e18 ns have no
         // sub-microsecond resolution as floats.
         let td = libm::round(sensor.time_offset.to_f64() * 1e9) as i64;
@@ -348,7 +376,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
 
     /// True when sensor `s`'s measurement stamped `stamp_ns` can be fused now: its IMU time is
     /// at or before the newest IMU sample. Feed IMU samples until it is, then fuse.
-    pub fn is_due(&self, s: usize, stamp_ns: u64) -> bool {
+    pub fn is_due(&self, s: SensorId, stamp_ns: u64) -> bool {
         match (self.imu_time(s, stamp_ns), self.imu_horizon_ns()) {
             (Ok(t), Some(h)) => t <= h,
             _ => false,

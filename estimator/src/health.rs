@@ -15,6 +15,7 @@
 //! covariance by `Ekf::excitation`.
 
 use crate::chi2::{self, Confidence};
+use crate::ids::SensorId;
 use crate::scalar::Scalar;
 use heapless::Deque;
 use nalgebra::{Cholesky, Matrix3, Vector3};
@@ -97,8 +98,8 @@ impl<T: Scalar> Default for HealthConfig<T> {
 pub enum HealthEvent<T: Scalar> {
     /// The extrinsic rotation of `sensor` changed; its covariance was inflated.
     RotationStep {
-        /// Sensor index.
-        sensor: usize,
+        /// The sensor.
+        sensor: SensorId,
         /// Stamp of the update that triggered it, ns.
         stamp_ns: u64,
         /// GLR statistic (chi-square(3) under "no change").
@@ -110,8 +111,8 @@ pub enum HealthEvent<T: Scalar> {
     },
     /// The extrinsic translation of `sensor` changed; its covariance was inflated.
     TranslationStep {
-        /// Sensor index.
-        sensor: usize,
+        /// The sensor.
+        sensor: SensorId,
         /// Stamp of the update that triggered it, ns.
         stamp_ns: u64,
         /// GLR statistic.
@@ -340,17 +341,17 @@ impl<T: Scalar, const S: usize> HealthMonitor<T, S> {
     }
 
     /// Health of sensor `s`.
-    pub fn sensor(&self, s: usize) -> Option<&SensorHealth<T>> {
-        self.sensors.get(s)
+    pub fn sensor(&self, s: SensorId) -> Option<&SensorHealth<T>> {
+        self.sensors.get(s.index())
     }
 
     /// Whether sensor `s`'s step detectors may see its innovations, given the largest
     /// rotation and translation sigma of its extrinsic now: once it has converged (below the
     /// arm thresholds) and, after a reaction to a step, re-converged (see
     /// [`HealthConfig::rearm_factor`]).
-    pub fn armed(&mut self, s: usize, sigma_rotation: T, sigma_translation: T) -> bool {
+    pub fn armed(&mut self, s: SensorId, sigma_rotation: T, sigma_translation: T) -> bool {
         let config = self.config;
-        let Some(health) = self.sensors.get_mut(s) else {
+        let Some(health) = self.sensors.get_mut(s.index()) else {
             return false;
         };
         if let Some((r, t)) = health.rearm_below {
@@ -365,9 +366,9 @@ impl<T: Scalar, const S: usize> HealthMonitor<T, S> {
 
     /// Holds sensor `s`'s detectors until its extrinsic sigmas are back within
     /// `rearm_factor` of the given values (its sigmas before the filter reacted to a step).
-    pub fn hold_until_reconverged(&mut self, s: usize, sigma_rotation: T, sigma_translation: T) {
+    pub fn hold_until_reconverged(&mut self, s: SensorId, sigma_rotation: T, sigma_translation: T) {
         let factor = self.config.rearm_factor;
-        if let Some(health) = self.sensors.get_mut(s) {
+        if let Some(health) = self.sensors.get_mut(s.index()) {
             health.rearm_below = Some((sigma_rotation * factor, sigma_translation * factor));
         }
     }
@@ -376,7 +377,7 @@ impl<T: Scalar, const S: usize> HealthMonitor<T, S> {
     /// caller then inflates the extrinsic covariance).
     pub fn record(
         &mut self,
-        s: usize,
+        s: SensorId,
         stamp_ns: u64,
         nis: T,
         dof: usize,
@@ -384,7 +385,7 @@ impl<T: Scalar, const S: usize> HealthMonitor<T, S> {
         innovation: Option<&ExtrinsicInnovation<T>>,
     ) -> Option<HealthEvent<T>> {
         let config = self.config;
-        let health = self.sensors.get_mut(s)?;
+        let health = self.sensors.get_mut(s.index())?;
         if accepted {
             health.accepted = health.accepted.saturating_add(1);
         } else {
@@ -449,21 +450,23 @@ impl<T: Scalar, const S: usize> HealthMonitor<T, S> {
 mod tests {
     use super::*;
 
+    const SENSOR: SensorId = SensorId::at::<0, 2>();
+
     #[test]
     fn detectors_rearm_only_after_the_reaction_has_reconverged() {
         let mut m = HealthMonitor::<f64, 2>::new(HealthConfig::default());
-        assert!(m.armed(0, 1e-4, 1e-3));
+        assert!(m.armed(SENSOR, 1e-4, 1e-3));
         // Not converged yet: the first arming.
-        assert!(!m.armed(0, 1e-2, 1e-3));
-        m.hold_until_reconverged(0, 1e-4, 1e-3);
+        assert!(!m.armed(SENSOR, 1e-2, 1e-3));
+        m.hold_until_reconverged(SENSOR, 1e-4, 1e-3);
         // Within the arm thresholds but not back within 2x of the sigmas before the step.
-        assert!(!m.armed(0, 3e-4, 5e-4));
-        assert!(!m.armed(0, 1e-4, 2.5e-3));
+        assert!(!m.armed(SENSOR, 3e-4, 5e-4));
+        assert!(!m.armed(SENSOR, 1e-4, 2.5e-3));
         // The other sensor is not held.
-        assert!(m.armed(1, 3e-4, 5e-4));
-        assert!(m.armed(0, 1.5e-4, 1.5e-3));
+        assert!(m.armed(SensorId::at::<1, 2>(), 3e-4, 5e-4));
+        assert!(m.armed(SENSOR, 1.5e-4, 1.5e-3));
         // Once re-converged the hold is gone: the ordinary arming applies again.
-        assert!(m.armed(0, 3e-4, 5e-4));
+        assert!(m.armed(SENSOR, 3e-4, 5e-4));
     }
 
     /// Information per update and axis: a 1-sigma of 0.18 deg per update.
@@ -487,7 +490,7 @@ mod tests {
         let mut fired = None;
         for k in 0..100 {
             if let Some(e) = m.record(
-                0,
+                SENSOR,
                 k,
                 3.0,
                 6,
@@ -518,7 +521,7 @@ mod tests {
                 translation_score: Vector3::zeros(),
             };
             assert!(
-                m.record(0, k, 3.0, 6, true, Some(&inn)).is_none(),
+                m.record(SENSOR, k, 3.0, 6, true, Some(&inn)).is_none(),
                 "alarm at {k}"
             );
         }
@@ -543,7 +546,7 @@ mod tests {
                 translation_score: Vector3::zeros(),
             };
             assert!(
-                m.record(0, k, 3.0, 6, true, Some(&inn)).is_none(),
+                m.record(SENSOR, k, 3.0, 6, true, Some(&inn)).is_none(),
                 "alarm at {k}"
             );
         }
@@ -557,7 +560,7 @@ mod tests {
         for k in 0..1000u64 {
             let s = if k % 2 == 0 { sd } else { -sd };
             let e = m.record(
-                0,
+                SENSOR,
                 k,
                 3.0,
                 3,
@@ -573,12 +576,15 @@ mod tests {
         let cfg = HealthConfig::<f64>::default();
         let mut m = HealthMonitor::<f64, 1>::new(cfg);
         for k in 0..60 {
-            m.record(0, k, 6.0, 6, true, None);
+            m.record(SENSOR, k, 6.0, 6, true, None);
         }
-        assert_eq!(m.sensor(0).unwrap().nis_status(&cfg), NisStatus::Consistent);
+        assert_eq!(
+            m.sensor(SENSOR).unwrap().nis_status(&cfg),
+            NisStatus::Consistent
+        );
         for k in 0..60 {
-            m.record(0, k, 20.0, 6, true, None);
+            m.record(SENSOR, k, 20.0, 6, true, None);
         }
-        assert_eq!(m.sensor(0).unwrap().nis_status(&cfg), NisStatus::High);
+        assert_eq!(m.sensor(SENSOR).unwrap().nis_status(&cfg), NisStatus::High);
     }
 }

@@ -22,6 +22,7 @@ pub mod error;
 pub mod filter;
 pub mod hand_eye;
 pub mod health;
+pub mod ids;
 pub mod lie;
 pub mod propagate;
 pub mod scalar;
@@ -29,9 +30,13 @@ pub mod state;
 pub mod update;
 
 pub use error::Error;
-pub use filter::{CameraImuEkf, Ekf, FilterConfig, JointEkf, PoseImuEkf};
+pub use filter::{
+    CameraImuEkf, Ekf, FilterConfig, JointEkf, PoseImuEkf, JOINT_CAMERA, JOINT_LIDAR, SOLE_SENSOR,
+    TARGET_FRAME,
+};
 pub use hand_eye::{HandEye, HandEyeError};
 pub use health::{HealthConfig, HealthEvent, HealthMonitor, SensorHealth};
+pub use ids::{FrameId, SensorId};
 pub use lie::Pose;
 pub use propagate::{ImuNoise, ImuSample};
 pub use scalar::Scalar;

@@ -13,6 +13,7 @@ mod layout;
 pub use initial::{InitialState, SensorPrior};
 pub use layout::{imu, Block, Layout, CLONE_DIM, FRAME_DIM, SENSOR_DIM};
 
+use crate::ids::SensorId;
 use crate::lie::Pose;
 use crate::scalar::Scalar;
 use nalgebra::{UnitQuaternion, Vector3};
@@ -64,5 +65,5 @@ pub struct CloneState<T: Scalar> {
     /// Sensor stamp (ns) of the measurement that created the clone.
     pub stamp_ns: u64,
     /// The sensor that created it.
-    pub sensor: usize,
+    pub sensor: SensorId,
 }

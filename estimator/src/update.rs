@@ -9,6 +9,7 @@ pub mod reprojection;
 mod sparse;
 pub mod zero_velocity;
 
+use crate::ids::SensorId;
 use crate::scalar::Scalar;
 use nalgebra::{SMatrix, Vector3};
 
@@ -32,9 +33,9 @@ pub enum UpdateKind {
 pub struct UpdateReport<T: Scalar> {
     /// Measurement model.
     pub kind: UpdateKind,
-    /// Sensor index; `None` for updates that belong to no sensor (zero velocity), which
+    /// The sensor; `None` for updates that belong to no sensor (zero velocity), which
     /// then enter no sensor's health window.
-    pub sensor: Option<usize>,
+    pub sensor: Option<SensorId>,
     /// Measurement stamp, ns (sensor clock).
     pub stamp_ns: u64,
     /// Residual dimension.

@@ -4,7 +4,9 @@
 use msreg_estimator::na::{UnitQuaternion, Vector3};
 use msreg_estimator::{
     Error, FilterConfig, ImuNoise, ImuSample, InitialState, Pose, PoseImuEkf, RelativePose,
+    SensorId, SOLE_SENSOR,
 };
+
 use proptest::prelude::*;
 
 const START_NS: u64 = 1_700_000_000_000_000_000;
@@ -14,8 +16,8 @@ fn warmed_up() -> PoseImuEkf<f64> {
     let config = FilterConfig::new(ImuNoise::vn300());
     let init = InitialState::<f64, 1>::at_rest(Vector3::new(0.0, 0.0, 9.81))
         .expect("gravity")
-        .with_extrinsic(0, Pose::identity(), 0.05, 0.2)
-        .with_time_offset(0, 0.0, 0.01);
+        .with_extrinsic(SOLE_SENSOR, Pose::identity(), 0.05, 0.2)
+        .with_time_offset(SOLE_SENSOR, 0.0, 0.01);
     let mut ekf = PoseImuEkf::new(&config, &init).expect("valid prior");
     for k in 0..=400u64 {
         let s = ImuSample {
@@ -25,7 +27,7 @@ fn warmed_up() -> PoseImuEkf<f64> {
         };
         ekf.propagate(&s).expect("valid sample");
         if k == 40 {
-            ekf.anchor(0, s.stamp_ns).expect("anchor");
+            ekf.anchor(SOLE_SENSOR, s.stamp_ns).expect("anchor");
         }
         if k > 40 && k % 40 == 0 {
             let m = RelativePose::with_sigmas(
@@ -35,7 +37,8 @@ fn warmed_up() -> PoseImuEkf<f64> {
                 0.0035,
                 0.005,
             );
-            ekf.update_relative_pose(0, &m).expect("valid update");
+            ekf.update_relative_pose(SOLE_SENSOR, &m)
+                .expect("valid update");
         }
     }
     ekf
@@ -47,7 +50,7 @@ fn snapshot(ekf: &PoseImuEkf<f64>) -> String {
         "{} {:?} {:?} {:?}",
         ekf.time_ns(),
         ekf.imu(),
-        ekf.sensor(0),
+        ekf.sensor(SOLE_SENSOR),
         ekf.covariance()
     )
 }
@@ -99,11 +102,13 @@ proptest! {
         let from = anchor.saturating_sub(from_offset);
         let rotation = UnitQuaternion::from_scaled_axis(if axis.iter().all(|x| x.is_finite()) { axis } else { Vector3::zeros() });
         let m = RelativePose::with_sigmas(from, from + len, Pose::new(rotation, trans), sigma_r, sigma_t);
+        // Sensors 1 and 2 are ids of a wider layout: typed errors, state untouched.
+        let sensor = SensorId::new::<3>(sensor).expect("sensor of the wider layout");
         match ekf.update_relative_pose(sensor, &m) {
             Err(_) => prop_assert_eq!(before, snapshot(&ekf)),
             Ok(report) => {
                 prop_assert!(report.nis.is_finite());
-                prop_assert!(ekf.sensor(0).is_some_and(|s| s.extrinsic.is_finite()));
+                prop_assert!(ekf.sensor(SOLE_SENSOR).is_some_and(|s| s.extrinsic.is_finite()));
             }
         }
     }
@@ -144,7 +149,7 @@ fn measurement_older_than_the_window_is_a_typed_error() {
     let t = ekf.time_ns();
     let m = RelativePose::with_sigmas(t - 900_000_000, t, Pose::identity(), 0.0035, 0.005);
     assert_eq!(
-        ekf.update_relative_pose(0, &m).unwrap_err(),
+        ekf.update_relative_pose(SOLE_SENSOR, &m).unwrap_err(),
         Error::OlderThanWindow
     );
     assert_eq!(before, snapshot(&ekf));
@@ -154,7 +159,8 @@ fn measurement_older_than_the_window_is_a_typed_error() {
 fn unknown_sensor_is_a_typed_error() {
     let mut ekf = warmed_up();
     assert_eq!(
-        ekf.anchor(5, ekf.time_ns()).unwrap_err(),
+        ekf.anchor(SensorId::at::<5, 6>(), ekf.time_ns())
+            .unwrap_err(),
         Error::UnknownSensor
     );
 }

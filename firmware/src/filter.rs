@@ -11,15 +11,18 @@ use msreg_estimator::health::NisStatus;
 use msreg_estimator::na::{Quaternion, UnitQuaternion, Vector3};
 use msreg_estimator::{
     CameraImuEkf, Ekf, Error as FilterError, FilterConfig, ImuNoise, ImuSample, ImuState,
-    InitialState, Pose, PoseImuEkf, RelativePose, UpdateReport,
+    InitialState, Pose, PoseImuEkf, RelativePose, SensorId, UpdateReport,
 };
 use msreg_protocol::{self as protocol, CameraDistortion, CameraProjection, CameraSetup, Config};
 use msreg_protocol::{Gate, ImuPrior, MonitorSetup, SensorPrior, SensorSet};
 
-/// The camera of the camera-IMU layout (index of its extrinsic and time offset).
-pub const SENSOR: usize = 0;
+/// The camera of the camera-IMU layout, the pose sensor of the pose-IMU one.
+pub use msreg_estimator::SOLE_SENSOR as SENSOR;
 /// The one static target frame of the camera-IMU layout.
-pub const TARGET: usize = 0;
+pub use msreg_estimator::TARGET_FRAME as TARGET;
+/// The most sensors of a layout the firmware runs: the monitoring layout's two pose
+/// sensors (the session keeps a queue for each).
+pub const POSE_SENSORS: usize = 2;
 
 /// The camera-IMU filter with the camera model and corner noise its updates use.
 pub struct CameraFilter {
@@ -63,6 +66,19 @@ impl Filter {
         }
     }
 
+    /// Sensor `wire` of the configured layout: the wire's `u8` checked against the layout
+    /// (`UnknownSensor` beyond it), the only way a message's sensor reaches the filter.
+    pub fn sensor_id(&self, wire: u8) -> Result<SensorId, FilterError> {
+        on_ekf!(self, f => id_in(f, wire))
+    }
+
+    /// The sensors of the configured layout, in order.
+    pub fn sensor_ids(&self) -> core::iter::Take<core::array::IntoIter<SensorId, POSE_SENSORS>> {
+        SensorId::all::<POSE_SENSORS>()
+            .into_iter()
+            .take(self.sensor_count())
+    }
+
     /// True for the layouts that take odometry (anchors and relative poses).
     pub fn takes_odometry(&self) -> bool {
         match self {
@@ -79,38 +95,38 @@ impl Filter {
     /// True when a measurement of sensor `s` stamped `stamp_ns` (sensor clock) can be
     /// fused: its IMU time `stamp + t_d` is at or before the newest IMU sample (the
     /// estimator's one rule).
-    pub fn is_due(&self, s: usize, stamp_ns: u64) -> bool {
+    pub fn is_due(&self, s: SensorId, stamp_ns: u64) -> bool {
         on_ekf!(self, f => f.is_due(s, stamp_ns))
     }
 
     /// IMU time `stamp + t_d` of a measurement of sensor `s` (current `t_d`), ns.
-    pub fn imu_time(&self, s: usize, stamp_ns: u64) -> Result<u64, FilterError> {
+    pub fn imu_time(&self, s: SensorId, stamp_ns: u64) -> Result<u64, FilterError> {
         on_ekf!(self, f => f.imu_time(s, stamp_ns))
     }
 
     /// Time offset `t_d` of sensor `s`, s.
-    pub fn time_offset(&self, s: usize) -> f32 {
+    pub fn time_offset(&self, s: SensorId) -> f32 {
         on_ekf!(self, f => f.time_offset(s))
     }
 
     /// Its 1-sigma, s.
-    pub fn time_offset_sigma(&self, s: usize) -> f32 {
+    pub fn time_offset_sigma(&self, s: SensorId) -> f32 {
         on_ekf!(self, f => f.time_offset_sigma(s))
     }
 
     /// `T_imu_sensor` of sensor `s`.
-    pub fn extrinsic(&self, s: usize) -> Pose<f32> {
+    pub fn extrinsic(&self, s: SensorId) -> Pose<f32> {
         on_ekf!(self, f => f.extrinsic(s))
     }
 
     /// 1-sigma of sensor `s`'s extrinsic rotation (rad) and translation (m), per axis.
-    pub fn extrinsic_sigma(&self, s: usize) -> (Vector3<f32>, Vector3<f32>) {
+    pub fn extrinsic_sigma(&self, s: SensorId) -> (Vector3<f32>, Vector3<f32>) {
         on_ekf!(self, f => f.extrinsic_sigma(s))
     }
 
     /// The health monitor's windowed NIS per dof of sensor `s` and its verdict (`None`
     /// for a sensor the layout does not have).
-    pub fn nis(&self, s: usize) -> Option<(f32, NisStatus)> {
+    pub fn nis(&self, s: SensorId) -> Option<(f32, NisStatus)> {
         on_ekf!(self, f => f.health().sensor(s).map(|h| {
             (h.windowed_nis_per_dof(), h.nis_status(&f.config().health))
         }))
@@ -131,7 +147,7 @@ impl Filter {
     /// Starts an odometry segment of sensor `s` (the layouts without odometry have no
     /// such sensor: the session refuses their odometry on arrival).
     #[inline(never)]
-    pub fn anchor(&mut self, s: usize, stamp_ns: u64) -> Result<(), FilterError> {
+    pub fn anchor(&mut self, s: SensorId, stamp_ns: u64) -> Result<(), FilterError> {
         match self {
             Filter::PoseImu(f) => f.anchor(s, stamp_ns),
             Filter::Monitor(f) => f.anchor(s, stamp_ns),
@@ -143,7 +159,7 @@ impl Filter {
     #[inline(never)]
     pub fn update_relative_pose(
         &mut self,
-        s: usize,
+        s: SensorId,
         meas: &RelativePose<f32>,
     ) -> Result<UpdateReport<f32>, FilterError> {
         match self {
@@ -164,7 +180,7 @@ impl Filter {
 /// with the calls inlined got a frame holding every layout's temporaries at once (23.7 KB
 /// for the zero-velocity update with three layouts).
 mod out_of_line {
-    use super::{Ekf, FilterError, ImuSample, RelativePose, UpdateReport};
+    use super::{Ekf, FilterError, ImuSample, RelativePose, SensorId, UpdateReport};
 
     #[inline(never)]
     pub(super) fn propagate<const S: usize, const C: usize, const N: usize, const F: usize>(
@@ -177,7 +193,7 @@ mod out_of_line {
     #[inline(never)]
     pub(super) fn relative_pose<const S: usize, const C: usize, const N: usize, const F: usize>(
         f: &mut Ekf<f32, S, C, N, F>,
-        s: usize,
+        s: SensorId,
         meas: &RelativePose<f32>,
     ) -> Result<UpdateReport<f32>, FilterError> {
         f.update_relative_pose(s, meas)
@@ -286,10 +302,18 @@ fn imu_prior<const S: usize>(p: &ImuPrior) -> Result<InitialState<f32, S>, Filte
     }
 }
 
+/// Sensor `wire` of filter `_f`'s layout ([`Filter::sensor_id`]).
+fn id_in<const S: usize, const C: usize, const N: usize, const F: usize>(
+    _f: &Ekf<f32, S, C, N, F>,
+    wire: u8,
+) -> Result<SensorId, FilterError> {
+    SensorId::from_wire::<S>(wire)
+}
+
 /// Sets sensor `s`'s prior from the wire.
 fn with_sensor<const S: usize>(
     init: InitialState<f32, S>,
-    s: usize,
+    s: SensorId,
     p: &SensorPrior,
 ) -> Result<InitialState<f32, S>, FilterError> {
     let extrinsic = pose(&p.extrinsic);
@@ -380,14 +404,15 @@ fn place_monitor(
     c: &Config,
     m: &MonitorSetup,
 ) -> Result<(), FilterError> {
-    let init = with_sensor(imu_prior::<2>(&c.imu_prior)?, 0, &c.sensor)?;
-    let init = with_sensor(init, 1, &m.pose1)?;
+    let [pose0, pose1] = MonitorEkf::<f32>::sensor_ids();
+    let init = with_sensor(imu_prior::<2>(&c.imu_prior)?, pose0, &c.sensor)?;
+    let init = with_sensor(init, pose1, &m.pose1)?;
     let axis = hold_axis(m)?;
     check_prior(fc, &init)?;
     *slot = build(fc, &init, Filter::Monitor);
     match (slot.as_mut(), axis) {
         (Some(Filter::Monitor(ekf)), Some(axis)) => {
-            for s in 0..2 {
+            for s in MonitorEkf::<f32>::sensor_ids() {
                 ekf.hold_translation_axis(s, Some(axis))?;
             }
             Ok(())
@@ -406,7 +431,7 @@ fn place_pose_imu(
     fc: &FilterConfig<f32>,
     c: &Config,
 ) -> Result<(), FilterError> {
-    let init = with_sensor(imu_prior::<1>(&c.imu_prior)?, 0, &c.sensor)?;
+    let init = with_sensor(imu_prior::<1>(&c.imu_prior)?, SENSOR, &c.sensor)?;
     check_prior(fc, &init)?;
     *slot = build(fc, &init, Filter::PoseImu);
     slot.as_ref().map(|_| ()).ok_or(FilterError::InvalidConfig)
@@ -424,7 +449,7 @@ fn place_camera_imu(
     if !(sigma.is_finite() && sigma > 0.0) {
         return Err(FilterError::InvalidConfig);
     }
-    let init = with_sensor(imu_prior::<1>(&c.imu_prior)?, 0, &c.sensor)?;
+    let init = with_sensor(imu_prior::<1>(&c.imu_prior)?, SENSOR, &c.sensor)?;
     let camera = camera(setup)?;
     check_prior(fc, &init)?;
     *slot = Some(Filter::CameraImu(CameraFilter {

@@ -13,8 +13,8 @@ use crate::scenario::{Event, ImuReading, PoseIncrement, ScenarioConfig, SensorSp
 
 /// The filter the firmware runs: one pose sensor, f32.
 pub type Filter = PoseImuEkf<f32>;
-/// Index of the pose sensor in the filter layout.
-pub const SENSOR: usize = 0;
+/// The pose sensor of the filter layout.
+pub use msreg_estimator::SOLE_SENSOR as SENSOR;
 
 /// Perturbation of the extrinsic prior from the truth: rotation (rad, right perturbation)
 /// and translation (m). About 4 deg and 7 cm.

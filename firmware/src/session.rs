@@ -18,7 +18,7 @@ use msreg_estimator::health::{HealthEvent, NisStatus};
 use msreg_estimator::na::{Matrix6, Vector2, Vector3};
 use msreg_estimator::{
     CornerObservation, Error as FilterError, ImuSample, Pose, RelativePose as FilterRelativePose,
-    UpdateReport,
+    SensorId, UpdateReport,
 };
 use msreg_protocol::{
     self as protocol, frame, Ack, AckStatus, AlarmKind, Anchor, Config, CornerSet, DeviceMsg,
@@ -27,13 +27,12 @@ use msreg_protocol::{
     CORNER_SET_MAX, DEVICE_FRAME_MAX, HOST_FRAME_MAX,
 };
 
+pub use crate::filter::POSE_SENSORS;
 pub use crate::filter::{configure, Filter};
 use crate::filter::{pose, CameraFilter, SENSOR, TARGET};
 
 /// Pose messages per sensor that may wait for the IMU stream.
 pub const PENDING_MAX: usize = 16;
-/// Pose sensors with a queue (the monitoring layout has two).
-pub const POSE_SENSORS: usize = 2;
 /// Camera messages (target pose, corner sets) that may wait for the IMU stream: each entry
 /// is a full corner set in RAM (~1 KB); the host sends them 60 ms ahead of the IMU batch at
 /// their stamp, so at 20 Hz at most three images and the target pose wait (docs/protocol.md).
@@ -384,15 +383,15 @@ impl Session {
     }
 
     fn on_pose<W: embedded_io::Write>(&mut self, w: &mut W, seq: u32, p: Pending) -> AckStatus {
-        let s = usize::from(p.sensor());
         let refused = match &self.filter {
             None => Some(ErrorKind::NotConfigured),
-            Some(f) if !f.takes_odometry() || s >= f.sensor_count() => {
-                Some(ErrorKind::WrongSensorSet)
-            }
-            Some(_) => match self.pending.get_mut(s) {
-                Some(queue) => queue.push_back(p).err().map(|_| ErrorKind::QueueFull),
-                None => Some(ErrorKind::WrongSensorSet),
+            // The wire's sensor becomes an id of the configured layout here, or is refused.
+            Some(f) => match f.sensor_id(p.sensor()) {
+                Ok(s) if f.takes_odometry() => match self.pending.get_mut(s.index()) {
+                    Some(queue) => queue.push_back(p).err().map(|_| ErrorKind::QueueFull),
+                    None => Some(ErrorKind::WrongSensorSet),
+                },
+                Ok(_) | Err(_) => Some(ErrorKind::WrongSensorSet),
             },
         };
         self.acknowledge(w, refused, seq, p.stamp_ns())
@@ -485,17 +484,17 @@ impl Session {
 
     /// True when a measurement of sensor `s` stamped `stamp_ns` (sensor clock) can be
     /// fused: the filter holds an IMU sample at or after its IMU time (`Ekf::is_due`).
-    fn is_due(&self, s: usize, stamp_ns: u64) -> bool {
+    fn is_due(&self, s: SensorId, stamp_ns: u64) -> bool {
         self.filter.as_ref().is_some_and(|f| f.is_due(s, stamp_ns))
     }
 
     /// The pose sensor whose queue front is due with the earliest IMU time (ties: the lower
     /// index), as `msreg monitor` orders the two sensors.
-    fn earliest_due_pose(&self) -> Option<usize> {
+    fn earliest_due_pose(&self) -> Option<SensorId> {
         let f = self.filter.as_ref()?;
-        (0..POSE_SENSORS)
+        f.sensor_ids()
             .filter_map(|s| {
-                let front = self.pending[s].front()?;
+                let front = self.pending[s.index()].front()?;
                 let stamp = front.stamp_ns();
                 if !f.is_due(s, stamp) {
                     return None;
@@ -536,7 +535,7 @@ impl Session {
 
     fn apply_due_poses<W: embedded_io::Write>(&mut self, w: &mut W) {
         while let Some(s) = self.earliest_due_pose() {
-            let Some(front) = self.pending[s].pop_front() else {
+            let Some(front) = self.pending[s.index()].pop_front() else {
                 return;
             };
             if self.imu_index == 0 {
@@ -613,7 +612,7 @@ impl Session {
     }
 
     #[inline(never)]
-    fn anchor<W: embedded_io::Write>(&mut self, w: &mut W, s: usize, stamp_ns: u64, seq: u32) {
+    fn anchor<W: embedded_io::Write>(&mut self, w: &mut W, s: SensorId, stamp_ns: u64, seq: u32) {
         let Some(filter) = self.filter.as_mut() else {
             return;
         };
@@ -627,7 +626,7 @@ impl Session {
     fn increment<W: embedded_io::Write>(
         &mut self,
         w: &mut W,
-        s: usize,
+        s: SensorId,
         r: &RelativePose,
         seq: u32,
     ) {
@@ -714,14 +713,14 @@ impl Session {
         let (Some(c), Some(f)) = (self.config, self.filter.as_ref()) else {
             return;
         };
-        let (now, sensors) = (f.time_ns(), f.sensor_count());
+        let (now, sensors) = (f.time_ns(), f.sensor_ids());
         if c.estimate_period_ns > 0
             && now
                 >= self
                     .last_estimate_ns
                     .saturating_add(u64::from(c.estimate_period_ns))
         {
-            for s in 0..sensors {
+            for s in sensors {
                 self.send_estimate(w, seq, s);
             }
         }
@@ -729,12 +728,12 @@ impl Session {
 
     /// The estimate of sensor `s`.
     #[inline(never)]
-    fn send_estimate<W: embedded_io::Write>(&mut self, w: &mut W, seq: u32, s: usize) {
+    fn send_estimate<W: embedded_io::Write>(&mut self, w: &mut W, seq: u32, s: SensorId) {
         let Some(f) = self.filter.as_ref() else {
             return;
         };
         self.last_estimate_ns = f.time_ns();
-        let alarm = self.alarm.get(s).copied().unwrap_or(false);
+        let alarm = self.alarm.get(s.index()).copied().unwrap_or(false);
         let e = estimate(f, &self.counts, alarm, seq, s);
         Self::tx(&mut self.tx_seq, w).send(&DeviceMsg::Estimate(e));
     }
@@ -819,7 +818,7 @@ fn diagnostic(r: &UpdateReport<f32>) -> UpdateDiagnostic {
         nis: r.nis,
         threshold: r.threshold,
         accepted: r.accepted,
-        sensor: r.sensor.map(|s| s as u8),
+        sensor: r.sensor.map(SensorId::wire),
     }
 }
 
@@ -836,7 +835,7 @@ fn alarm(e: &HealthEvent<f32>) -> HealthAlarm {
             kind: AlarmKind::RotationStep,
             statistic,
             step: step.into(),
-            sensor: sensor as u8,
+            sensor: sensor.wire(),
         },
         HealthEvent::TranslationStep {
             sensor,
@@ -849,12 +848,12 @@ fn alarm(e: &HealthEvent<f32>) -> HealthAlarm {
             kind: AlarmKind::TranslationStep,
             statistic,
             step: step.into(),
-            sensor: sensor as u8,
+            sensor: sensor.wire(),
         },
     }
 }
 
-fn estimate(f: &Filter, c: &Counts, alarm: bool, seq: u32, s: usize) -> Estimate {
+fn estimate(f: &Filter, c: &Counts, alarm: bool, seq: u32, s: SensorId) -> Estimate {
     let (sr, st) = f.extrinsic_sigma(s);
     let (nis_per_dof, nis_state) = f.nis(s).map_or((0.0, NisState::Filling), |(nis, status)| {
         let state = match status {
@@ -879,10 +878,10 @@ fn estimate(f: &Filter, c: &Counts, alarm: bool, seq: u32, s: usize) -> Estimate
         } else {
             HealthState::Nominal
         },
-        alarms: c.alarms.get(s).copied().unwrap_or(0),
+        alarms: c.alarms.get(s.index()).copied().unwrap_or(0),
         updates_accepted: c.accepted,
         updates_rejected: c.rejected,
         last_seq: seq,
-        sensor: s as u8,
+        sensor: s.wire(),
     }
 }

@@ -1,6 +1,7 @@
 //! Stochastic clones: the window of past IMU poses relative measurements tie together.
 
 use super::Ekf;
+use crate::ids::SensorId;
 use crate::scalar::Scalar;
 use crate::state::{imu, CloneState, Layout};
 use crate::Error;
@@ -10,7 +11,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     /// IMU time of sensor `s`'s measurement stamped `stamp_ns`, checked to be reachable by
     /// propagation: not before the filter time (up to `max_late_ns`, then the filter time
     /// itself), not beyond the newest IMU sample.
-    pub(super) fn reachable_imu_time(&self, s: usize, stamp_ns: u64) -> Result<u64, Error> {
+    pub(super) fn reachable_imu_time(&self, s: SensorId, stamp_ns: u64) -> Result<u64, Error> {
         let horizon = self.imu_horizon_ns().ok_or(Error::NotInitialized)?;
         let t = self.imu_time(s, stamp_ns)?;
         if t < self.time_ns && self.time_ns - t <= self.config.max_late_ns {
@@ -57,7 +58,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     /// The clone is the pose at the measurement's true IMU time `stamp + t_d`, so its error is
     /// `[dtheta + w dt_d; dp + v dt_d]`: the clone carries the time-offset correlation
     /// through the angular and linear velocity (OpenVINS).
-    pub(super) fn clone_imu_pose(&mut self, s: usize, slot: usize, stamp_ns: u64) {
+    pub(super) fn clone_imu_pose(&mut self, s: SensorId, slot: usize, stamp_ns: u64) {
         self.flush_transition();
         self.drop_clone(slot);
         let w = self
@@ -97,22 +98,20 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
 
     /// Starts an odometry segment of sensor `s`: clones the IMU pose at `stamp_ns + t_d` as
     /// the start of the next relative measurement.
-    pub fn anchor(&mut self, s: usize, stamp_ns: u64) -> Result<(), Error> {
-        if s >= S {
-            return Err(Error::UnknownSensor);
-        }
+    pub fn anchor(&mut self, s: SensorId, stamp_ns: u64) -> Result<(), Error> {
+        let i = s.checked(S)?;
         // Nothing after the (atomic) propagation can fail.
         let slot = self.prepare_clone(s, stamp_ns)?;
-        if let Some(old) = self.anchors[s] {
+        if let Some(old) = self.anchors[i] {
             self.drop_clone(old);
         }
         self.clone_imu_pose(s, slot, stamp_ns);
-        self.anchors[s] = Some(slot);
+        self.anchors[i] = Some(slot);
         Ok(())
     }
 
     /// Propagates to the measurement time and picks a clone slot.
-    pub(super) fn prepare_clone(&mut self, s: usize, stamp_ns: u64) -> Result<usize, Error> {
+    pub(super) fn prepare_clone(&mut self, s: SensorId, stamp_ns: u64) -> Result<usize, Error> {
         let t = self.reachable_imu_time(s, stamp_ns)?;
         let slot = self.free_slot()?;
         self.advance_to(t)?;

@@ -16,6 +16,7 @@
 
 use super::undo::PropagationUndo;
 use super::Ekf;
+use crate::ids::{FrameId, SensorId};
 use crate::lie::{skew, Pose};
 use crate::scalar::Scalar;
 use crate::state::{imu, Layout};
@@ -90,18 +91,14 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     /// dropped. On error the filter is unchanged.
     pub fn init_frame_relative(
         &mut self,
-        f: usize,
-        s: usize,
+        f: FrameId,
+        s: SensorId,
         stamp_ns: u64,
         t_s_f: &Pose<T>,
         cov: &SMatrix<T, 6, 6>,
     ) -> Result<(), Error> {
-        if f >= F {
-            return Err(Error::UnknownFrame);
-        }
-        if s >= S {
-            return Err(Error::UnknownSensor);
-        }
+        f.checked(F)?;
+        s.checked(S)?;
         if !t_s_f.is_finite() || !cov.iter().all(|x| x.is_finite()) {
             return Err(Error::NonFinite);
         }
@@ -124,12 +121,12 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     /// all are finite.
     fn write_frame_from(
         &mut self,
-        f: usize,
-        s: usize,
+        f: FrameId,
+        s: SensorId,
         t_s_f: &Pose<T>,
         cov: &SMatrix<T, 6, 6>,
     ) -> Result<(), Error> {
-        let jac = compose_frame(&self.imu.pose(), &self.sensors[s].extrinsic, t_s_f);
+        let jac = compose_frame(&self.imu.pose(), &self.sensors[s.index()].extrinsic, t_s_f);
         // The measurement happened at the IMU time `stamp + t_d`: a time-offset error moves
         // the pose it was composed through by `[w; v] dt_d` (as a clone's).
         let w = self
@@ -170,7 +167,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         self.cov
             .fixed_view_mut::<6, 6>(fb.idx, fb.idx)
             .copy_from(&p_ff);
-        self.frames[f] = Some(jac.pose);
+        self.frames[f.index()] = Some(jac.pose);
         Ok(())
     }
 }

@@ -35,12 +35,24 @@ pub(super) fn measurement_cov<T: Scalar>() -> SMatrix<T, 6, 6> {
     m.map(T::lit)
 }
 
+/// Places the camera filter's target from the PnP-like [`target_in_sensor`] with
+/// [`measurement_cov`] at [`STAMP`], as the pipeline does.
+pub(super) fn place_target<T: Scalar>(ekf: &mut CameraImuEkf<T>) -> Result<(), Error> {
+    ekf.init_frame_relative(
+        TARGET_FRAME,
+        SOLE_SENSOR,
+        STAMP,
+        &target_in_sensor(),
+        &measurement_cov(),
+    )
+}
+
 /// A spinning, accelerating camera-IMU filter standing at `T0 + 240 ms`, reach to 260 ms.
 pub(super) fn camera_filter<T: Scalar>(time_offset: f64) -> CameraImuEkf<T> {
     let mut init = InitialState::<T, 1>::at_rest(Vector3::new(T::zero(), T::zero(), T::lit(9.81)))
         .expect("gravity")
-        .with_extrinsic(0, extrinsic(), T::lit(0.02), T::lit(0.02))
-        .with_time_offset(0, T::lit(time_offset), T::lit(0.01));
+        .with_extrinsic(SOLE_SENSOR, extrinsic(), T::lit(0.02), T::lit(0.02))
+        .with_time_offset(SOLE_SENSOR, T::lit(time_offset), T::lit(0.01));
     init.imu.velocity = Vector3::new(T::lit(0.7), T::lit(-0.3), T::lit(0.2));
     init.imu.rotation = UnitQuaternion::from_euler_angles(T::lit(0.3), T::lit(-0.2), T::lit(1.0));
     let config = FilterConfig::new(ImuNoise::vn300());
@@ -104,38 +116,37 @@ fn compose_frame_jacobians_match_central_differences() {
 #[test]
 fn frame_covariance_is_the_dense_linear_transform_of_the_state() {
     let mut before = camera_filter::<f64>(0.004);
-    let t = before.imu_time(0, STAMP).expect("sensor");
+    let t = before.imu_time(SOLE_SENSOR, STAMP).expect("sensor");
     before.advance_to(t).expect("advance");
     let p = before.covariance();
     let mut ekf = camera_filter::<f64>(0.004);
-    ekf.init_frame_relative(0, 0, STAMP, &target_in_sensor(), &measurement_cov())
-        .expect("frame");
+    place_target(&mut ekf).expect("frame");
     let jac = compose_frame(
         &before.imu().pose(),
-        &before.extrinsic(0),
+        &before.extrinsic(SOLE_SENSOR),
         &target_in_sensor(),
     );
     let w = before.imu_now.expect("reading").gyro - before.imu().gyro_bias;
-    let fr = Layout::<1, 0>::frame_orientation(0).idx;
+    let fr = Layout::<1, 0>::frame_orientation(TARGET_FRAME).idx;
     let mut a = SMatrix::<f64, 28, 28>::identity();
     a.fixed_view_mut::<6, 6>(fr, fr).fill(0.0);
     let cols = [
         0,
         3,
-        Layout::<1, 0>::extrinsic_rotation(0).idx,
-        Layout::<1, 0>::extrinsic_translation(0).idx,
+        Layout::<1, 0>::extrinsic_rotation(SOLE_SENSOR).idx,
+        Layout::<1, 0>::extrinsic_translation(SOLE_SENSOR).idx,
     ];
     for (c, b) in cols.iter().zip(jac.state.iter()) {
         a.fixed_view_mut::<6, 3>(fr, *c).copy_from(b);
     }
-    let td = Layout::<1, 0>::time_offset(0).idx;
+    let td = Layout::<1, 0>::time_offset(SOLE_SENSOR).idx;
     let j_td = jac.state[0] * w + jac.state[1] * before.imu().velocity;
     a.fixed_view_mut::<6, 1>(fr, td).copy_from(&j_td);
     let mut b = SMatrix::<f64, 28, 6>::zeros();
     b.fixed_view_mut::<6, 6>(fr, 0).copy_from(&jac.measurement);
     let dense = a * p * a.transpose() + b * measurement_cov::<f64>() * b.transpose();
     assert_mat_close(&ekf.covariance(), &dense, 1e-12);
-    assert_eq!(ekf.frame(0), Some(jac.pose));
+    assert_eq!(ekf.frame(TARGET_FRAME), Some(jac.pose));
     assert!(ekf.covariance().cholesky().is_some());
 }
 
@@ -146,9 +157,8 @@ fn frame_time_offset_column_matches_central_differences() {
     let (td, h) = (0.004, 1e-4);
     let frame_at = |td: f64| {
         let mut ekf = camera_filter::<f64>(td);
-        ekf.init_frame_relative(0, 0, STAMP, &target_in_sensor(), &measurement_cov())
-            .expect("frame");
-        ekf.frame(0).expect("frame")
+        place_target(&mut ekf).expect("frame");
+        ekf.frame(TARGET_FRAME).expect("frame")
     };
     let (plus, minus) = (frame_at(td + h), frame_at(td - h));
     let mut numeric = SVector::<f64, 6>::zeros();
@@ -159,10 +169,9 @@ fn frame_time_offset_column_matches_central_differences() {
         .fixed_rows_mut::<3>(3)
         .copy_from(&((plus.translation - minus.translation) / (2.0 * h)));
     let mut ekf = camera_filter::<f64>(td);
-    ekf.init_frame_relative(0, 0, STAMP, &target_in_sensor(), &measurement_cov())
-        .expect("frame");
-    let t = Layout::<1, 0>::time_offset(0).idx;
-    let fr = Layout::<1, 0>::frame_orientation(0).idx;
+    place_target(&mut ekf).expect("frame");
+    let t = Layout::<1, 0>::time_offset(SOLE_SENSOR).idx;
+    let fr = Layout::<1, 0>::frame_orientation(TARGET_FRAME).idx;
     let cov = ekf.covariance();
     let analytic = cov.fixed_view::<6, 1>(fr, t).clone_owned() / cov[(t, t)];
     // As for the clones: the integrator's position agrees with its velocity to
@@ -170,7 +179,8 @@ fn frame_time_offset_column_matches_central_differences() {
     assert_mat_close(&analytic, &numeric, 2e-4);
 }
 
-/// Frame, sensor, stamp, measurement, its covariance and the error expected.
+/// Frame, sensor (indices into a layout twice as wide as the filter's: ids made for a larger
+/// layout still reach it), stamp, measurement, its covariance and the error expected.
 type Case = (usize, usize, u64, Pose<f64>, SMatrix<f64, 6, 6>, Error);
 
 #[test]
@@ -213,6 +223,8 @@ fn every_error_leaves_the_filter_unchanged() {
         ),
     ];
     for (f, s, stamp, pose, cov, expected) in cases {
+        let f = FrameId::new::<2>(f).expect("frame of the wider layout");
+        let s = SensorId::new::<2>(s).expect("sensor of the wider layout");
         let mut ekf = camera_filter::<f64>(0.004);
         let (p, x, time) = (ekf.covariance(), *ekf.imu(), ekf.time_ns());
         assert_eq!(
@@ -222,7 +234,7 @@ fn every_error_leaves_the_filter_unchanged() {
         assert_eq!(ekf.covariance(), p);
         assert_eq!(*ekf.imu(), x);
         assert_eq!(ekf.time_ns(), time);
-        assert_eq!(ekf.frame(0), None);
+        assert_eq!(ekf.frame(TARGET_FRAME), None);
     }
 }
 
@@ -230,18 +242,18 @@ fn every_error_leaves_the_filter_unchanged() {
 fn f32_agrees_with_f64() {
     let mut wide = camera_filter::<f64>(0.004);
     let mut narrow = camera_filter::<f32>(0.004);
-    wide.init_frame_relative(0, 0, STAMP, &target_in_sensor(), &measurement_cov())
-        .expect("f64");
-    narrow
-        .init_frame_relative(0, 0, STAMP, &target_in_sensor(), &measurement_cov())
-        .expect("f32");
-    let (a, b) = (wide.frame(0).expect("f64"), narrow.frame(0).expect("f32"));
+    place_target(&mut wide).expect("f64");
+    place_target(&mut narrow).expect("f32");
+    let (a, b) = (
+        wide.frame(TARGET_FRAME).expect("f64"),
+        narrow.frame(TARGET_FRAME).expect("f32"),
+    );
     let rotation = b.rotation.cast::<f64>().inverse() * a.rotation;
     assert!(rotation.angle() < 1e-5, "{}", rotation.angle());
     assert!((b.translation.cast::<f64>() - a.translation).norm() < 1e-5);
     let (pa, pb) = (
-        wide.frame_covariance(0),
-        narrow.frame_covariance(0).cast::<f64>(),
+        wide.frame_covariance(TARGET_FRAME),
+        narrow.frame_covariance(TARGET_FRAME).cast::<f64>(),
     );
     assert!(
         (pa - pb).amax() < 1e-5 * pa.amax(),

@@ -4,6 +4,7 @@
 //! that frame's PnP error out of the result and lets gravity come from the IMU alone.
 
 use super::Ekf;
+use crate::ids::{FrameId, SensorId};
 use crate::lie::Pose;
 use crate::scalar::Scalar;
 use crate::state::{Block, Layout, FRAME_DIM};
@@ -12,7 +13,7 @@ use nalgebra::SMatrix;
 
 impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> Ekf<T, S, C, N, F> {
     /// Both blocks of frame `f` (orientation then position).
-    pub(super) const fn frame_block(f: usize) -> Block {
+    pub(super) const fn frame_block(f: FrameId) -> Block {
         Block {
             idx: Layout::<S, C>::frame_orientation(f).idx,
             dof: FRAME_DIM,
@@ -25,14 +26,12 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     /// with the current IMU pose and extrinsic).
     pub fn init_frame(
         &mut self,
-        f: usize,
+        f: FrameId,
         pose: Pose<T>,
         sigma_rotation: T,
         sigma_position: T,
     ) -> Result<(), Error> {
-        if f >= F {
-            return Err(Error::UnknownFrame);
-        }
+        let i = f.checked(F)?;
         if !pose.is_finite() {
             return Err(Error::NonFinite);
         }
@@ -48,18 +47,29 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         }
         self.inflate(Layout::<S, C>::frame_orientation(f), sigma_rotation);
         self.inflate(Layout::<S, C>::frame_position(f), sigma_position);
-        self.frames[f] = Some(pose);
+        self.frames[i] = Some(pose);
         Ok(())
     }
 
+    /// Checks a measurement of static frame `f` through sensor `s` against this layout:
+    /// `UnknownSensor`, `UnknownFrame`, `FrameNotInitialized` (an id made for a larger
+    /// layout can reach a smaller filter; the types rule out everything else).
+    pub(super) fn check_target_model(&self, s: SensorId, f: FrameId) -> Result<(), Error> {
+        s.checked(S)?;
+        match self.frames[f.checked(F)?] {
+            Some(_) => Ok(()),
+            None => Err(Error::FrameNotInitialized),
+        }
+    }
+
     /// `T_G_F` of static frame `f`, once initialised.
-    pub fn frame(&self, f: usize) -> Option<Pose<T>> {
-        self.frames.get(f).copied().flatten()
+    pub fn frame(&self, f: FrameId) -> Option<Pose<T>> {
+        self.frames.get(f.index()).copied().flatten()
     }
 
     /// 6x6 covariance of frame `f` (`[orientation; position]`), zero for an unknown frame.
-    pub fn frame_covariance(&self, f: usize) -> SMatrix<T, 6, 6> {
-        if f >= F {
+    pub fn frame_covariance(&self, f: FrameId) -> SMatrix<T, 6, 6> {
+        if f.checked(F).is_err() {
             return SMatrix::zeros();
         }
         let b = Self::frame_block(f).idx;

@@ -5,6 +5,7 @@ use super::undo::{ColumnsUndo, StepUndo};
 use super::Ekf;
 use crate::chi2;
 use crate::health::{ExtrinsicInnovation, HealthEvent};
+use crate::ids::{FrameId, SensorId};
 use crate::lie::Pose;
 use crate::propagate;
 use crate::scalar::Scalar;
@@ -21,12 +22,10 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     /// rejects the measurement, so the odometry chain continues.
     pub fn update_relative_pose(
         &mut self,
-        s: usize,
+        s: SensorId,
         meas: &relative_pose::RelativePose<T>,
     ) -> Result<UpdateReport<T>, Error> {
-        if s >= S {
-            return Err(Error::UnknownSensor);
-        }
+        let i = s.checked(S)?;
         if !meas.is_valid() {
             return Err(if meas.delta.is_finite() {
                 Error::InvalidConfig
@@ -34,7 +33,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
                 Error::NonFinite
             });
         }
-        let from_slot = self.anchors[s].ok_or(Error::NoAnchor)?;
+        let from_slot = self.anchors[i].ok_or(Error::NoAnchor)?;
         let anchor_stamp = self.clones[from_slot].map(|c| c.stamp_ns).unwrap_or(0);
         if anchor_stamp != meas.stamp_from_ns {
             return Err(if meas.stamp_from_ns < anchor_stamp {
@@ -54,7 +53,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         }
         let report = report?;
         self.drop_clone(from_slot);
-        self.anchors[s] = Some(to_slot);
+        self.anchors[i] = Some(to_slot);
         Ok(report)
     }
 
@@ -70,7 +69,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     #[inline(never)]
     fn clone_and_fuse(
         &mut self,
-        s: usize,
+        s: SensorId,
         from_slot: usize,
         to_slot: usize,
         meas: &relative_pose::RelativePose<T>,
@@ -88,7 +87,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     /// The relative-pose update between two clones; changes the filter only on success.
     fn fuse_relative_pose(
         &mut self,
-        s: usize,
+        s: SensorId,
         from_slot: usize,
         to_slot: usize,
         meas: &relative_pose::RelativePose<T>,
@@ -98,7 +97,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         let lin = relative_pose::linearize(
             &from.pose,
             &to.pose,
-            &self.sensors[s].extrinsic,
+            &self.sensors[s.index()].extrinsic,
             &meas.delta,
         );
         let mut jacobian = SparseJacobian::<T, 6, 18>::zeros();
@@ -166,7 +165,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     pub(super) fn fuse<const M: usize, const L: usize>(
         &mut self,
         kind: UpdateKind,
-        sensor: Option<usize>,
+        sensor: Option<SensorId>,
         stamp_ns: u64,
         meas: &Measurement<T, M, L>,
         extrinsic_jacobian: Option<&SMatrix<T, M, 6>>,
@@ -213,7 +212,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     pub(super) fn record_update(
         &mut self,
         kind: UpdateKind,
-        sensor: Option<usize>,
+        sensor: Option<SensorId>,
         stamp_ns: u64,
         (nis, dof, threshold): (T, usize, T),
         accepted: bool,
@@ -279,7 +278,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
                 self.config.health.inflate_translation,
             ),
         };
-        let Some(x) = self.sensors.get_mut(sensor) else {
+        let Some(x) = self.sensors.get_mut(sensor.index()) else {
             return;
         };
         if block == Layout::<S, C>::extrinsic_rotation(sensor) {
@@ -303,13 +302,11 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     /// known re-mount.
     pub fn inflate_extrinsic(
         &mut self,
-        s: usize,
+        s: SensorId,
         sigma_rotation: T,
         sigma_translation: T,
     ) -> Result<(), Error> {
-        if s >= S {
-            return Err(Error::UnknownSensor);
-        }
+        s.checked(S)?;
         if !(sigma_rotation >= T::zero() && sigma_translation >= T::zero()) {
             return Err(Error::InvalidConfig);
         }
@@ -332,7 +329,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         let imu_dx = dx.fixed_rows::<15>(0).clone_owned();
         let imu = propagate::boxplus(&self.imu, &imu_dx);
         let mut sensors = self.sensors;
-        for (s, sensor) in sensors.iter_mut().enumerate() {
+        for (s, sensor) in SensorId::all::<S>().into_iter().zip(sensors.iter_mut()) {
             sensor.extrinsic = sensor.extrinsic.boxplus(
                 &v3(Layout::<S, C>::extrinsic_rotation(s)),
                 &v3(Layout::<S, C>::extrinsic_translation(s)),
@@ -349,7 +346,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
             }
         }
         let mut frames = self.frames;
-        for (f, slot) in frames.iter_mut().enumerate() {
+        for (f, slot) in FrameId::all::<F>().into_iter().zip(frames.iter_mut()) {
             if let Some(pose) = slot {
                 *pose = pose.boxplus(
                     &v3(Layout::<S, C>::frame_orientation(f)),

@@ -19,6 +19,7 @@
 //! its Jacobian `J` satisfies `J V = 0`, so `J T = J`.
 
 use super::Ekf;
+use crate::ids::FrameId;
 use crate::lie::skew;
 use crate::scalar::Scalar;
 use crate::state::{imu, Block, Layout};
@@ -35,11 +36,8 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     /// changes, and of it only the parts that depend on where G is. Call it once, right after
     /// the frame is initialised. Errors: `UnknownFrame`, `FrameNotInitialized`; on error the
     /// filter is unchanged.
-    pub fn fix_gauge(&mut self, f: usize) -> Result<(), Error> {
-        if f >= F {
-            return Err(Error::UnknownFrame);
-        }
-        let anchor = self.frames[f].ok_or(Error::FrameNotInitialized)?;
+    pub fn fix_gauge(&mut self, f: FrameId) -> Result<(), Error> {
+        let anchor = self.frames[f.checked(F)?].ok_or(Error::FrameNotInitialized)?;
         self.flush_transition();
         // `K = V (A V)^-1`: the yaw column taken about the frame's origin, so that it leaves
         // the frame's position alone (`A V = [[1, 0], [z x p_F, I]]`).
@@ -108,7 +106,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
                 pose(o, p, r, &clone.pose.translation);
             }
         }
-        for (f, frame) in self.frames.iter().enumerate() {
+        for (f, frame) in FrameId::all::<F>().into_iter().zip(&self.frames) {
             if let Some(frame) = frame {
                 let r = frame.rotation.to_rotation_matrix().into_inner();
                 let (o, p) = (

@@ -3,7 +3,7 @@
 //! gauge-invariant blocks kept exactly, every error leaving the filter unchanged, f32
 //! against f64.
 
-use super::frame_relative_tests::{camera_filter, measurement_cov, target_in_sensor, STAMP};
+use super::frame_relative_tests::{camera_filter, place_target, STAMP};
 use super::joint_tests::joint_filter;
 use super::*;
 use crate::lie::{exp, log, Pose};
@@ -51,8 +51,8 @@ fn difference<const S: usize, const C: usize, const N: usize, const F: usize>(
             pose(Layout::<S, C>::clone_orientation(c).idx, &x.pose, &y.pose);
         }
     }
-    for f in 0..F {
-        if let (Some(x), Some(y)) = (a.frames[f], b.frames[f]) {
+    for f in FrameId::all::<F>() {
+        if let (Some(x), Some(y)) = (a.frames[f.index()], b.frames[f.index()]) {
             pose(Layout::<S, C>::frame_orientation(f).idx, &x, &y);
         }
     }
@@ -68,7 +68,7 @@ fn joint_with_clone() -> JointEkf<f64> {
             Vector3::new(1.5, -2.0, 0.4),
         ),
         stamp_ns: STAMP,
-        sensor: 0,
+        sensor: SOLE_SENSOR,
     });
     ekf
 }
@@ -87,8 +87,7 @@ fn gauge_directions_match_a_finite_yaw_and_translation_of_every_pose() {
 /// the IMU pose, the extrinsic and the time offset, as the pipeline does it).
 fn placed() -> CameraImuEkf<f64> {
     let mut ekf = camera_filter::<f64>(0.003);
-    ekf.init_frame_relative(0, 0, STAMP, &target_in_sensor(), &measurement_cov())
-        .expect("frame");
+    place_target(&mut ekf).expect("frame");
     ekf
 }
 
@@ -123,12 +122,12 @@ fn fixing_the_gauge_zeroes_the_frame_yaw_and_position_and_keeps_every_invariant(
     let mut ekf = placed();
     let before = ekf.covariance();
     let invariant_before = invariant_covariance(&ekf);
-    ekf.fix_gauge(0).expect("fixed");
+    ekf.fix_gauge(TARGET_FRAME).expect("fixed");
     let after = ekf.covariance();
-    let frame = ekf.frame(0).expect("frame");
+    let frame = ekf.frame(TARGET_FRAME).expect("frame");
     let yaw = frame.rotation.to_rotation_matrix().into_inner().transpose() * Vector3::z();
-    let o = Layout::<1, 0>::frame_orientation(0).idx;
-    let p = Layout::<1, 0>::frame_position(0).idx;
+    let o = Layout::<1, 0>::frame_orientation(TARGET_FRAME).idx;
+    let p = Layout::<1, 0>::frame_position(TARGET_FRAME).idx;
     let scale = before.amax();
     let yaw_row = yaw.transpose() * after.fixed_view::<3, 28>(o, 0);
     assert!(yaw_row.amax() < 1e-12 * scale, "yaw row {yaw_row}");
@@ -156,10 +155,10 @@ fn fixing_the_gauge_zeroes_the_frame_yaw_and_position_and_keeps_every_invariant(
 #[test]
 fn the_fixed_gauge_survives_propagation() {
     let mut ekf = placed();
-    ekf.fix_gauge(0).expect("fixed");
+    ekf.fix_gauge(TARGET_FRAME).expect("fixed");
     let horizon = ekf.imu_horizon_ns().expect("samples");
     ekf.advance_to(horizon).expect("advance");
-    let p = Layout::<1, 0>::frame_position(0).idx;
+    let p = Layout::<1, 0>::frame_position(TARGET_FRAME).idx;
     let rows = ekf.covariance().fixed_view::<3, 28>(p, 0).amax();
     assert!(rows < 1e-12 * ekf.covariance().amax(), "{rows}");
 }
@@ -168,8 +167,11 @@ fn the_fixed_gauge_survives_propagation() {
 fn errors_leave_the_filter_unchanged() {
     let mut ekf = camera_filter::<f64>(0.003);
     let before = ekf.covariance();
-    assert_eq!(ekf.fix_gauge(0), Err(Error::FrameNotInitialized));
-    assert_eq!(ekf.fix_gauge(1), Err(Error::UnknownFrame));
+    assert_eq!(ekf.fix_gauge(TARGET_FRAME), Err(Error::FrameNotInitialized));
+    assert_eq!(
+        ekf.fix_gauge(FrameId::at::<1, 2>()),
+        Err(Error::UnknownFrame)
+    );
     assert_eq!(ekf.covariance(), before);
 }
 
@@ -177,11 +179,9 @@ fn errors_leave_the_filter_unchanged() {
 fn f32_follows_f64() {
     let mut wide = placed();
     let mut narrow = camera_filter::<f32>(0.003);
-    narrow
-        .init_frame_relative(0, 0, STAMP, &target_in_sensor(), &measurement_cov::<f32>())
-        .expect("frame");
-    wide.fix_gauge(0).expect("f64");
-    narrow.fix_gauge(0).expect("f32");
+    place_target(&mut narrow).expect("frame");
+    wide.fix_gauge(TARGET_FRAME).expect("f64");
+    narrow.fix_gauge(TARGET_FRAME).expect("f32");
     let (a, b) = (wide.covariance(), narrow.covariance().map(f64::from));
     assert!((a - b).amax() < 1e-5 * a.amax(), "{}", (a - b).amax());
 }

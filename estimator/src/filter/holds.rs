@@ -3,6 +3,7 @@
 //! error (see [`crate::update::Hold`]).
 
 use super::Ekf;
+use crate::ids::SensorId;
 use crate::scalar::Scalar;
 use crate::state::Layout;
 use crate::update::Hold;
@@ -16,12 +17,10 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     /// unobservable. Errors (filter unchanged): unknown sensor, zero or non-finite axis.
     pub fn hold_translation_axis(
         &mut self,
-        s: usize,
+        s: SensorId,
         axis: Option<Vector3<T>>,
     ) -> Result<(), Error> {
-        if s >= S {
-            return Err(Error::UnknownSensor);
-        }
+        let i = s.checked(S)?;
         let unit = match axis {
             None => None,
             Some(a) => {
@@ -35,13 +34,13 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
                 Some(a / norm)
             }
         };
-        self.held_translation[s] = unit;
+        self.held_translation[i] = unit;
         Ok(())
     }
 
     /// The held translation direction of sensor `s`, if any (unit, IMU frame).
-    pub fn held_translation_axis(&self, s: usize) -> Option<Vector3<T>> {
-        self.held_translation.get(s).copied().flatten()
+    pub fn held_translation_axis(&self, s: SensorId) -> Option<Vector3<T>> {
+        self.held_translation.get(s.index()).copied().flatten()
     }
 
     /// The holds every update applies: the first `count` entries of the array.
@@ -51,7 +50,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
             axis: Vector3::zeros(),
         }; S];
         let mut count = 0;
-        for (s, held) in self.held_translation.iter().enumerate() {
+        for (s, held) in SensorId::all::<S>().into_iter().zip(&self.held_translation) {
             if let Some(axis) = held {
                 out[count] = Hold {
                     block: Layout::<S, C>::extrinsic_translation(s).idx,

@@ -15,8 +15,7 @@ use crate::update::reprojection::{CornerObservation, CornerSet};
 use crate::update::UpdateKind;
 use nalgebra::{SMatrix, SVector, UnitQuaternion, Vector2, Vector3};
 
-const LIDAR: usize = 0;
-const CAMERA: usize = 1;
+use super::{JOINT_CAMERA as CAMERA, JOINT_LIDAR as LIDAR};
 /// The scan / image stamp: between two IMU samples, after the last fed one.
 const STAMP: u64 = T0 + 240_000_000 + 1_234_567;
 const N: usize = 59;
@@ -83,13 +82,13 @@ pub(super) fn joint_filter<T: Scalar>(lidar_time_offset: T) -> JointEkf<T> {
         .pose()
         .compose(&camera_mount())
         .compose(&board_in_camera);
-    ekf.init_frame(0, board, T::lit(0.05), T::lit(0.05))
+    ekf.init_frame(TARGET_FRAME, board, T::lit(0.05), T::lit(0.05))
         .expect("frame");
     ekf
 }
 
 /// The filter moved to the measurement's IMU time (where an update would linearise).
-fn at_measurement<T: Scalar>(ekf: &JointEkf<T>, s: usize) -> JointEkf<T> {
+fn at_measurement<T: Scalar>(ekf: &JointEkf<T>, s: SensorId) -> JointEkf<T> {
     let mut e = ekf.clone();
     let t = e.imu_time(s, STAMP).expect("sensor").max(e.time_ns());
     e.advance_to(t).expect("advance");
@@ -105,7 +104,7 @@ fn plane_seen<T: Scalar>(ekf: &JointEkf<T>, offset_m: f64) -> BoardPlane<T> {
         .pose()
         .compose(&e.extrinsic(LIDAR))
         .inverse()
-        .compose(&e.frame(0).expect("frame"));
+        .compose(&e.frame(TARGET_FRAME).expect("frame"));
     let points: [Vector3<T>; 70] = core::array::from_fn(|i| {
         let (a, b) = (T::lit((i % 10) as f64), T::lit((i / 10) as f64));
         t_l_t.transform_point(&Vector3::new(
@@ -122,7 +121,7 @@ fn predicted_plane(ekf: &JointEkf<f64>, plane: &BoardPlane<f64>) -> Vector3<f64>
     board_plane::predict(
         &e.imu().pose(),
         &e.extrinsic(LIDAR),
-        &e.frame(0).expect("frame"),
+        &e.frame(TARGET_FRAME).expect("frame"),
         plane,
     )
 }
@@ -130,7 +129,7 @@ fn predicted_plane(ekf: &JointEkf<f64>, plane: &BoardPlane<f64>) -> Vector3<f64>
 #[test]
 fn layout_is_59_states_with_the_target_last() {
     assert_eq!(Layout::<2, 4>::dim_with_frames(1), N);
-    assert_eq!(Layout::<2, 4>::frame_orientation(0).idx, 53);
+    assert_eq!(Layout::<2, 4>::frame_orientation(TARGET_FRAME).idx, 53);
     let ekf = joint_filter(0.0f64);
     assert_eq!(ekf.covariance().nrows(), N);
 }
@@ -165,12 +164,12 @@ fn board_plane_jacobian_matches_central_differences_over_the_whole_state() {
     let lin = board_plane::linearize(
         &at_scan.imu().pose(),
         &at_scan.extrinsic(LIDAR),
-        &at_scan.frame(0).expect("frame"),
+        &at_scan.frame(TARGET_FRAME).expect("frame"),
         &plane,
     );
     let gyro = at_scan.imu_now.expect("imu").gyro;
     let analytic: SMatrix<f64, 3, N> = at_scan
-        .board_plane_jacobian(LIDAR, 0, &lin, &gyro)
+        .board_plane_jacobian(LIDAR, TARGET_FRAME, &lin, &gyro)
         .to_dense();
     // The rows are whitened by sqrt(K) and sqrt(lambda) (O(10)); the time-offset column
     // carries the midpoint integrator's O(|w| |a| dt^2) velocity inconsistency.
@@ -185,7 +184,7 @@ fn corners_seen(ekf: &JointEkf<f64>) -> [CornerObservation<f64>; 30] {
         let p_c = crate::update::reprojection::point_in_camera(
             &e.imu().pose(),
             &e.extrinsic(CAMERA),
-            &e.frame(0).expect("frame"),
+            &e.frame(TARGET_FRAME).expect("frame"),
             &p,
         );
         let pixel = camera::<f64>().project(&p_c).expect("in view").pixel;
@@ -217,13 +216,15 @@ fn corners_then_a_plane_couple_the_lidar_and_camera_extrinsics() {
         pixel_sigma: 0.5,
     };
     let report = ekf
-        .update_reprojection(CAMERA, 0, &camera(), &corners)
+        .update_reprojection(CAMERA, TARGET_FRAME, &camera(), &corners)
         .expect("corners");
     assert!(report.accepted);
     let plane = plane_seen(&ekf, 0.01);
     let (before, _) = ekf.extrinsic_sigma(LIDAR);
     let before_t = ekf.extrinsic_sigma(LIDAR).1;
-    let report = ekf.update_board_plane(LIDAR, 0, &plane).expect("plane");
+    let report = ekf
+        .update_board_plane(LIDAR, TARGET_FRAME, &plane)
+        .expect("plane");
     // Then the plane is fused, the residual shrinks, the LiDAR's translation along the
     // board normal tightens, and the two extrinsics are now correlated through the board
     assert_eq!(report.kind, UpdateKind::BoardPlane);
@@ -242,13 +243,13 @@ fn outlying_and_bad_planes_leave_the_state_untouched() {
     // A board 30 cm off is gated: recorded, not fused.
     let mut gated = ekf.clone();
     let report = gated
-        .update_board_plane(LIDAR, 0, &plane_seen(&ekf, 0.3))
+        .update_board_plane(LIDAR, TARGET_FRAME, &plane_seen(&ekf, 0.3))
         .expect("plane");
     assert!(!report.accepted);
     // (The filter stands at the scan's IMU time: propagation is not undone.)
     assert_eq!(gated.imu(), at_measurement(&ekf, LIDAR).imu());
     assert_eq!(gated.extrinsic(LIDAR), ekf.extrinsic(LIDAR));
-    assert_eq!(gated.frame(0), ekf.frame(0));
+    assert_eq!(gated.frame(TARGET_FRAME), ekf.frame(TARGET_FRAME));
     // Typed errors, each with the state (and the filter time) unchanged.
     let good = plane_seen(&ekf, 0.0);
     let mut nan = good;
@@ -259,10 +260,10 @@ fn outlying_and_bad_planes_leave_the_state_untouched() {
     beyond.stamp_ns = T0 + 1_000_000_000;
     let cases = [
         (2, 0, good, Error::UnknownSensor),
-        (LIDAR, 1, good, Error::UnknownFrame),
-        (LIDAR, 0, nan, Error::NonFinite),
+        (0, 1, good, Error::UnknownFrame),
+        (0, 0, nan, Error::NonFinite),
         (
-            LIDAR,
+            0,
             0,
             early,
             Error::TimeWentBackwards {
@@ -271,7 +272,7 @@ fn outlying_and_bad_planes_leave_the_state_untouched() {
             },
         ),
         (
-            LIDAR,
+            0,
             0,
             beyond,
             Error::NotYetDue {
@@ -281,6 +282,9 @@ fn outlying_and_bad_planes_leave_the_state_untouched() {
         ),
     ];
     for (s, f, plane, expected) in cases {
+        // Ids of a wider layout than the joint filter's: they can still reach it.
+        let s = SensorId::new::<3>(s).expect("sensor of the wider layout");
+        let f = FrameId::new::<2>(f).expect("frame of the wider layout");
         let mut e = ekf.clone();
         assert_eq!(e.update_board_plane(s, f, &plane), Err(expected));
         assert_eq!(e.covariance(), ekf.covariance());
@@ -303,10 +307,11 @@ fn f32_follows_f64_through_a_joint_sequence() {
             corners: &obs,
             pixel_sigma: T::lit(0.5),
         };
-        ekf.update_reprojection(CAMERA, 0, &camera(), &corners)
+        ekf.update_reprojection(CAMERA, TARGET_FRAME, &camera(), &corners)
             .expect("corners");
         let plane = plane_seen(&ekf, 0.01);
-        ekf.update_board_plane(LIDAR, 0, &plane).expect("plane");
+        ekf.update_board_plane(LIDAR, TARGET_FRAME, &plane)
+            .expect("plane");
         (
             ekf.extrinsic(LIDAR),
             ekf.extrinsic(CAMERA),
@@ -355,12 +360,12 @@ fn stacked_update(ekf: &JointEkf<f64>, obs: &[CornerObservation<f64>; 30]) -> (J
             &camera(),
             &e.imu().pose(),
             &e.extrinsic(CAMERA),
-            &e.frame(0).expect("frame"),
+            &e.frame(TARGET_FRAME).expect("frame"),
             &corner.point_in_target,
             &corner.pixel,
         )
         .expect("in view");
-        let h = e.reprojection_jacobian(CAMERA, 0, &lin, &gyro);
+        let h = e.reprojection_jacobian(CAMERA, TARGET_FRAME, &lin, &gyro);
         columns = h.columns;
         values.fixed_rows_mut::<2>(2 * k).copy_from(&h.values);
         residual.fixed_rows_mut::<2>(2 * k).copy_from(&lin.residual);
@@ -388,7 +393,7 @@ fn compressed_image_update_equals_the_stacked_update() {
         pixel_sigma: 0.5,
     };
     let report = compressed
-        .update_reprojection(CAMERA, 0, &camera(), &corners)
+        .update_reprojection(CAMERA, TARGET_FRAME, &camera(), &corners)
         .expect("corners");
     let (stacked, nis) = stacked_update(&ekf, &obs);
     // Then NIS, dof, state and covariance agree to rounding
@@ -412,8 +417,8 @@ fn compressed_image_update_equals_the_stacked_update() {
         assert!((compressed.time_offset(s) - stacked.time_offset(s)).abs() < 1e-15);
     }
     let (a, b) = (
-        compressed.frame(0).expect("f"),
-        stacked.frame(0).expect("f"),
+        compressed.frame(TARGET_FRAME).expect("f"),
+        stacked.frame(TARGET_FRAME).expect("f"),
     );
     assert!(a.rotation.angle_to(&b.rotation) < 1e-13);
     assert!((a.translation - b.translation).norm() < 1e-13);
@@ -433,7 +438,7 @@ fn compressed_image_update_in_f32_follows_the_stacked_f64_one() {
         pixel_sigma: 0.5,
     };
     let report = e32
-        .update_reprojection(CAMERA, 0, &camera(), &corners)
+        .update_reprojection(CAMERA, TARGET_FRAME, &camera(), &corners)
         .expect("corners");
     assert!(
         (f64::from(report.nis) - nis).abs() < 1e-3 * nis,

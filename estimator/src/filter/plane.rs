@@ -4,6 +4,7 @@
 
 use super::undo::PropagationUndo;
 use super::Ekf;
+use crate::ids::{FrameId, SensorId};
 use crate::scalar::Scalar;
 use crate::update::board_plane::{self, BoardPlane, BoardPlaneJacobians};
 use crate::update::{Measurement, SparseJacobian, UpdateKind, UpdateReport};
@@ -17,19 +18,11 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     /// health monitor records it. On error the filter is unchanged.
     pub fn update_board_plane(
         &mut self,
-        s: usize,
-        f: usize,
+        s: SensorId,
+        f: FrameId,
         meas: &BoardPlane<T>,
     ) -> Result<UpdateReport<T>, Error> {
-        if s >= S {
-            return Err(Error::UnknownSensor);
-        }
-        if f >= F {
-            return Err(Error::UnknownFrame);
-        }
-        if self.frames[f].is_none() {
-            return Err(Error::FrameNotInitialized);
-        }
+        self.check_target_model(s, f)?;
         meas.validate()?;
         let t = self.reachable_imu_time(s, meas.stamp_ns)?;
         let undo = PropagationUndo::save(self);
@@ -42,16 +35,20 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
 
     fn fuse_board_plane(
         &mut self,
-        s: usize,
-        f: usize,
+        s: SensorId,
+        f: FrameId,
         meas: &BoardPlane<T>,
         t: u64,
     ) -> Result<UpdateReport<T>, Error> {
         self.advance_to(t)?;
         let last = self.imu_now.ok_or(Error::NotInitialized)?;
-        let target = self.frames[f].ok_or(Error::FrameNotInitialized)?;
-        let lin =
-            board_plane::linearize(&self.imu.pose(), &self.sensors[s].extrinsic, &target, meas);
+        let target = self.frames[f.index()].ok_or(Error::FrameNotInitialized)?;
+        let lin = board_plane::linearize(
+            &self.imu.pose(),
+            &self.sensors[s.index()].extrinsic,
+            &target,
+            meas,
+        );
         let mut extrinsic = SMatrix::<T, 3, 6>::zeros();
         extrinsic
             .fixed_columns_mut::<3>(0)
@@ -77,8 +74,8 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     /// offset, target pose), as for a corner.
     pub(super) fn board_plane_jacobian(
         &self,
-        s: usize,
-        f: usize,
+        s: SensorId,
+        f: FrameId,
         lin: &BoardPlaneJacobians<T>,
         held_gyro: &Vector3<T>,
     ) -> SparseJacobian<T, 3, 19> {

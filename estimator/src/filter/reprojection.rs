@@ -25,6 +25,7 @@ use super::Ekf;
 use crate::camera::Camera;
 use crate::chi2;
 use crate::health::ExtrinsicInnovation;
+use crate::ids::{FrameId, SensorId};
 use crate::lie::Pose;
 use crate::scalar::Scalar;
 use crate::state::{imu, Layout};
@@ -54,8 +55,8 @@ struct Image<T: Scalar> {
 /// (its estimate when the image arrived), the camera model, the corners, and the gyro
 /// reading held over the last IMU interval.
 struct ImageView<'a, T: Scalar> {
-    s: usize,
-    f: usize,
+    s: SensorId,
+    f: FrameId,
     target: Pose<T>,
     camera: &'a Camera<T>,
     meas: &'a CornerSet<'a, T>,
@@ -79,20 +80,12 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     /// by the gate: only the health monitor records it. On error the filter is unchanged.
     pub fn update_reprojection(
         &mut self,
-        s: usize,
-        f: usize,
+        s: SensorId,
+        f: FrameId,
         camera: &Camera<T>,
         meas: &CornerSet<'_, T>,
     ) -> Result<UpdateReport<T>, Error> {
-        if s >= S {
-            return Err(Error::UnknownSensor);
-        }
-        if f >= F {
-            return Err(Error::UnknownFrame);
-        }
-        if self.frames[f].is_none() {
-            return Err(Error::FrameNotInitialized);
-        }
+        self.check_target_model(s, f)?;
         meas.validate()?;
         let t = self.reachable_imu_time(s, meas.stamp_ns)?;
         let step = StepUndo::save(self);
@@ -125,8 +118,8 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     #[inline(never)]
     fn fuse_image(
         &mut self,
-        s: usize,
-        f: usize,
+        s: SensorId,
+        f: FrameId,
         camera: &Camera<T>,
         meas: &CornerSet<'_, T>,
     ) -> Result<Outcome<T>, Error> {
@@ -145,8 +138,8 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     /// is written before the gate has accepted. The stats are the first pass's.
     fn gate_and_fuse_image(
         &mut self,
-        s: usize,
-        f: usize,
+        s: SensorId,
+        f: FrameId,
         camera: &Camera<T>,
         meas: &CornerSet<'_, T>,
     ) -> Result<Outcome<T>, Error> {
@@ -155,7 +148,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         let view = ImageView {
             s,
             f,
-            target: self.frames[f].ok_or(Error::FrameNotInitialized)?,
+            target: self.frames[f.index()].ok_or(Error::FrameNotInitialized)?,
             camera,
             meas,
             held_gyro: last.gyro,
@@ -226,7 +219,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         } = *view;
         let sigma = meas.pixel_sigma * scale;
         let corner_gate = chi2::quantile::<T>(2, self.config.gate);
-        let (pose, extrinsic) = (self.imu.pose(), self.sensors[s].extrinsic);
+        let (pose, extrinsic) = (self.imu.pose(), self.sensors[s.index()].extrinsic);
         let mut image = Image {
             rows: Compressor::new(),
             columns: [0; ACTIVE],
@@ -271,8 +264,8 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     /// target pose) of the 2 x N.
     pub(super) fn reprojection_jacobian(
         &self,
-        s: usize,
-        f: usize,
+        s: SensorId,
+        f: FrameId,
         lin: &reprojection::ReprojectionJacobians<T>,
         held_gyro: &Vector3<T>,
     ) -> SparseJacobian<T, 2, ACTIVE> {
@@ -298,8 +291,8 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     /// measurement's true IMU time: `d/dt_d = H_theta w + H_p v` (as the clones carry it).
     pub(super) fn target_model_jacobian<const M: usize>(
         &self,
-        s: usize,
-        f: usize,
+        s: SensorId,
+        f: FrameId,
         blocks: [&SMatrix<T, M, 3>; 6],
         held_gyro: &Vector3<T>,
     ) -> SparseJacobian<T, M, ACTIVE> {

@@ -16,7 +16,7 @@ pub(super) const T0: u64 = 1_700_000_000_000_000_000;
 fn moving_filter(time_offset: f64) -> PoseImuEkf<f64> {
     let mut init = InitialState::<f64, 1>::at_rest(Vector3::new(0.0, 0.0, 9.81))
         .expect("gravity")
-        .with_time_offset(0, time_offset, 0.01);
+        .with_time_offset(SOLE_SENSOR, time_offset, 0.01);
     init.imu.velocity = Vector3::new(0.7, -0.3, 0.2);
     init.imu.rotation = UnitQuaternion::from_euler_angles(0.3, -0.2, 1.0);
     let mut ekf = PoseImuEkf::new(&FilterConfig::new(ImuNoise::vn300()), &init).expect("prior");
@@ -55,7 +55,7 @@ fn clone_time_offset_jacobian_matches_central_differences() {
     // When the pose is cloned at stamp + t_d for t_d +- h
     let clone_pose = |td: f64| {
         let mut ekf = moving_filter(td);
-        ekf.anchor(0, stamp).expect("anchor");
+        ekf.anchor(SOLE_SENSOR, stamp).expect("anchor");
         ekf.imu().pose()
     };
     let (plus, minus) = (clone_pose(td + h), clone_pose(td - h));
@@ -68,9 +68,9 @@ fn clone_time_offset_jacobian_matches_central_differences() {
         .copy_from(&((plus.translation - minus.translation) / (2.0 * h)));
     // Then the clone's covariance with t_d is d(clone)/d(t_d) * var(t_d)
     let mut ekf = moving_filter(td);
-    ekf.anchor(0, stamp).expect("anchor");
+    ekf.anchor(SOLE_SENSOR, stamp).expect("anchor");
     let c = Layout::<1, 2>::clone_orientation(0).idx;
-    let t = Layout::<1, 2>::time_offset(0).idx;
+    let t = Layout::<1, 2>::time_offset(SOLE_SENSOR).idx;
     let var = ekf.covariance()[(t, t)];
     let analytic = ekf.covariance().fixed_view::<6, 1>(c, t).clone_owned() / var;
     // The midpoint integrator's position is consistent with its velocity to O(|w| |a| dt^2)
@@ -84,14 +84,15 @@ fn slightly_late_measurement_is_fused_at_the_filter_time_and_a_late_one_is_refus
     let mut ekf = moving_filter(0.0);
     let now = T0 + 240_000_000;
     // When a measurement's IMU time is 0.6 ms behind (a t_d update moved it there)
-    ekf.anchor(0, now - 600_000).expect("within max_late_ns");
+    ekf.anchor(SOLE_SENSOR, now - 600_000)
+        .expect("within max_late_ns");
     // Then it is cloned at the filter time
     assert_eq!(ekf.time_ns(), now);
     // And one 1.5 ms behind is time going backwards, the state untouched
     let mut late = moving_filter(0.0);
     let before = late.covariance();
     assert!(matches!(
-        late.anchor(0, now - 1_500_000),
+        late.anchor(SOLE_SENSOR, now - 1_500_000),
         Err(Error::TimeWentBackwards { .. })
     ));
     assert_eq!(late.covariance(), before);
@@ -99,7 +100,7 @@ fn slightly_late_measurement_is_fused_at_the_filter_time_and_a_late_one_is_refus
 
 /// Feeds the constant spinning reading at 400 Hz until a measurement at `stamp` is due.
 fn spin_until_due(ekf: &mut PoseImuEkf<f64>, stamp: u64) {
-    while !ekf.is_due(0, stamp) {
+    while !ekf.is_due(SOLE_SENSOR, stamp) {
         ekf.propagate(&ImuSample {
             stamp_ns: ekf.imu_horizon_ns().expect("imu") + 2_500_000,
             gyro: Vector3::new(1.2, -0.8, 0.5),
@@ -113,12 +114,12 @@ fn spin_until_due(ekf: &mut PoseImuEkf<f64>, stamp: u64) {
 fn covariance_stays_symmetric_and_positive_through_updates() {
     let mut ekf = moving_filter(0.0);
     let t = ekf.time_ns();
-    ekf.anchor(0, t).expect("anchor");
+    ekf.anchor(SOLE_SENSOR, t).expect("anchor");
     for k in 1..=20u64 {
         let stamp = t + k * 100_000_000;
         spin_until_due(&mut ekf, stamp);
         let m = RelativePose::with_sigmas(stamp - 100_000_000, stamp, Pose::identity(), 0.5, 0.5);
-        ekf.update_relative_pose(0, &m).expect("update");
+        ekf.update_relative_pose(SOLE_SENSOR, &m).expect("update");
     }
     let p = ekf.covariance();
     assert_mat_close(
@@ -142,14 +143,14 @@ fn relative_pose_failing_after_propagation_and_cloning_takes_both_back() {
     // propagated to its end stamp and cloned the IMU pose there)
     let mut ekf = moving_filter(0.0);
     let t = ekf.time_ns();
-    ekf.anchor(0, t).expect("anchor");
+    ekf.anchor(SOLE_SENSOR, t).expect("anchor");
     let stamp = t + 15_000_000;
     let mut bad = RelativePose::with_sigmas(t, stamp, Pose::identity(), 1e-4, 1e-4);
     bad.covariance[(0, 1)] = 1.0;
     bad.covariance[(1, 0)] = 1.0;
     let before = ekf.clone();
     // When it is fused
-    let result = ekf.update_relative_pose(0, &bad);
+    let result = ekf.update_relative_pose(SOLE_SENSOR, &bad);
     // Then it is a typed error and nothing moved: time, state, covariance, clones
     assert_eq!(result, Err(Error::SingularInnovation));
     assert_eq!(ekf.time_ns(), before.time_ns());
@@ -161,8 +162,8 @@ fn relative_pose_failing_after_propagation_and_cloning_takes_both_back() {
     let good = RelativePose::with_sigmas(t, stamp, Pose::identity(), 0.05, 0.05);
     let mut copy = before.clone();
     assert_eq!(
-        ekf.update_relative_pose(0, &good),
-        copy.update_relative_pose(0, &good)
+        ekf.update_relative_pose(SOLE_SENSOR, &good),
+        copy.update_relative_pose(SOLE_SENSOR, &good)
     );
     assert_eq!(ekf.covariance(), copy.covariance());
     assert_eq!(ekf.imu(), copy.imu());
@@ -189,7 +190,7 @@ fn zero_velocity_belongs_to_no_sensor_and_needs_the_stream_period() {
     assert!(report.accepted);
     assert_eq!(report.sensor, None);
     assert_eq!(report.dof, 9);
-    let health = ekf.health().sensor(0).expect("sensor 0");
+    let health = ekf.health().sensor(SOLE_SENSOR).expect("sensor 0");
     assert_eq!((health.accepted, health.rejected), (0, 0));
 }
 
@@ -198,42 +199,42 @@ fn held_translation_axis_keeps_its_prior_through_relative_pose_updates() {
     // Given a moving filter holding the lever arm along a tilted axis
     let mut ekf = moving_filter(0.0);
     assert_eq!(
-        ekf.hold_translation_axis(1, Some(Vector3::z())),
+        ekf.hold_translation_axis(SensorId::at::<1, 2>(), Some(Vector3::z())),
         Err(Error::UnknownSensor)
     );
     assert_eq!(
-        ekf.hold_translation_axis(0, Some(Vector3::zeros())),
+        ekf.hold_translation_axis(SOLE_SENSOR, Some(Vector3::zeros())),
         Err(Error::InvalidConfig)
     );
     assert_eq!(
-        ekf.hold_translation_axis(0, Some(Vector3::new(f64::NAN, 0.0, 1.0))),
+        ekf.hold_translation_axis(SOLE_SENSOR, Some(Vector3::new(f64::NAN, 0.0, 1.0))),
         Err(Error::NonFinite)
     );
     let axis = Vector3::new(0.1, -0.2, 1.0).normalize();
-    ekf.hold_translation_axis(0, Some(axis * 3.0))
+    ekf.hold_translation_axis(SOLE_SENSOR, Some(axis * 3.0))
         .expect("hold");
-    assert!((ekf.held_translation_axis(0).expect("held") - axis).norm() < 1e-15);
-    let b = Layout::<1, 2>::extrinsic_translation(0).idx;
+    assert!((ekf.held_translation_axis(SOLE_SENSOR).expect("held") - axis).norm() < 1e-15);
+    let b = Layout::<1, 2>::extrinsic_translation(SOLE_SENSOR).idx;
     let along = |ekf: &PoseImuEkf<f64>| {
         let p = ekf.covariance().fixed_view::<3, 3>(b, b).clone_owned();
         (
             (axis.transpose() * p * axis)[0],
-            axis.dot(&ekf.extrinsic(0).translation),
+            axis.dot(&ekf.extrinsic(SOLE_SENSOR).translation),
         )
     };
     let (var0, value0) = along(&ekf);
-    let sigma_before = ekf.extrinsic_sigma(0).1;
+    let sigma_before = ekf.extrinsic_sigma(SOLE_SENSOR).1;
     // When relative poses near the motion the filter predicts, but not on it, are fused
     let t = ekf.time_ns();
-    ekf.anchor(0, t).expect("anchor");
+    ekf.anchor(SOLE_SENSOR, t).expect("anchor");
     let mut from = ekf.imu().pose();
     for k in 1..=6u64 {
         let stamp = t + k * 100_000_000;
         spin_until_due(&mut ekf, stamp);
         let mut probe = ekf.clone();
-        probe.anchor(0, stamp).expect("probe");
+        probe.anchor(SOLE_SENSOR, stamp).expect("probe");
         let to = probe.imu().pose();
-        let e = ekf.extrinsic(0);
+        let e = ekf.extrinsic(SOLE_SENSOR);
         let predicted = e
             .inverse()
             .compose(&from.inverse().compose(&to))
@@ -243,7 +244,7 @@ fn held_translation_axis_keeps_its_prior_through_relative_pose_updates() {
             &Vector3::new(0.01, -0.02, 0.03),
         );
         let m = RelativePose::with_sigmas(stamp - 100_000_000, stamp, delta, 0.01, 0.02);
-        let report = ekf.update_relative_pose(0, &m).expect("update");
+        let report = ekf.update_relative_pose(SOLE_SENSOR, &m).expect("update");
         assert!(report.accepted, "update {k}: NIS {}", report.nis);
         from = to;
     }
@@ -251,7 +252,7 @@ fn held_translation_axis_keeps_its_prior_through_relative_pose_updates() {
     let (var1, value1) = along(&ekf);
     assert!((var1 - var0).abs() < 1e-9 * var0, "{var0} -> {var1}");
     assert!((value1 - value0).abs() < 1e-12, "{value0} -> {value1}");
-    let after = ekf.extrinsic_sigma(0).1;
+    let after = ekf.extrinsic_sigma(SOLE_SENSOR).1;
     assert!(after.y < 0.8 * sigma_before.y, "{sigma_before} -> {after}");
 }
 
@@ -307,8 +308,8 @@ mod reprojection {
     fn camera_filter(time_offset: f64) -> CameraImuEkf<f64> {
         let mut init = InitialState::<f64, 1>::at_rest(Vector3::new(0.0, 0.0, 9.81))
             .expect("gravity")
-            .with_extrinsic(0, extrinsic(), 0.02, 0.02)
-            .with_time_offset(0, time_offset, 0.01);
+            .with_extrinsic(SOLE_SENSOR, extrinsic(), 0.02, 0.02)
+            .with_time_offset(SOLE_SENSOR, time_offset, 0.01);
         init.imu.velocity = Vector3::new(0.7, -0.3, 0.2);
         init.imu.rotation = UnitQuaternion::from_euler_angles(0.3, -0.2, 1.0);
         let mut ekf =
@@ -335,7 +336,8 @@ mod reprojection {
             .pose()
             .compose(&extrinsic())
             .compose(&target_in_camera);
-        ekf.init_frame(0, target, 0.05, 0.05).expect("frame");
+        ekf.init_frame(TARGET_FRAME, target, 0.05, 0.05)
+            .expect("frame");
         ekf
     }
 
@@ -344,14 +346,14 @@ mod reprojection {
         let mut at_image = ekf.clone();
         // After an update the filter already stands at the image's (then) IMU time.
         let t = at_image
-            .imu_time(0, STAMP)
+            .imu_time(SOLE_SENSOR, STAMP)
             .expect("sensor")
             .max(at_image.time_ns());
         at_image.advance_to(t).expect("advance");
         let p_c = crate::update::reprojection::point_in_camera(
             &at_image.imu().pose(),
-            &at_image.extrinsic(0),
-            &at_image.frame(0).expect("frame"),
+            &at_image.extrinsic(SOLE_SENSOR),
+            &at_image.frame(TARGET_FRAME).expect("frame"),
             p,
         );
         camera().project(&p_c).expect("in view").pixel
@@ -364,7 +366,7 @@ mod reprojection {
             corners: obs,
             pixel_sigma: 0.5,
         };
-        ekf.update_reprojection(0, 0, &camera(), &meas)
+        ekf.update_reprojection(SOLE_SENSOR, TARGET_FRAME, &camera(), &meas)
             .expect("update")
     }
 
@@ -389,7 +391,7 @@ mod reprojection {
         let corner = Vector3::new(0.15, 0.05, 0.0);
         let mut at_image = camera_filter(td);
         at_image
-            .advance_to(at_image.imu_time(0, STAMP).expect("sensor"))
+            .advance_to(at_image.imu_time(SOLE_SENSOR, STAMP).expect("sensor"))
             .expect("advance");
         // When every error-state direction is perturbed there
         let h = 1e-6;
@@ -409,20 +411,21 @@ mod reprojection {
         let td_column = (predicted(&camera_filter(td + h_td), &corner)
             - predicted(&camera_filter(td - h_td), &corner))
             / (2.0 * h_td);
-        numeric.set_column(Layout::<1, 0>::time_offset(0).idx, &td_column);
+        numeric.set_column(Layout::<1, 0>::time_offset(SOLE_SENSOR).idx, &td_column);
         // Then the analytic Jacobian the update uses agrees
         let lin = crate::update::reprojection::linearize(
             &camera(),
             &at_image.imu().pose(),
-            &at_image.extrinsic(0),
-            &at_image.frame(0).expect("frame"),
+            &at_image.extrinsic(SOLE_SENSOR),
+            &at_image.frame(TARGET_FRAME).expect("frame"),
             &corner,
             &Vector2::zeros(),
         )
         .expect("in view");
         let gyro = at_image.imu_now.expect("imu").gyro;
-        let analytic: SMatrix<f64, 2, 28> =
-            at_image.reprojection_jacobian(0, 0, &lin, &gyro).to_dense();
+        let analytic: SMatrix<f64, 2, 28> = at_image
+            .reprojection_jacobian(SOLE_SENSOR, TARGET_FRAME, &lin, &gyro)
+            .to_dense();
         // Pixels per unit error are O(500); the time-offset column carries the midpoint
         // integrator's O(|w| |a| dt^2) velocity inconsistency, as in the clone test.
         assert_mat_close(&(analytic / 1000.0), &(numeric / 1000.0), 2e-4);
@@ -432,12 +435,12 @@ mod reprojection {
     fn consistent_corners_are_fused_and_shrink_the_extrinsic() {
         let mut ekf = camera_filter(0.0);
         let obs = observations(&ekf, 0.3);
-        let before = ekf.extrinsic_sigma(0);
+        let before = ekf.extrinsic_sigma(SOLE_SENSOR);
         let report = fuse(&mut ekf, &obs);
         assert_eq!(report.kind, UpdateKind::Reprojection);
         assert_eq!(report.dof, 60);
         assert!(report.accepted, "nis {} > {}", report.nis, report.threshold);
-        let after = ekf.extrinsic_sigma(0);
+        let after = ekf.extrinsic_sigma(SOLE_SENSOR);
         assert!(after.0.norm() < before.0.norm() && after.1.norm() < before.1.norm());
         // The corners now reproject closer to where they were seen.
         let residual: f64 = obs
@@ -455,7 +458,7 @@ mod reprojection {
         let obs = observations(&ekf, 3.0);
         let mut prior = ekf.clone();
         prior
-            .advance_to(prior.imu_time(0, STAMP).expect("sensor"))
+            .advance_to(prior.imu_time(SOLE_SENSOR, STAMP).expect("sensor"))
             .expect("advance");
         let p0 = prior.covariance();
         let gyro = prior.imu_now.expect("imu").gyro;
@@ -466,14 +469,15 @@ mod reprojection {
             let lin = crate::update::reprojection::linearize(
                 &camera(),
                 &prior.imu().pose(),
-                &prior.extrinsic(0),
-                &prior.frame(0).expect("frame"),
+                &prior.extrinsic(SOLE_SENSOR),
+                &prior.frame(TARGET_FRAME).expect("frame"),
                 &o.point_in_target,
                 &o.pixel,
             )
             .expect("in view");
-            let rows: SMatrix<f64, 2, 28> =
-                prior.reprojection_jacobian(0, 0, &lin, &gyro).to_dense();
+            let rows: SMatrix<f64, 2, 28> = prior
+                .reprojection_jacobian(SOLE_SENSOR, TARGET_FRAME, &lin, &gyro)
+                .to_dense();
             h.fixed_view_mut::<2, 28>(2 * k, 0).copy_from(&rows);
             r.fixed_rows_mut::<2>(2 * k).copy_from(&lin.residual);
         }
@@ -488,12 +492,12 @@ mod reprojection {
         assert!((report.nis - r.dot(&(s_inv * r))).abs() < 1e-8 * report.nis);
         let scale = p0.amax();
         assert!((ekf.covariance() - p_batch).amax() < 1e-9 * scale);
-        let e = Layout::<1, 0>::extrinsic_rotation(0).idx;
-        let expected = prior.extrinsic(0).boxplus(
+        let e = Layout::<1, 0>::extrinsic_rotation(SOLE_SENSOR).idx;
+        let expected = prior.extrinsic(SOLE_SENSOR).boxplus(
             &dx.fixed_rows::<3>(e).into_owned(),
             &dx.fixed_rows::<3>(e + 3).into_owned(),
         );
-        let got = ekf.extrinsic(0);
+        let got = ekf.extrinsic(SOLE_SENSOR);
         assert!(log(&(got.rotation.inverse() * expected.rotation)).norm() < 1e-10);
         assert!((got.translation - expected.translation).norm() < 1e-10);
         // (the prior's correction is not small: the test would see a relinearised update)
@@ -538,8 +542,8 @@ mod reprojection {
         let report = fuse(&mut ekf, &obs);
         assert!(!report.accepted);
         assert_eq!(ekf.imu(), before.imu());
-        assert_eq!(ekf.extrinsic(0), before.extrinsic(0));
-        assert_eq!(ekf.frame(0), before.frame(0));
+        assert_eq!(ekf.extrinsic(SOLE_SENSOR), before.extrinsic(SOLE_SENSOR));
+        assert_eq!(ekf.frame(TARGET_FRAME), before.frame(TARGET_FRAME));
         assert_eq!(ekf.covariance(), before.covariance());
     }
 
@@ -570,6 +574,9 @@ mod reprojection {
             ),
         ];
         for (s, f, corners, sigma, stamp, expected) in cases {
+            // Ids of a wider layout than the filter's: they can still reach it.
+            let s = SensorId::new::<2>(s).expect("sensor of the wider layout");
+            let f = FrameId::new::<2>(f).expect("frame of the wider layout");
             let mut e = ekf.clone();
             let meas = CornerSet {
                 stamp_ns: stamp,
@@ -592,7 +599,7 @@ mod reprojection {
             pixel_sigma: 0.5,
         };
         assert_eq!(
-            fresh.update_reprojection(0, 0, &camera(), &meas),
+            fresh.update_reprojection(SOLE_SENSOR, TARGET_FRAME, &camera(), &meas),
             Err(Error::FrameNotInitialized)
         );
     }

@@ -2,6 +2,7 @@
 //! prior.
 
 use super::{ImuState, SensorState};
+use crate::ids::SensorId;
 use crate::lie::Pose;
 use crate::scalar::Scalar;
 use nalgebra::{UnitQuaternion, Vector3};
@@ -83,15 +84,15 @@ impl<T: Scalar, const S: usize> InitialState<T, S> {
     }
 
     /// Sets sensor `s`'s extrinsic prior `T_I_S` with per-axis sigmas (rad, m).
-    /// An out-of-range `s` is ignored (the filter checks sensor indices on use).
+    /// An `s` beyond this layout's `S` (an id made for a larger one) is ignored.
     pub fn with_extrinsic(
         mut self,
-        s: usize,
+        s: SensorId,
         t_imu_sensor: Pose<T>,
         sigma_rotation: T,
         sigma_translation: T,
     ) -> Self {
-        if let Some(prior) = self.sensors.get_mut(s) {
+        if let Some(prior) = self.sensors.get_mut(s.index()) {
             prior.state.extrinsic = t_imu_sensor;
             prior.sigma_rotation = sigma_rotation;
             prior.sigma_translation = sigma_translation;
@@ -100,8 +101,8 @@ impl<T: Scalar, const S: usize> InitialState<T, S> {
     }
 
     /// Sets sensor `s`'s time-offset prior; a zero sigma keeps it fixed.
-    pub fn with_time_offset(mut self, s: usize, time_offset: T, sigma: T) -> Self {
-        if let Some(prior) = self.sensors.get_mut(s) {
+    pub fn with_time_offset(mut self, s: SensorId, time_offset: T, sigma: T) -> Self {
+        if let Some(prior) = self.sensors.get_mut(s.index()) {
             prior.state.time_offset = time_offset;
             prior.sigma_time_offset = sigma;
         }

@@ -1,4 +1,8 @@
 //! Typed index ranges of the error state, fixed at compile time (PX4-style named blocks).
+//! Sensor and frame blocks are found by their typed ids; the layout only computes offsets (the
+//! filter checks an id against its own `S` / `F` before it uses one).
+
+use crate::ids::{FrameId, SensorId};
 
 /// A contiguous block of the error state: `idx..idx + dof`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -65,33 +69,33 @@ impl<const S: usize, const C: usize> Layout<S, C> {
     }
 
     /// Extrinsic rotation error of sensor `s`.
-    pub const fn extrinsic_rotation(s: usize) -> Block {
+    pub const fn extrinsic_rotation(s: SensorId) -> Block {
         Block {
-            idx: Self::sensor_base(s),
+            idx: Self::sensor_base(s.index()),
             dof: 3,
         }
     }
 
     /// Extrinsic translation error of sensor `s`.
-    pub const fn extrinsic_translation(s: usize) -> Block {
+    pub const fn extrinsic_translation(s: SensorId) -> Block {
         Block {
-            idx: Self::sensor_base(s) + 3,
+            idx: Self::sensor_base(s.index()) + 3,
             dof: 3,
         }
     }
 
     /// Both extrinsic blocks of sensor `s` (rotation then translation).
-    pub const fn extrinsic(s: usize) -> Block {
+    pub const fn extrinsic(s: SensorId) -> Block {
         Block {
-            idx: Self::sensor_base(s),
+            idx: Self::sensor_base(s.index()),
             dof: 6,
         }
     }
 
     /// Time-offset error of sensor `s`.
-    pub const fn time_offset(s: usize) -> Block {
+    pub const fn time_offset(s: SensorId) -> Block {
         Block {
-            idx: Self::sensor_base(s) + 6,
+            idx: Self::sensor_base(s.index()) + 6,
             dof: 1,
         }
     }
@@ -113,17 +117,17 @@ impl<const S: usize, const C: usize> Layout<S, C> {
     }
 
     /// Orientation error `dtheta` of static frame `f` (right perturbation of `R_G_F`).
-    pub const fn frame_orientation(f: usize) -> Block {
+    pub const fn frame_orientation(f: FrameId) -> Block {
         Block {
-            idx: Self::DIM + FRAME_DIM * f,
+            idx: Self::DIM + FRAME_DIM * f.index(),
             dof: 3,
         }
     }
 
     /// Position error of static frame `f` in G.
-    pub const fn frame_position(f: usize) -> Block {
+    pub const fn frame_position(f: FrameId) -> Block {
         Block {
-            idx: Self::DIM + FRAME_DIM * f + 3,
+            idx: Self::DIM + FRAME_DIM * f.index() + 3,
             dof: 3,
         }
     }
@@ -137,7 +141,7 @@ mod tests {
     fn blocks_tile_the_joint_layout() {
         type L = Layout<2, 3>;
         let mut next = imu::DIM;
-        for s in 0..2 {
+        for s in SensorId::all::<2>() {
             assert_eq!(L::extrinsic_rotation(s).idx, next);
             assert_eq!(L::extrinsic_translation(s).idx, next + 3);
             assert_eq!(L::time_offset(s).idx, next + 6);
@@ -148,7 +152,7 @@ mod tests {
             next = L::clone_position(c).end();
         }
         assert_eq!(next, L::DIM);
-        for f in 0..2 {
+        for f in FrameId::all::<2>() {
             assert_eq!(L::frame_orientation(f).idx, next);
             assert_eq!(L::frame_position(f).idx, next + 3);
             next = L::frame_position(f).end();

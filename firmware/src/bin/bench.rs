@@ -19,7 +19,7 @@ use panic_halt as _;
 use msreg_estimator::na::{UnitQuaternion, Vector2, Vector3};
 use msreg_estimator::{
     CameraImuEkf, CornerObservation, CornerSet, FilterConfig, ImuNoise, ImuSample, InitialState,
-    Pose,
+    Pose, SOLE_SENSOR, TARGET_FRAME,
 };
 use msreg_firmware::joint::scenario::{self, JointConfig, JointEvent, JointScenario};
 use msreg_firmware::joint::selftest::{JointCounts, JointSetup};
@@ -99,8 +99,8 @@ fn bench_reprojection(clock: &InstructionClock) -> Option<Tally> {
     };
     let gravity = Vector3::new(0.0, 0.0, 9.81);
     let init = InitialState::<f32, 1>::at_rest(gravity)?
-        .with_extrinsic(0, Pose::identity(), 0.01, 0.01)
-        .with_time_offset(0, 0.0, 0.005);
+        .with_extrinsic(SOLE_SENSOR, Pose::identity(), 0.01, 0.01)
+        .with_time_offset(SOLE_SENSOR, 0.0, 0.005);
     let mut ekf = CameraImuEkf::<f32>::new(&FilterConfig::new(noise), &init).ok()?;
     let stamp_ns = 1_000_000_000;
     ekf.propagate(&ImuSample {
@@ -111,8 +111,9 @@ fn bench_reprojection(clock: &InstructionClock) -> Option<Tally> {
     .ok()?;
     let camera = scenario::euroc_camera()?;
     let t_c_t = Pose::new(UnitQuaternion::identity(), Vector3::new(-0.1, -0.12, 0.8));
-    let t_g_c = ekf.imu().pose().compose(&ekf.extrinsic(0));
-    ekf.init_frame(0, t_g_c.compose(&t_c_t), 0.05, 0.05).ok()?;
+    let t_g_c = ekf.imu().pose().compose(&ekf.extrinsic(SOLE_SENSOR));
+    ekf.init_frame(TARGET_FRAME, t_g_c.compose(&t_c_t), 0.05, 0.05)
+        .ok()?;
     let mut corners = [CornerObservation {
         point_in_target: Vector3::zeros(),
         pixel: Vector2::zeros(),
@@ -131,7 +132,8 @@ fn bench_reprojection(clock: &InstructionClock) -> Option<Tally> {
     };
     let mut tally = Tally::default();
     for _ in 0..10 {
-        let (outcome, ticks) = clock.measure(|| ekf.update_reprojection(0, 0, &camera, &meas));
+        let (outcome, ticks) =
+            clock.measure(|| ekf.update_reprojection(SOLE_SENSOR, TARGET_FRAME, &camera, &meas));
         if !outcome.is_ok_and(|r| r.accepted) {
             return None;
         }

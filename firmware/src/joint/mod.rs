@@ -16,12 +16,12 @@ use selftest::{JointCounts, JointSetup, SensorResult};
 
 /// The joint filter the firmware runs.
 pub type JointFilter = JointEkf<f32>;
-/// Sensor index of the LiDAR (relative poses, board planes).
-pub const LIDAR: usize = 0;
-/// Sensor index of the camera (corner reprojections).
-pub const CAMERA: usize = 1;
-/// Static frame index of the board.
-pub const BOARD_FRAME: usize = 0;
+/// The camera (corner reprojections).
+pub use msreg_estimator::JOINT_CAMERA as CAMERA;
+/// The LiDAR (relative poses, board planes).
+pub use msreg_estimator::JOINT_LIDAR as LIDAR;
+/// The static frame of the board.
+pub use msreg_estimator::TARGET_FRAME as BOARD_FRAME;
 /// Error states of the joint layout.
 pub const JOINT_STATES: usize = Layout::<2, 4>::dim_with_frames(1);
 /// Bytes of one `JointEkf<f32>`: a compile-time fact of the layout.

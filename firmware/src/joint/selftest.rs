@@ -10,7 +10,7 @@ use msreg_estimator::na::{Cholesky, Matrix6, Vector3, Vector6};
 use msreg_estimator::state::imu;
 use msreg_estimator::update::board_plane::BoardPlane;
 use msreg_estimator::{
-    CornerSet, Error, FilterConfig, InitialState, Layout, Pose, UpdateKind, UpdateReport,
+    CornerSet, Error, FilterConfig, InitialState, Layout, Pose, SensorId, UpdateKind, UpdateReport,
 };
 
 use super::scenario::{Image, JointConfig, JointEvent, JointScenario};
@@ -36,7 +36,7 @@ pub struct JointSetup {
 }
 
 /// True `T_I_S` of sensor `s` as an estimator pose.
-pub fn truth(config: &JointConfig, s: usize) -> Pose<f32> {
+pub fn truth(config: &JointConfig, s: SensorId) -> Pose<f32> {
     let t = if s == CAMERA {
         config.t_i_c
     } else {
@@ -46,7 +46,7 @@ pub fn truth(config: &JointConfig, s: usize) -> Pose<f32> {
 }
 
 /// The extrinsic prior of sensor `s`: the truth perturbed.
-pub fn prior(config: &JointConfig, s: usize) -> Pose<f32> {
+pub fn prior(config: &JointConfig, s: SensorId) -> Pose<f32> {
     let (rot, trans) = if s == CAMERA {
         CAMERA_PRIOR_ERROR
     } else {
@@ -147,7 +147,7 @@ fn board_plane(
 }
 
 /// The sensor whose clock stamps a measurement event, and the stamp; `None` for IMU samples.
-fn sensor_stamp(event: &JointEvent) -> Option<(usize, u64)> {
+fn sensor_stamp(event: &JointEvent) -> Option<(SensorId, u64)> {
     match event {
         JointEvent::Imu(_) => None,
         JointEvent::LidarAnchor { stamp_ns } | JointEvent::BadPlane { stamp_ns, .. } => {
@@ -348,7 +348,7 @@ fn extrinsic_nees(estimate: &Pose<f32>, truth: &Pose<f32>, cov: &Matrix6<f32>) -
 }
 
 /// Sensor `s`'s result at the end of the run.
-pub fn sensor_result(filter: &JointFilter, config: &JointConfig, s: usize) -> SensorResult {
+pub fn sensor_result(filter: &JointFilter, config: &JointConfig, s: SensorId) -> SensorResult {
     let truth = truth(config, s);
     let estimate = filter.extrinsic(s);
     let (sr, st) = filter.extrinsic_sigma(s);

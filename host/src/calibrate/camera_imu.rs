@@ -20,7 +20,7 @@ mod start;
 use std::time::Instant;
 
 use msreg_estimator::camera::Camera;
-use msreg_estimator::{CornerObservation, Scalar};
+use msreg_estimator::{CornerObservation, Scalar, SOLE_SENSOR, TARGET_FRAME};
 use serde::Serialize;
 
 use super::extrinsic::ImuExtrinsicCalibration;
@@ -111,8 +111,6 @@ impl Default for CameraImuOptions {
 const MIN_PIXEL_SIGMA: f64 = 0.05;
 /// Fewest corners an image needs for PnP and the update.
 pub const MIN_CORNERS: usize = 6;
-/// The filter's static frame of the target.
-const TARGET: usize = 0;
 
 /// The outcome: `T_imu_cam` (the filter's state; the result file stores its inverse
 /// `T_cam_imu`) with its covariance, the time offset `t_d` (= Kalibr's
@@ -278,7 +276,7 @@ fn reprojection_calibration<T: Scalar>(
     let init_s = started.elapsed().as_secs_f64();
 
     let started = Instant::now();
-    let mut feed = CornerFeed::new(input, options, start, prior, 0);
+    let mut feed = CornerFeed::new(input, options, start, prior, SOLE_SENSOR);
     drive_imu(&mut ekf, imu, standstill.as_ref(), progress, &mut feed)?;
     feed.skip_remaining();
     let CornerFeed {

@@ -13,7 +13,7 @@ use crate::calibrate::InputError;
 use crate::dataset::{ImuNoiseYaml, ImuRecord, PoseRecord};
 use msreg_estimator::{
     Ekf, Error as FilterError, FilterConfig, ImuSample, InitialState, PoseImuEkf, Scalar,
-    UpdateReport,
+    UpdateReport, SOLE_SENSOR,
 };
 use nalgebra::{Isometry3, Vector3};
 
@@ -202,7 +202,7 @@ pub(crate) fn start_filter<T: Scalar>(
     let mut ekf = PoseImuEkf::<T>::new(&config, &initial)
         .map_err(|error| InputError::InvalidNoise { error })?;
     if let Some(p) = planar {
-        ekf.hold_translation_axis(0, Some(convert::vec3(&p.motion.axis_imu)))
+        ekf.hold_translation_axis(SOLE_SENSOR, Some(convert::vec3(&p.motion.axis_imu)))
             .map_err(|error| InputError::PlanarAxis { error })?;
     }
     Ok(FilterStart {
@@ -435,10 +435,10 @@ pub(crate) fn initial_state<T: Scalar>(
     );
     Ok(state
         .with_extrinsic(
-            0,
+            SOLE_SENSOR,
             extrinsic,
             T::lit(options.rotation_sigma_rad),
             T::lit(options.translation_sigma_m),
         )
-        .with_time_offset(0, T::zero(), T::lit(time_offset_sigma_s(options))))
+        .with_time_offset(SOLE_SENSOR, T::zero(), T::lit(time_offset_sigma_s(options))))
 }

@@ -25,7 +25,7 @@ pub(crate) mod solve;
 #[cfg(test)]
 mod tests;
 
-use msreg_estimator::{ImuState, InitialState, Scalar};
+use msreg_estimator::{ImuState, InitialState, Scalar, SOLE_SENSOR};
 use nalgebra::{
     DMatrix, Isometry3, Matrix3, Matrix3x2, SMatrix, SymmetricEigen, Translation3, UnitQuaternion,
     Vector3,
@@ -683,12 +683,16 @@ impl FilterPrior {
         state.sigma_accel_bias = T::lit(self.sigma_accel_bias);
         let state = state
             .with_extrinsic(
-                0,
+                SOLE_SENSOR,
                 convert::pose::<T>(&self.t_imu_sensor),
                 T::lit(sigma_rotation_rad),
                 T::lit(self.sigma_translation.max()),
             )
-            .with_time_offset(0, T::lit(time_offset_s), T::lit(sigma_time_offset_s));
+            .with_time_offset(
+                SOLE_SENSOR,
+                T::lit(time_offset_s),
+                T::lit(sigma_time_offset_s),
+            );
         state.is_valid().then_some(state)
     }
 }

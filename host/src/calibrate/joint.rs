@@ -19,7 +19,7 @@ mod plane;
 
 use std::time::Instant;
 
-use msreg_estimator::{Ekf, InitialState, JointEkf, Scalar, SensorPrior, SensorState};
+use msreg_estimator::{Ekf, InitialState, JointEkf, Scalar, SensorId, SensorPrior, SensorState};
 use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, Vector3};
 
 use super::camera_imu::{
@@ -41,10 +41,8 @@ use msreg_estimator::camera::Camera;
 pub use consistency::{chained_pairwise, LoopConsistency, PairwiseRuns};
 pub use plane::{BoardExtent, PlaneOptions, PlaneStats};
 
-/// The filter's index of the LiDAR.
-pub const LIDAR: usize = 0;
-/// The filter's index of the camera.
-pub const CAMERA: usize = 1;
+/// The LiDAR and the camera of the joint layout (`JointEkf`).
+pub use msreg_estimator::{JOINT_CAMERA as CAMERA, JOINT_LIDAR as LIDAR};
 
 /// What the pipeline reads.
 #[derive(Clone, Copy)]
@@ -279,7 +277,7 @@ pub fn cam_lidar<T: Scalar, const S: usize, const C: usize, const N: usize, cons
     ekf: &Ekf<T, S, C, N, F>,
 ) -> (Isometry3<f64>, Matrix6<f64>) {
     let p = ekf.covariance();
-    let block = |a: usize, b: usize| {
+    let block = |a: SensorId, b: SensorId| {
         let (a, b) = (
             msreg_estimator::Layout::<S, C>::extrinsic(a).idx,
             msreg_estimator::Layout::<S, C>::extrinsic(b).idx,
@@ -451,7 +449,7 @@ impl<T: Scalar> ImuHooks<T, JointEkf<T>> for JointFeed<'_, T> {
     ) -> Result<(), InputError> {
         loop {
             let imu_time =
-                |s: usize, stamp: Option<u64>| stamp.and_then(|t| ekf.imu_time(s, t).ok());
+                |s: SensorId, stamp: Option<u64>| stamp.and_then(|t| ekf.imu_time(s, t).ok());
             let scan = imu_time(LIDAR, self.lidar.next_due(ekf)?);
             let image_stamp = self.corners.next_due(ekf);
             let image = imu_time(CAMERA, image_stamp).zip(image_stamp);

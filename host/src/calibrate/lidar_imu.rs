@@ -45,7 +45,7 @@ mod update;
 use std::time::Instant;
 
 use msreg_estimator::state::imu as imu_block;
-use msreg_estimator::{Ekf, Scalar};
+use msreg_estimator::{Ekf, Scalar, SensorId, SOLE_SENSOR};
 
 pub(crate) use self::{feed::*, rotation::*};
 use super::extrinsic::ImuExtrinsicCalibration;
@@ -119,7 +119,12 @@ pub fn calibrate<T: Scalar>(
     let init_s = started.elapsed().as_secs_f64();
 
     let started = Instant::now();
-    let mut feed = LidarFeed::new(input.scans, options, first_imu.stamp_ns, (0, false));
+    let mut feed = LidarFeed::new(
+        input.scans,
+        options,
+        first_imu.stamp_ns,
+        (SOLE_SENSOR, false),
+    );
     if moving.is_some() {
         feed = feed.annealed_by_imu_state();
     }
@@ -244,7 +249,7 @@ fn extrinsic_sigma_ratio<
     const F: usize,
 >(
     ekf: &Ekf<T, S, C, N, F>,
-    s: usize,
+    s: SensorId,
 ) -> f64 {
     let (rotation, translation) = ekf.extrinsic_sigma(s);
     let prior = ekf.prior_sigma(s);

@@ -9,7 +9,7 @@
 use super::InputError;
 use std::time::Instant;
 
-use msreg_estimator::{PoseImuEkf, Scalar};
+use msreg_estimator::{PoseImuEkf, Scalar, SOLE_SENSOR};
 
 use super::driver::report::{PoseImuCalibration, PoseImuOptions, Timing};
 use super::driver::verdict::{finish, Run};
@@ -173,7 +173,7 @@ impl<T: Scalar> ImuHooks<T> for PoseFeed<'_> {
         _rec: &ImuRecord,
     ) -> Result<(), InputError> {
         while let Some(pose) = self.poses.get(self.next_pose) {
-            if !ekf.is_due(0, pose.stamp_ns) {
+            if !ekf.is_due(SOLE_SENSOR, pose.stamp_ns) {
                 break;
             }
             if index == 0 {

@@ -14,7 +14,7 @@ use crate::monitor::{
 use msreg_estimator::chi2::Confidence;
 use msreg_estimator::filter::MonitorEkf;
 use msreg_estimator::state::SensorPrior as FilterSensorPrior;
-use msreg_estimator::{FilterConfig, HealthConfig, InitialState, Pose as FilterPose};
+use msreg_estimator::{FilterConfig, HealthConfig, InitialState, Pose as FilterPose, SensorId};
 use msreg_protocol::{
     Anchor, Config, Gate, HostMsg, ImuNoise, ImuPrior, ImuStart, MonitorSetup, Pose, RelativePose,
     SensorPrior, SensorSet,
@@ -117,11 +117,11 @@ pub fn monitor_config(prior: &FilterPrior, estimate_period_ns: u32) -> Result<Co
 }
 
 /// The message of one odometry step of sensor `s`.
-fn step_message(step: &PoseStep, s: u8) -> HostMsg {
+fn step_message(step: &PoseStep, s: SensorId) -> HostMsg {
     match step {
         PoseStep::Anchor(stamp_ns) => HostMsg::Anchor(Anchor {
             stamp_ns: *stamp_ns,
-            sensor: s,
+            sensor: s.wire(),
         }),
         PoseStep::Increment(m) => {
             let sd = |i: usize| m.covariance[(i, i)].sqrt() as f32;
@@ -131,7 +131,7 @@ fn step_message(step: &PoseStep, s: u8) -> HostMsg {
                 delta: wire_pose(&m.delta),
                 sigma_rotation_rad: [sd(0), sd(1), sd(2)],
                 sigma_translation_m: [sd(3), sd(4), sd(5)],
-                sensor: s,
+                sensor: s.wire(),
             })
         }
     }
@@ -149,9 +149,9 @@ pub fn build_monitor_stream(
     let start_ns = input.imu[0].stamp_ns;
     let mut measurements = Vec::new();
     let mut skipped = 0;
-    for s in 0..2u8 {
-        let (steps, _) = pose_steps(&ekf, usize::from(s), input, start_ns);
-        skipped += input.poses[usize::from(s)].len() - steps.len();
+    for s in MonitorEkf::<f64>::sensor_ids() {
+        let (steps, _) = pose_steps(&ekf, s, input, start_ns);
+        skipped += input.poses[s.index()].len() - steps.len();
         measurements.extend(steps.iter().map(|p| (p.stamp_ns(), step_message(p, s))));
     }
     // Stamp order (stable: sensor 0 first at equal stamps); the device holds each in its
@@ -232,8 +232,9 @@ mod tests {
         assert!(close(m.resolvable_step_factor, 1.0));
         // Each sensor's odometry: one anchor, then increments, in stamp order.
         let ekf = prior.filter().expect("filter");
-        for s in 0..2u8 {
-            let (steps, _) = pose_steps(&ekf, usize::from(s), &input, sim.imu[0].stamp_ns);
+        for s in MonitorEkf::<f64>::sensor_ids() {
+            let (steps, _) = pose_steps(&ekf, s, &input, sim.imu[0].stamp_ns);
+            let s = s.wire();
             let sent: Vec<&HostMsg> = stream
                 .messages
                 .iter()

@@ -5,7 +5,7 @@ use msreg_estimator::filter::MonitorEkf;
 use msreg_estimator::health::NisStatus;
 use msreg_estimator::update::relative_pose::RelativePose;
 use msreg_estimator::update::UpdateReport;
-use msreg_estimator::{Error as FilterError, FilterConfig, HealthEvent};
+use msreg_estimator::{Error as FilterError, FilterConfig, HealthEvent, SensorId};
 use nalgebra::Matrix3;
 
 use super::start::{self, ExtrinsicSigmas, FilterPrior, Start};
@@ -89,16 +89,14 @@ impl PoseStep {
 /// increment from the one before. Also returns a note per gap.
 pub fn pose_steps(
     ekf: &MonitorEkf<f64>,
-    s: usize,
+    s: SensorId,
     input: &MonitorInput,
     t0_ns: u64,
 ) -> (Vec<PoseStep>, Vec<String>) {
-    let poses = input.poses[s];
+    let poses = input.poses[s.index()];
     let period_ns = nominal_period_ns(poses) as f64;
-    let sigma = (
-        input.pose_noise[s].rotation_noise_rad,
-        input.pose_noise[s].translation_noise_m,
-    );
+    let noise = &input.pose_noise[s.index()];
+    let sigma = (noise.rotation_noise_rad, noise.translation_noise_m);
     let first = poses
         .iter()
         .position(|p| ekf.imu_time(s, p.stamp_ns).map_or(true, |t| t >= t0_ns))
@@ -146,13 +144,13 @@ struct Feed {
 
 /// One update as the caller sees it.
 struct Fused {
-    sensor: usize,
+    sensor: SensorId,
     t_s: f64,
     report: UpdateReport<f64>,
 }
 
 fn feeds(ekf: &MonitorEkf<f64>, input: &MonitorInput, t0_ns: u64) -> [Feed; 2] {
-    core::array::from_fn(|s| {
+    MonitorEkf::<f64>::sensor_ids().map(|s| {
         let (steps, skipped) = pose_steps(ekf, s, input, t0_ns);
         Feed {
             steps,
@@ -167,7 +165,7 @@ fn feeds(ekf: &MonitorEkf<f64>, input: &MonitorInput, t0_ns: u64) -> [Feed; 2] {
 /// device (`firmware/src/session.rs`): an increment the filter cannot chain (no anchor, or
 /// older than its window) re-anchors at its end; one refused otherwise is skipped and the
 /// next pose anchors.
-fn fuse_next(ekf: &mut MonitorEkf<f64>, s: usize, feed: &mut Feed) -> Option<UpdateReport<f64>> {
+fn fuse_next(ekf: &mut MonitorEkf<f64>, s: SensorId, feed: &mut Feed) -> Option<UpdateReport<f64>> {
     let step = feed.steps[feed.next];
     feed.next += 1;
     let stamp = step.stamp_ns();
@@ -203,10 +201,12 @@ fn fuse_next(ekf: &mut MonitorEkf<f64>, s: usize, feed: &mut Feed) -> Option<Upd
 }
 
 /// The due step (of either sensor) with the earliest IMU time.
-fn earliest_due(ekf: &MonitorEkf<f64>, feeds: &[Feed; 2]) -> Option<usize> {
-    (0..2)
+fn earliest_due(ekf: &MonitorEkf<f64>, feeds: &[Feed; 2]) -> Option<SensorId> {
+    MonitorEkf::<f64>::sensor_ids()
+        .into_iter()
         .filter_map(|s| {
-            let stamp = feeds[s].steps.get(feeds[s].next)?.stamp_ns();
+            let feed = &feeds[s.index()];
+            let stamp = feed.steps.get(feed.next)?.stamp_ns();
             ekf.is_due(s, stamp)
                 .then(|| ekf.imu_time(s, stamp).ok())
                 .flatten()
@@ -244,11 +244,12 @@ fn run(
             }
         }
         while let Some(s) = earliest_due(ekf, &feeds) {
-            let stamp = feeds[s].steps[feeds[s].next].stamp_ns();
+            let feed = &mut feeds[s.index()];
+            let stamp = feed.steps[feed.next].stamp_ns();
             let t_s = ekf
                 .imu_time(s, stamp)
                 .map_or(0.0, |t| t.saturating_sub(t0) as f64 * 1e-9);
-            if let Some(report) = fuse_next(ekf, s, &mut feeds[s]) {
+            if let Some(report) = fuse_next(ekf, s, feed) {
                 on_update(
                     ekf,
                     &Fused {
@@ -282,7 +283,7 @@ fn step_alarm(t_s: f64, event: &HealthEvent<f64>) -> Alarm {
             ..
         } => Alarm {
             t_s,
-            sensor: SENSOR_NAMES[sensor],
+            sensor: SENSOR_NAMES[sensor.index()],
             kind: "rotation_step",
             statistic,
             step: step.map(f64::to_degrees).into(),
@@ -294,7 +295,7 @@ fn step_alarm(t_s: f64, event: &HealthEvent<f64>) -> Alarm {
             ..
         } => Alarm {
             t_s,
-            sensor: SENSOR_NAMES[sensor],
+            sensor: SENSOR_NAMES[sensor.index()],
             kind: "translation_step",
             statistic,
             step: (step * 1e3).into(),
@@ -315,7 +316,7 @@ impl MonitorRun {
         let r = &f.report;
         let dof = r.dof.max(1) as f64;
         let health = ekf.health().sensor(f.sensor);
-        self.nis[f.sensor].push(NisPoint {
+        self.nis[f.sensor.index()].push(NisPoint {
             t_s: f.t_s,
             nis_per_dof: r.nis / dof,
             gate_per_dof: r.threshold / dof,
@@ -326,16 +327,16 @@ impl MonitorRun {
             self.alarms.push(step_alarm(f.t_s, event));
         }
         let high = health.is_some_and(|h| h.nis_status(&ekf.config().health) == NisStatus::High);
-        if high && !self.high[f.sensor] {
+        if high && !self.high[f.sensor.index()] {
             self.warnings.push(Alarm {
                 t_s: f.t_s,
-                sensor: SENSOR_NAMES[f.sensor],
+                sensor: SENSOR_NAMES[f.sensor.index()],
                 kind: "nis_high",
                 statistic: health.map_or(0.0, |h| h.windowed_nis_per_dof()),
                 step: [0.0; 3],
             });
         }
-        self.high[f.sensor] = high;
+        self.high[f.sensor.index()] = high;
     }
 }
 
@@ -392,24 +393,23 @@ pub fn monitor(
         .last()
         .map_or(0.0, |r| (r.stamp_ns - t0) as f64 * 1e-9);
     let mut sensors = Vec::new();
-    for (s, (nis, (skipped, (excitation, observability)))) in m
-        .nis
-        .into_iter()
-        .zip(
-            skipped
-                .into_iter()
-                .zip(excitation.into_iter().zip(observability)),
+    for (s, (nis, (skipped, (excitation, observability)))) in
+        MonitorEkf::<f64>::sensor_ids().into_iter().zip(
+            m.nis.into_iter().zip(
+                skipped
+                    .into_iter()
+                    .zip(excitation.into_iter().zip(observability)),
+            ),
         )
-        .enumerate()
     {
         let estimate = ExtrinsicEstimate::from_covariance(
             convert::isometry(&ekf.extrinsic(s)),
             ekf.time_offset(s),
             &ekf.extrinsic_covariance(s),
         );
-        let prior = &input.prior[s].transform;
+        let prior = &input.prior[s.index()].transform;
         sensors.push(SensorReport {
-            name: SENSOR_NAMES[s],
+            name: SENSOR_NAMES[s.index()],
             accepted: nis.iter().filter(|p| p.accepted).count(),
             rejected: nis.iter().filter(|p| !p.accepted).count(),
             nis,
@@ -464,7 +464,7 @@ fn observability_run(
     let mut ekf = prior.filter()?;
     let mut excitation: [Vec<ExcitationPoint>; 2] = [Vec::new(), Vec::new()];
     run(&mut ekf, input, &prior, &mut |e, f| {
-        excitation[f.sensor].push(ExcitationPoint {
+        excitation[f.sensor.index()].push(ExcitationPoint {
             t_s: f.t_s,
             excitation: e.excitation(f.sensor),
         })
@@ -473,7 +473,7 @@ fn observability_run(
         axis: p.axis_imu,
         reason: PLANAR_REASON.into(),
     });
-    let tables = core::array::from_fn(|s| {
+    let tables = MonitorEkf::<f64>::sensor_ids().map(|s| {
         let (sr, st) = ekf.extrinsic_sigma(s);
         let sigma = [sr.x, sr.y, sr.z, st.x, st.y, st.z, ekf.time_offset_sigma(s)];
         let cov = ekf.extrinsic_covariance(s);

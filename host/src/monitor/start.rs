@@ -157,7 +157,7 @@ impl FilterPrior {
         let mut ekf = MonitorEkf::<f64>::new(&self.config, &self.init)
             .map_err(|error| MonitorError::InvalidPrior { error })?;
         if let Some(axis) = self.hold_axis {
-            for s in 0..2 {
+            for s in MonitorEkf::<f64>::sensor_ids() {
                 ekf.hold_translation_axis(s, Some(axis))
                     .map_err(|error| MonitorError::PlanarAxis { error })?;
             }
@@ -176,8 +176,8 @@ impl Start {
         sigmas: &[ExtrinsicSigmas; 2],
     ) -> FilterPrior {
         let mut state = self.imu;
-        for (s, sigma) in sigmas.iter().enumerate() {
-            let prior = &input.prior[s];
+        for (s, sigma) in MonitorEkf::<f64>::sensor_ids().into_iter().zip(sigmas) {
+            let prior = &input.prior[s.index()];
             state = state
                 .with_extrinsic(
                     s,

@@ -9,14 +9,14 @@ use crate::calibrate::driver::ImuHooks;
 use crate::calibrate::InputError;
 use crate::dataset::ImuRecord;
 use msreg_estimator::camera::Camera;
-use msreg_estimator::{CornerObservation, CornerSet, Ekf, Error as FilterError, Scalar};
+use msreg_estimator::{CornerObservation, CornerSet, Ekf, Error as FilterError, Scalar, SensorId};
 use nalgebra::{Matrix6, Vector2};
 
 /// The RepErrCal measurement feed: fuses every image whose IMU time has come, initialising
 /// the target pose from the first image's PnP.
 pub(crate) struct CornerFeed<'a, T: Scalar> {
-    /// The filter's index of the camera (its target is static frame 0).
-    pub(crate) sensor: usize,
+    /// The filter's camera (its target is static frame [`TARGET_FRAME`]).
+    pub(crate) sensor: SensorId,
     pub(crate) run: Run,
     pub(crate) frames: &'a [CornerFrame],
     pub(crate) next: usize,
@@ -59,7 +59,7 @@ impl<'a, T: Scalar> CornerFeed<'a, T> {
         options: &CameraImuOptions,
         start: &Start<'_>,
         prior: PoseImuOptions,
-        sensor: usize,
+        sensor: SensorId,
     ) -> Self {
         let frames = input.frames;
         Self {
@@ -147,7 +147,7 @@ impl<'a, T: Scalar> CornerFeed<'a, T> {
                 .skip_measurement("cam0", frame.stamp_ns, "too few corners");
             return;
         }
-        if ekf.frame(TARGET).is_none() {
+        if ekf.frame(TARGET_FRAME).is_none() {
             if let Err(why) = self.init_target(ekf, frame) {
                 self.run.skip_measurement("cam0", frame.stamp_ns, &why);
                 return;
@@ -184,7 +184,7 @@ impl<'a, T: Scalar> CornerFeed<'a, T> {
         ))
         .map(T::lit);
         ekf.init_frame_relative(
-            TARGET,
+            TARGET_FRAME,
             self.sensor,
             frame.stamp_ns,
             &convert::pose::<T>(&convert::isometry(&pnp.t_cam_target)),
@@ -192,7 +192,7 @@ impl<'a, T: Scalar> CornerFeed<'a, T> {
         )
         .and_then(|()| {
             if self.gauge_at_target {
-                ekf.fix_gauge(TARGET)
+                ekf.fix_gauge(TARGET_FRAME)
             } else {
                 Ok(())
             }
@@ -222,7 +222,7 @@ impl<'a, T: Scalar> CornerFeed<'a, T> {
             corners: &self.buffer,
             pixel_sigma: self.pixel_sigma.max(T::lit(own)),
         };
-        match ekf.update_reprojection(self.sensor, TARGET, &self.camera, &meas) {
+        match ekf.update_reprojection(self.sensor, TARGET_FRAME, &self.camera, &meas) {
             Ok(report) => {
                 self.run.record_update(ekf, frame.stamp_ns, &report);
                 let after = self.mean_error(ekf);
@@ -260,7 +260,7 @@ impl<'a, T: Scalar> CornerFeed<'a, T> {
         ekf: &Ekf<T, S, C, N, F>,
         stamp_ns: u64,
     ) -> Option<ReprojectionSample> {
-        let target = ekf.frame(TARGET)?;
+        let target = ekf.frame(TARGET_FRAME)?;
         let pixel = |p: &Vector2<T>| Vector2::new(p.x.to_f64(), p.y.to_f64());
         let reprojected = self
             .buffer
@@ -288,7 +288,7 @@ impl<'a, T: Scalar> CornerFeed<'a, T> {
         &self,
         ekf: &Ekf<T, S, C, N, F>,
     ) -> f64 {
-        let Some(target) = ekf.frame(TARGET) else {
+        let Some(target) = ekf.frame(TARGET_FRAME) else {
             return f64::NAN;
         };
         let imu = ekf.imu().pose();

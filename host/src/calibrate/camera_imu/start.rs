@@ -138,13 +138,13 @@ pub(crate) fn prior_from_motion<T: Scalar>(
         Some(_) => (initial, "standstill mean".to_string(), String::new()),
     };
     let initial = initial.with_extrinsic(
-        0,
+        SOLE_SENSOR,
         convert::pose::<T>(&motion.t_imu_sensor),
         T::lit(sigma_r),
         T::lit(sigma_t),
     );
     let initial = if prior.estimate_time_offset {
-        initial.with_time_offset(0, T::lit(motion.time_offset_s), T::lit(sigma_td))
+        initial.with_time_offset(SOLE_SENSOR, T::lit(motion.time_offset_s), T::lit(sigma_td))
     } else {
         initial
     };

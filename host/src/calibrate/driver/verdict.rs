@@ -9,14 +9,15 @@ use crate::calibrate::init::{self, Standstill};
 use crate::calibrate::observability::{self, HeldDirection};
 use crate::dataset::PoseRecord;
 use msreg_estimator::{
-    health::HealthEvent, Ekf, Error as FilterError, PoseImuEkf, RelativePose, Scalar,
+    health::HealthEvent, Ekf, Error as FilterError, PoseImuEkf, RelativePose, Scalar, SensorId,
+    SOLE_SENSOR,
 };
 use nalgebra::Matrix6;
 
 /// Bookkeeping of one run over the recording.
 pub(crate) struct Run {
-    /// The filter's index of the sensor whose measurements this run books.
-    pub(crate) sensor: usize,
+    /// The filter's sensor whose measurements this run books.
+    pub(crate) sensor: SensorId,
     pub(crate) start_ns: u64,
     pub(crate) max_interval_ns: u64,
     pub(crate) period_ns: u64,
@@ -34,7 +35,7 @@ pub(crate) struct Run {
 impl Run {
     pub(crate) fn new(start_ns: u64, period_ns: u64) -> Self {
         Self {
-            sensor: 0,
+            sensor: SOLE_SENSOR,
             start_ns,
             max_interval_ns: period_ns.saturating_mul(10),
             period_ns,
@@ -49,8 +50,9 @@ impl Run {
         }
     }
 
-    /// The same run booking sensor `s` of the filter (0 unless the filter has several).
-    pub(crate) fn for_sensor(mut self, s: usize) -> Self {
+    /// The same run booking sensor `s` of the filter ([`SOLE_SENSOR`] unless the filter has
+    /// several).
+    pub(crate) fn for_sensor(mut self, s: SensorId) -> Self {
         self.sensor = s;
         self
     }
@@ -81,7 +83,7 @@ impl Run {
             .previous
             .filter(|p| pose.stamp_ns - p.stamp_ns <= self.max_interval_ns);
         let Some(prev) = previous else {
-            match ekf.anchor(0, pose.stamp_ns) {
+            match ekf.anchor(SOLE_SENSOR, pose.stamp_ns) {
                 Ok(()) => self.previous = Some(*pose),
                 Err(e) => self.skip(pose.stamp_ns, &format!("cannot anchor: {e}")),
             }
@@ -101,7 +103,7 @@ impl Run {
             T::lit(sigma_r * scale),
             T::lit(sigma_t * scale),
         );
-        match ekf.update_relative_pose(0, &meas) {
+        match ekf.update_relative_pose(SOLE_SENSOR, &meas) {
             Ok(report) => {
                 self.previous = Some(*pose);
                 self.record_update(ekf, pose.stamp_ns, &report);
@@ -183,7 +185,7 @@ pub(crate) fn history_point<
     const F: usize,
 >(
     ekf: &Ekf<T, S, C, N, F>,
-    s: usize,
+    s: SensorId,
     t_s: f64,
     (nis, dof): (f64, usize),
     accepted: bool,

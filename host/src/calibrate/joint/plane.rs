@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 
 use msreg_estimator::update::board_plane::BoardPlane;
-use msreg_estimator::{Ekf, Scalar};
+use msreg_estimator::{Ekf, Scalar, TARGET_FRAME};
 use nalgebra::{Matrix3, Point3, SymmetricEigen, Vector3};
 use serde::Serialize;
 
@@ -15,9 +15,6 @@ use crate::calibrate::InputError;
 use crate::camera_yaml::CheckerboardTarget;
 use crate::lidar::deskew::DeskewedScan;
 use crate::pointcloud::ray_plane::fit_ray_plane;
-
-/// The filter's static frame of the board.
-const TARGET: usize = 0;
 
 /// The physical board in the target frame: centred on the pattern, `width_m` along target x.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -153,7 +150,7 @@ impl PlaneFeed {
             Ok(p) => p,
             Err(why) => return self.skip(why),
         };
-        match ekf.update_board_plane(LIDAR, TARGET, &plane) {
+        match ekf.update_board_plane(LIDAR, TARGET_FRAME, &plane) {
             Ok(report) => {
                 self.last_returns = returns;
                 self.measurements.push(BoardPlane {
@@ -188,7 +185,7 @@ impl PlaneFeed {
         stamp_ns: u64,
         scan: &DeskewedScan,
     ) -> Result<(BoardPlane<T>, Vec<Vector3<f64>>), String> {
-        let target = ekf.frame(TARGET).ok_or("no target yet")?;
+        let target = ekf.frame(TARGET_FRAME).ok_or("no target yet")?;
         let (sr, st) = ekf.extrinsic_sigma(LIDAR);
         let (sr, st) = (sr.amax().to_f64(), st.amax().to_f64());
         if sr > self.options.arm_sigma_rotation_rad || st > self.options.arm_sigma_translation_m {

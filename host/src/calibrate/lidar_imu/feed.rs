@@ -12,7 +12,7 @@ use crate::lidar::deskew::DeskewedScan;
 use crate::lidar::{PoseBuffer, ScanSource};
 use crate::ndt::{LocalMap, NdtTarget};
 use crate::pointcloud::PointCloud;
-use msreg_estimator::{Ekf, Scalar};
+use msreg_estimator::{Ekf, Scalar, SensorId};
 use nalgebra::{Isometry3, Vector6};
 use std::time::Instant;
 
@@ -39,8 +39,8 @@ pub(crate) struct Previous {
 
 /// The LiDAR front-end of the filter loop.
 pub(crate) struct LidarFeed<'a> {
-    /// The filter's index of the LiDAR.
-    pub(crate) sensor: usize,
+    /// The filter's LiDAR.
+    pub(crate) sensor: SensorId,
     /// Keep every deskewed scan for [`LidarFeed::take_deskewed`] (the joint calibration's
     /// board planes).
     pub(crate) keep_deskewed: bool,
@@ -105,7 +105,7 @@ impl<'a> LidarFeed<'a> {
         scans: &'a dyn ScanSource,
         options: &'a LidarImuOptions,
         first_imu_ns: u64,
-        (sensor, keep_deskewed): (usize, bool),
+        (sensor, keep_deskewed): (SensorId, bool),
     ) -> Self {
         Self {
             sensor,

@@ -38,7 +38,7 @@
 
 use crate::calibrate::InputError;
 use msreg_estimator::Scalar;
-use msreg_estimator::{FilterConfig, PoseImuEkf};
+use msreg_estimator::{FilterConfig, PoseImuEkf, SOLE_SENSOR};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 use super::{last_firing_ns, load, LidarImuOptions};
@@ -451,7 +451,7 @@ pub(crate) fn start<T: Scalar>(
         Err(_) => initial,
     };
     let initial = if filter.estimate_time_offset {
-        initial.with_time_offset(0, T::lit(td), T::lit(filter.time_offset_sigma_s))
+        initial.with_time_offset(SOLE_SENSOR, T::lit(td), T::lit(filter.time_offset_sigma_s))
     } else {
         initial
     };
