@@ -252,16 +252,6 @@ fn observable_summary(draws: &[Draw]) -> usize {
     ok
 }
 
-/// The draw with the highest final MI (the best maximum the searches found), and per draw
-/// its rotation (deg) and translation (m) from it.
-fn spread_about_best(draws: &[Draw]) -> Vec<(f64, f64)> {
-    let best = draws
-        .iter()
-        .max_by(|a, b| a.mi_end.total_cmp(&b.mi_end))
-        .expect("draws");
-    draws.iter().map(|d| errors(&best.end, &d.end)).collect()
-}
-
 /// Held camera-frame translation axes end exactly where they started.
 fn held_axes_unchanged(d: &Draw) -> bool {
     (0..3).all(|a| {
@@ -325,33 +315,6 @@ fn targetless_refinement_returns_to_the_reference_on_18_of_20() {
     assert!(ok >= 18, "only {ok} of 20 within 0.3 deg / 5 cm");
 }
 
-/// Not the acceptance: the same draws around the marking-aligned pose (the reference is
-/// 0.27 deg off in pitch by the lane markings, docs/prior_map.md), with the basin search.
-/// Asserts what it measured (docs/prior_map.md, seed 20): 19 of 20 end at a higher MI than
-/// the marking-aligned pose; those end within 0.27 deg of the highest-MI end (the MI's
-/// maximum, ~0.5 deg in roll from the marking-aligned pose); rotation error <= 0.72 deg,
-/// translation over the axes not held <= 10.7 cm; held axes unchanged. Bounds about 3x.
-#[test]
-#[ignore = "marking-aligned draws (3-6 min): cargo test --release -p msreg --test mi_targetless_real targetless_refinement_around -- --ignored --nocapture"]
-fn targetless_refinement_around_the_marking_aligned_pose() {
-    let Some(draws) = run_around(20, 20, Centre::MarkingAligned) else {
-        eprintln!("SKIP: ../shared/data/real/calibanything-1 absent");
-        return;
-    };
-    summary(&draws);
-    observable_summary(&draws);
-    let above = draws.iter().filter(|d| d.mi_end > d.mi_ref).count();
-    assert!(above >= 18, "{above} of 20 end above the centre's MI");
-    for (d, (spread, _)) in draws.iter().zip(spread_about_best(&draws)) {
-        if d.mi_end > d.mi_ref {
-            assert!(spread < 0.8, "{spread} deg from the highest-MI end");
-        }
-        assert!(d.rot_err_deg < 2.2, "rotation error {} deg", d.rot_err_deg);
-        assert!(observable_trans_err(d) < 0.32);
-        assert!(held_axes_unchanged(d));
-    }
-}
-
 /// The 20 draws of seed 20 around the pose the evidence supports (docs/prior_map.md,
 /// "Which pose does the evidence support?").
 #[test]
@@ -363,6 +326,26 @@ fn targetless_refinement_around_the_evidence_pose() {
     };
     summary(&draws);
     observable_summary(&draws);
+    // Measured (docs/prior_map.md): 18 of 20 within 0.3 deg (worst 0.448 deg, median
+    // 0.14); 19 of 20 end above the evidence pose's MI; over the translation axes not
+    // held, worst 5.1 cm; `z` held on 15 of 20. Bounds about 3x (counts: 3x the misses).
+    let rot_ok = draws.iter().filter(|d| d.rot_err_deg <= 0.3).count();
+    assert!(rot_ok >= 14, "{rot_ok} of 20 within 0.3 deg");
+    let above = draws.iter().filter(|d| d.mi_end > d.mi_ref).count();
+    assert!(
+        above >= 17,
+        "{above} of 20 end above the evidence pose's MI"
+    );
+    let mut rot: Vec<f64> = draws.iter().map(|d| d.rot_err_deg).collect();
+    rot.sort_by(f64::total_cmp);
+    assert!(rot[10] < 0.42, "median rotation error {} deg", rot[10]);
+    let held_z = draws.iter().filter(|d| d.held[5]).count();
+    assert!(held_z >= 10, "z held on {held_z} of 20");
+    for d in &draws {
+        assert!(d.rot_err_deg < 1.35, "rotation error {} deg", d.rot_err_deg);
+        assert!(observable_trans_err(d) < 0.153);
+        assert!(held_axes_unchanged(d));
+    }
 }
 
 /// The draws the search's constants (blur levels, spacing, candidates kept, the
