@@ -9,9 +9,9 @@
 use msreg_host::camera_yaml::read_camera_yaml;
 use msreg_host::dataset::CalibrationResult;
 use msreg_host::mi::markings::{align_rotation, MarkingOptions};
-use msreg_host::mi::scene::{highpass, MiScene, PoseParam};
+use msreg_host::mi::scene::{highpass, PoseParam};
 use msreg_host::mi::targetless::{
-    calibrate_targetless, ground_band, visible_points, TargetlessOptions,
+    calibrate_targetless, targetless_scene, visible_points, TargetlessOptions,
 };
 use msreg_host::pointcloud::read_pcd;
 use msreg_host::shared_data::dir_or_skip;
@@ -69,7 +69,17 @@ enum Centre {
     /// The reference with its rotation aligned to the lane markings
     /// (`msreg_host::mi::markings`; translation unchanged).
     MarkingAligned,
+    /// The pose the independent cues support: the reference rotated by
+    /// [`EVIDENCE_ROTATION_DEG`] (translation unchanged; the forward translation is not
+    /// determined by this frame).
+    Evidence,
 }
+
+/// Right rotation increment (deg, LiDAR axes) from the published reference to the pose
+/// the evidence supports: the inverse-variance mean of the lane markings, the ground MI
+/// and the off-ground MI, `(+0.013, -0.344, +0.219) +- (0.056, 0.022, 0.055)` deg
+/// (`tools/mi_cues.py`, docs/prior_map.md "Which pose does the evidence support?").
+const EVIDENCE_ROTATION_DEG: [f64; 3] = [0.013, -0.344, 0.219];
 
 fn run(draws: usize, seed: u64) -> Option<Vec<Draw>> {
     run_around(draws, seed, Centre::Reference)
@@ -97,6 +107,7 @@ fn tuning_options() -> TargetlessOptions {
             "trans" => b.trans_m = f(v),
             "hp" => o.highpass_px = f(v),
             "band" => o.ground_band_m = (f(v) > 0.0).then(|| f(v)),
+            "offground" => o.off_ground_group = f(v) > 0.0,
             "cand" => o.refine_candidates = f(v) as usize,
             "margin" => o.margin_px = f(v),
             "refblur" => o.refine_blur_px = v.split(',').map(f).collect(),
@@ -120,6 +131,11 @@ fn run_around(draws: usize, seed: u64, centre: Centre) -> Option<Vec<Draw>> {
         .transform;
     let reference = match centre {
         Centre::Reference => reference,
+        Centre::Evidence => {
+            let w = EVIDENCE_ROTATION_DEG.map(f64::to_radians);
+            PoseParam::CamFromSource
+                .retract(&reference, &Vector6::new(w[0], w[1], w[2], 0.0, 0.0, 0.0))
+        }
         Centre::MarkingAligned => {
             align_rotation(
                 &cloud,
@@ -140,16 +156,12 @@ fn run_around(draws: usize, seed: u64, centre: Centre) -> Option<Vec<Draw>> {
     };
     // The MI of the final image level at any pose, on the points visible at the reference.
     let (p, i) = visible_points(&cloud, &camera, &reference, options.margin_px);
-    let (p, i) = match options.ground_band_m {
-        Some(b) => ground_band(&p, &i, b),
-        None => (p, i),
-    };
     let judged = if options.highpass_px > 0.0 {
         highpass(&image, options.highpass_px)
     } else {
         image.clone()
     };
-    let judge = MiScene::new(p, &i, &judged, camera, 1.0);
+    let judge = targetless_scene(p, &i, &judged, &camera, 1.0, &options);
     let mi = |t: &Isometry3<f64>| judge.smoothed(t).mi;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut out = Vec::new();
@@ -240,16 +252,6 @@ fn observable_summary(draws: &[Draw]) -> usize {
     ok
 }
 
-/// The draw with the highest final MI (the best maximum the searches found), and per draw
-/// its rotation (deg) and translation (m) from it.
-fn spread_about_best(draws: &[Draw]) -> Vec<(f64, f64)> {
-    let best = draws
-        .iter()
-        .max_by(|a, b| a.mi_end.total_cmp(&b.mi_end))
-        .expect("draws");
-    draws.iter().map(|d| errors(&best.end, &d.end)).collect()
-}
-
 /// Held camera-frame translation axes end exactly where they started.
 fn held_axes_unchanged(d: &Draw) -> bool {
     (0..3).all(|a| {
@@ -313,39 +315,52 @@ fn targetless_refinement_returns_to_the_reference_on_18_of_20() {
     assert!(ok >= 18, "only {ok} of 20 within 0.3 deg / 5 cm");
 }
 
-/// Not the acceptance: the same draws around the marking-aligned pose (the reference is
-/// 0.27 deg off in pitch by the lane markings, docs/prior_map.md), with the basin search.
-/// Asserts what it measured (docs/prior_map.md, seed 20): 19 of 20 end at a higher MI than
-/// the marking-aligned pose; those end within 0.27 deg of the highest-MI end (the MI's
-/// maximum, ~0.5 deg in roll from the marking-aligned pose); rotation error <= 0.72 deg,
-/// translation over the axes not held <= 10.7 cm; held axes unchanged. Bounds about 3x.
+/// The 20 draws of seed 20 around the pose the evidence supports (docs/prior_map.md,
+/// "Which pose does the evidence support?").
 #[test]
-#[ignore = "marking-aligned draws (3-6 min): cargo test --release -p msreg --test mi_targetless_real targetless_refinement_around -- --ignored --nocapture"]
-fn targetless_refinement_around_the_marking_aligned_pose() {
-    let Some(draws) = run_around(20, 20, Centre::MarkingAligned) else {
+#[ignore = "evidence-pose draws (3-8 min): cargo test --release -p msreg --test mi_targetless_real around_the_evidence -- --ignored --nocapture"]
+fn targetless_refinement_around_the_evidence_pose() {
+    let Some(draws) = run_around(20, 20, Centre::Evidence) else {
         eprintln!("SKIP: ../shared/data/real/calibanything-1 absent");
         return;
     };
     summary(&draws);
     observable_summary(&draws);
+    // Measured (docs/prior_map.md): 18 of 20 within 0.3 deg (worst 0.448 deg, median
+    // 0.14); 19 of 20 end above the evidence pose's MI; over the translation axes not
+    // held, worst 5.1 cm; `z` held on 15 of 20. Bounds about 3x (counts: 3x the misses).
+    let rot_ok = draws.iter().filter(|d| d.rot_err_deg <= 0.3).count();
+    assert!(rot_ok >= 14, "{rot_ok} of 20 within 0.3 deg");
     let above = draws.iter().filter(|d| d.mi_end > d.mi_ref).count();
-    assert!(above >= 18, "{above} of 20 end above the centre's MI");
-    for (d, (spread, _)) in draws.iter().zip(spread_about_best(&draws)) {
-        if d.mi_end > d.mi_ref {
-            assert!(spread < 0.8, "{spread} deg from the highest-MI end");
-        }
-        assert!(d.rot_err_deg < 2.2, "rotation error {} deg", d.rot_err_deg);
-        assert!(observable_trans_err(d) < 0.32);
+    assert!(
+        above >= 17,
+        "{above} of 20 end above the evidence pose's MI"
+    );
+    let mut rot: Vec<f64> = draws.iter().map(|d| d.rot_err_deg).collect();
+    rot.sort_by(f64::total_cmp);
+    assert!(rot[10] < 0.42, "median rotation error {} deg", rot[10]);
+    let held_z = draws.iter().filter(|d| d.held[5]).count();
+    assert!(held_z >= 10, "z held on {held_z} of 20");
+    for d in &draws {
+        assert!(d.rot_err_deg < 1.35, "rotation error {} deg", d.rot_err_deg);
+        assert!(observable_trans_err(d) < 0.153);
         assert!(held_axes_unchanged(d));
     }
 }
 
-/// The draws the basin search's constants (blur levels, spacing, candidates kept) were
-/// chosen on: seed 7, not the tests' 15 / 20. Prints the same summaries.
+/// The draws the search's constants (blur levels, spacing, candidates kept, the
+/// off-ground group, the probe's significance test) were chosen on: seed 7, not the tests'
+/// 15 / 20. Around the evidence pose by default; `MSREG_CENTRE=reference|markings`
+/// moves the centre. Prints the same summaries.
 #[test]
 #[ignore = "tuning draws (seed 7): cargo test --release -p msreg --test mi_targetless_real tuning -- --ignored --nocapture"]
-fn tuning_draws_around_the_marking_aligned_pose() {
-    let Some(draws) = run_around(20, 7, Centre::MarkingAligned) else {
+fn tuning_draws() {
+    let centre = match std::env::var("MSREG_CENTRE").as_deref() {
+        Ok("reference") => Centre::Reference,
+        Ok("markings") => Centre::MarkingAligned,
+        _ => Centre::Evidence,
+    };
+    let Some(draws) = run_around(20, 7, centre) else {
         eprintln!("SKIP: ../shared/data/real/calibanything-1 absent");
         return;
     };

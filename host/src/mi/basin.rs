@@ -30,8 +30,16 @@ pub struct BasinOptions {
     pub subsample: usize,
     /// DoFs of `delta` searched by the lattice; the others are probed for flatness.
     pub grid_dofs: [bool; 6],
-    /// Samples each side of the probe along a DoF not in the lattice (over its half range).
+    /// Samples each side of the probe along a DoF not in the lattice.
     pub probe_steps: usize,
+    /// The probe's half range over the DoF's half range: above 1, so that a start as far
+    /// off as the basin allows still has its maximum inside the probe, not at its end.
+    pub probe_range: f64,
+    /// Half range (deg) of the rotations re-maximised at each probe sample (a profile of
+    /// the MI, not a slice; 0: a slice). A translation of a few cm moves the ground like
+    /// a few tenths of a degree, so a slice through a pose whose rotation was fitted at
+    /// the wrong translation peaks where the two balance although the profile is flat.
+    pub profile_rot_deg: f64,
 }
 
 impl Default for BasinOptions {
@@ -54,7 +62,11 @@ impl Default for BasinOptions {
             // the rotations absorb it in the lattice; the three translations are probed
             // and refined continuously (held when flat).
             grid_dofs: [true, true, true, false, false, false],
-            probe_steps: 4,
+            // +-15 cm in 2.5 cm steps (the spacing of the earlier +-10 cm, 4-step probe).
+            probe_steps: 6,
+            probe_range: 1.5,
+            // 10 cm of translation ~ 0.2-0.6 deg of rotation on the ground at 10-30 m.
+            profile_rot_deg: 0.5,
         }
     }
 }
@@ -72,9 +84,16 @@ pub struct Probe {
     /// (px; `(n_eff (-2 c))^-1/2` times the pixels per unit, as the refinement's sigmas);
     /// infinite when the parabola opens upwards.
     pub sigma_px: f64,
+    /// The parabola's curvature over its least-squares standard error (from the fit
+    /// residuals): how clearly the samples curve down beyond their roughness; negative
+    /// for a maximum.
+    pub curvature_z: f64,
     /// True when the MI does not determine this DoF within the range: the highest sample
-    /// at an end, the parabola's vertex outside, or `sigma_px` above 3 px (the
-    /// refinement's `poor`). Held by the refinement.
+    /// at an end, the parabola's vertex outside, `sigma_px` above 3 px (the refinement's
+    /// `poor`), or the curvature not 3 standard errors below zero (a bump no larger than
+    /// the slice's roughness; on the real CalibAnything frame the forward translation's
+    /// slice is flat within noise and, without this test, 6 of 20 probes took a bump for
+    /// a peak). Held by the refinement.
     pub flat: bool,
 }
 
@@ -147,15 +166,13 @@ pub fn basin_search(
     let probes: Vec<Probe> = (0..6)
         .filter(|&k| !options.grid_dofs[k])
         .map(|k| {
-            probe(
-                &finest,
-                param,
-                &best,
-                k,
-                half(k),
-                options.probe_steps,
-                cell_px,
-            )
+            let spec = ProbeSpec {
+                dof: k,
+                half: half(k) * options.probe_range,
+                steps: options.probe_steps,
+                profile_rot_rad: options.profile_rot_deg.to_radians(),
+            };
+            probe(&finest, param, &best, &spec, cell_px)
         })
         .collect();
     let mut held = [false; 6];
@@ -171,30 +188,71 @@ pub fn basin_search(
     }
 }
 
-/// The smoothed MI along DoF `dof` through `x` at `2 steps + 1` offsets over
-/// `[-half, half]`, and whether it is flat there ([`Probe::flat`]); `n_eff` counts
-/// occupied `cell_px` cells as the refinement does.
+/// What [`probe`] samples.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ProbeSpec {
+    /// Index in `delta`.
+    pub dof: usize,
+    /// Half range (rad or m).
+    pub half: f64,
+    /// Samples each side.
+    pub steps: usize,
+    /// Half range (rad) of the rotations re-maximised at each sample (a two-level
+    /// 5-per-axis lattice; `profile_rot_rad / 4` resolution); 0 for a slice.
+    pub profile_rot_rad: f64,
+}
+
+/// The smoothed MI at `x (+) delta` with `delta[dof] = offset`, the rotations
+/// re-maximised over `profile_rot_rad` when positive.
+fn profile_value(
+    scene: &MiScene,
+    param: PoseParam,
+    x: &Isometry3<f64>,
+    spec: &ProbeSpec,
+    offset: f64,
+) -> f64 {
+    let mut d = Vector6::zeros();
+    d[spec.dof] = offset;
+    let xo = param.retract(x, &d);
+    if spec.profile_rot_rad <= 0.0 {
+        return scene.smoothed(&param.t_cam_src(&xo)).mi;
+    }
+    let axis = GridAxis {
+        half_range: spec.profile_rot_rad,
+        steps: 2,
+    };
+    let grid = grid_search_multi(&[axis, axis, axis], 2, 1, |_, p| {
+        let w = Vector6::new(p[0], p[1], p[2], 0.0, 0.0, 0.0);
+        scene
+            .histogram_serial(&param.t_cam_src(&param.retract(&xo, &w)))
+            .score()
+            .mi
+    });
+    grid.best.first().map_or(f64::NAN, |c| c.score)
+}
+
+/// The smoothed MI along DoF `spec.dof` through `x` at `2 steps + 1` offsets over
+/// `[-half, half]` (a profile when `spec.profile_rot_rad` > 0), and whether it is flat
+/// there ([`Probe::flat`]); `n_eff` counts occupied `cell_px` cells as the refinement
+/// does.
 pub fn probe(
     scene: &MiScene,
     param: PoseParam,
     x: &Isometry3<f64>,
-    dof: usize,
-    half: f64,
-    steps: usize,
+    spec: &ProbeSpec,
     cell_px: f64,
 ) -> Probe {
-    let n = steps.max(1) as isize;
+    let (dof, half) = (spec.dof, spec.half);
+    let n = spec.steps.max(1) as isize;
     let offsets: Vec<f64> = (-n..=n).map(|i| half * i as f64 / n as f64).collect();
     let mi: Vec<f64> = offsets
         .iter()
-        .map(|&o| {
-            let mut d = Vector6::zeros();
-            d[dof] = o;
-            scene.smoothed(&param.t_cam_src(&param.retract(x, &d))).mi
-        })
+        .map(|&o| profile_value(scene, param, x, spec, o))
         .collect();
     let top = (0..mi.len()).max_by(|&a, &b| mi[a].total_cmp(&mi[b]));
-    let (c, vertex) = parabola(&offsets, &mi);
+    let fit = parabola(&offsets, &mi);
+    let (c, vertex) = (fit.curvature, fit.vertex);
+    let curvature_z = c / fit.curvature_se;
     let n_eff = scene.occupied_cells(&param.t_cam_src(x), cell_px).max(1) as f64;
     let sigma_px = if c < 0.0 {
         (n_eff * -2.0 * c).recip().sqrt() * scene.pixels_per_unit(param, x)[dof]
@@ -205,19 +263,33 @@ pub fn probe(
         || vertex.is_nan()
         || vertex.abs() > half
         || sigma_px.is_nan()
-        || sigma_px > 3.0;
+        || sigma_px > 3.0
+        || curvature_z.is_nan()
+        || curvature_z > -3.0;
     Probe {
         dof,
         offsets,
         mi,
         sigma_px,
+        curvature_z,
         flat,
     }
 }
 
-/// Least-squares `a + b o + c o^2` through `(offsets, values)`: `(c, vertex -b / 2c)`
-/// (vertex NaN when degenerate).
-pub fn parabola(offsets: &[f64], values: &[f64]) -> (f64, f64) {
+/// A least-squares parabola `a + b o + c o^2`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Parabola {
+    /// `c`.
+    pub curvature: f64,
+    /// `-b / 2c` (NaN when degenerate).
+    pub vertex: f64,
+    /// Standard error of `c` from the residuals (`s^2 (A^T A)^-1`, `s^2` = RSS / (n - 3));
+    /// 0 for an exact fit, NaN with fewer than 4 samples or a degenerate fit.
+    pub curvature_se: f64,
+}
+
+/// Least-squares parabola through `(offsets, values)`.
+pub fn parabola(offsets: &[f64], values: &[f64]) -> Parabola {
     let mut ata = nalgebra::Matrix3::zeros();
     let mut atb = nalgebra::Vector3::zeros();
     for (&o, &v) in offsets.iter().zip(values) {
@@ -225,9 +297,33 @@ pub fn parabola(offsets: &[f64], values: &[f64]) -> (f64, f64) {
         ata += row * row.transpose();
         atb += row * v;
     }
-    match ata.cholesky().map(|ch| ch.solve(&atb)) {
-        Some(p) if p[2] != 0.0 => (p[2], -p[1] / (2.0 * p[2])),
-        Some(p) => (p[2], f64::NAN),
-        None => (0.0, f64::NAN),
+    let degenerate = Parabola {
+        curvature: 0.0,
+        vertex: f64::NAN,
+        curvature_se: f64::NAN,
+    };
+    let Some(inv) = ata.try_inverse().filter(|_| ata.cholesky().is_some()) else {
+        return degenerate;
+    };
+    let p = inv * atb;
+    let rss: f64 = offsets
+        .iter()
+        .zip(values)
+        .map(|(&o, &v)| (v - p[0] - p[1] * o - p[2] * o * o).powi(2))
+        .sum();
+    let n = offsets.len().min(values.len());
+    let curvature_se = if n > 3 {
+        (rss / (n - 3) as f64 * inv[(2, 2)]).max(0.0).sqrt()
+    } else {
+        f64::NAN
+    };
+    Parabola {
+        curvature: p[2],
+        vertex: if p[2] != 0.0 {
+            -p[1] / (2.0 * p[2])
+        } else {
+            f64::NAN
+        },
+        curvature_se,
     }
 }

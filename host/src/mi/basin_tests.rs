@@ -4,7 +4,7 @@
 
 use nalgebra::Vector6;
 
-use super::basin::{basin_search, parabola, probe, BasinOptions};
+use super::basin::{basin_search, parabola, probe, BasinOptions, ProbeSpec};
 use super::scene::{MiScene, PoseParam};
 use super::search::{
     grid_search_multi, refine, GridAxis, Observability, RefineOptions, UNCONSTRAINED_VARIANCE,
@@ -44,10 +44,30 @@ fn multi_candidate_lattice_keeps_a_narrow_global_maximum_a_single_path_would_los
 fn parabola_recovers_an_exact_quadratic() {
     let o: Vec<f64> = (-4..=4).map(|i| i as f64 * 0.025).collect();
     let v: Vec<f64> = o.iter().map(|x| 0.3 - 2.0 * (x - 0.03).powi(2)).collect();
-    let (c, vertex) = parabola(&o, &v);
-    assert!((c + 2.0).abs() < 1e-9 && (vertex - 0.03).abs() < 1e-9);
-    let (c, vertex) = parabola(&o, &vec![1.0; o.len()]);
-    assert!(c.abs() < 1e-12 && vertex.is_nan());
+    let p = parabola(&o, &v);
+    assert!((p.curvature + 2.0).abs() < 1e-9 && (p.vertex - 0.03).abs() < 1e-9);
+    assert!(p.curvature_se < 1e-9, "{p:?}");
+    let p = parabola(&o, &vec![1.0; o.len()]);
+    assert!(p.curvature.abs() < 1e-12 && p.vertex.is_nan());
+}
+
+/// The curvature's standard error grows with the roughness about the parabola: a slight
+/// bump under a rough slice is not significant (|c| < 3 se), the same bump on a smooth
+/// one is.
+#[test]
+fn parabola_curvature_significance_follows_the_roughness() {
+    let o: Vec<f64> = (-4..=4).map(|i| i as f64 * 0.025).collect();
+    let bump = |x: f64| -0.05 * x * x;
+    let rough: Vec<f64> = o
+        .iter()
+        .enumerate()
+        .map(|(i, &x)| bump(x) + if i % 2 == 0 { 4e-4 } else { -4e-4 })
+        .collect();
+    let p = parabola(&o, &rough);
+    assert!(p.curvature > -3.0 * p.curvature_se, "{p:?}");
+    let smooth: Vec<f64> = o.iter().map(|&x| bump(x) + 1e-7 * x.sin()).collect();
+    let p = parabola(&o, &smooth);
+    assert!(p.curvature < -3.0 * p.curvature_se, "{p:?}");
 }
 
 #[test]
@@ -57,12 +77,24 @@ fn probe_is_flat_on_a_blank_image_and_not_at_the_simulated_optimum() {
     let scene = MiScene::new(g.points.clone(), &g.intensities, &g.image, g.camera, 2.0);
     for dof in 0..6 {
         let half = if dof < 3 { 0.02 } else { 0.10 };
-        let p = probe(&scene, param, &g.t_world_cam, dof, half, 4, 3.0);
+        let spec = ProbeSpec {
+            dof,
+            half,
+            steps: 4,
+            profile_rot_rad: 0.0,
+        };
+        let p = probe(&scene, param, &g.t_world_cam, &spec, 3.0);
         assert!(!p.flat && p.sigma_px < 0.5, "dof {dof}: {p:?}");
     }
     let blank = GrayImage::new(g.image.width(), g.image.height(), 0.5);
     let scene = MiScene::new(g.points, &g.intensities, &blank, g.camera, 2.0);
-    let p = probe(&scene, param, &g.t_world_cam, 5, 0.10, 4, 3.0);
+    let spec = ProbeSpec {
+        dof: 5,
+        half: 0.10,
+        steps: 4,
+        profile_rot_rad: 0.0,
+    };
+    let p = probe(&scene, param, &g.t_world_cam, &spec, 3.0);
     assert!(p.flat, "{p:?}");
 }
 

@@ -201,3 +201,70 @@ impl BSplineHistogram {
         s * self.scale()
     }
 }
+
+/// One [`BSplineHistogram`] per point group (e.g. ground and off-ground LiDAR returns,
+/// whose reflectivity relates to the image differently). The score is the
+/// sample-weighted mean `sum_k n_k MI_k / sum_k n_k` (the conditional MI `I(A; B | G)`):
+/// `N` times it is the log-likelihood ratio of per-group joint models against
+/// independence, the sum of the groups' own, so no weight is chosen.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GroupedHistogram {
+    /// The histogram of each group.
+    pub groups: Vec<BSplineHistogram>,
+}
+
+impl GroupedHistogram {
+    /// `groups` empty histograms (at least one).
+    pub fn new(groups: usize, bins: usize) -> Self {
+        Self {
+            groups: vec![BSplineHistogram::new(bins); groups.max(1)],
+        }
+    }
+
+    /// Adds one sample of group `g` (clamped to the last group).
+    #[inline]
+    pub fn add(&mut self, g: u8, a: f32, b: f32) {
+        let k = usize::from(g).min(self.groups.len() - 1);
+        self.groups[k].add(a, b);
+    }
+
+    /// Adds another grouped histogram of the same shape (parallel reduction).
+    pub fn merge(mut self, other: &Self) -> Self {
+        for (x, y) in self.groups.iter_mut().zip(&other.groups) {
+            for (a, b) in x.joint.iter_mut().zip(&y.joint) {
+                *a += b;
+            }
+            x.total += y.total;
+        }
+        self
+    }
+
+    /// Samples over all groups.
+    pub fn total(&self) -> f64 {
+        self.groups.iter().map(|h| h.total).sum()
+    }
+
+    /// The sample-weighted MI and NMI (a single group: its own score).
+    pub fn score(&self) -> MiScore {
+        if let [only] = self.groups.as_slice() {
+            return only.score();
+        }
+        weighted_score(self.groups.iter().map(|h| h.score()))
+    }
+}
+
+/// `sum n_k s_k / sum n_k` of MI and NMI, samples summed.
+pub fn weighted_score(scores: impl Iterator<Item = MiScore>) -> MiScore {
+    let (mut mi, mut nmi, mut n) = (0.0, 0.0, 0usize);
+    for s in scores {
+        mi += s.mi * s.samples as f64;
+        nmi += s.nmi * s.samples as f64;
+        n += s.samples;
+    }
+    let d = n.max(1) as f64;
+    MiScore {
+        mi: mi / d,
+        nmi: nmi / d,
+        samples: n,
+    }
+}

@@ -5,7 +5,7 @@ use msreg_estimator::camera::Camera;
 use nalgebra::{Isometry3, Matrix3, Matrix3x6, Translation3, UnitQuaternion, Vector3, Vector6};
 use rayon::prelude::*;
 
-use super::histogram::{hard_mi, BSplineHistogram, MiScore};
+use super::histogram::{score_of, weighted_score, GroupedHistogram, MiScore};
 use crate::vision::GrayImage;
 
 /// Samples per rayon task.
@@ -195,6 +195,11 @@ pub struct MiScene {
     pub bins: usize,
     /// Points closer than this to the camera are ignored (m).
     pub min_depth: f64,
+    /// Group of each point (empty: one group); each group has its own joint histogram
+    /// ([`GroupedHistogram`]).
+    pub groups: Vec<u8>,
+    /// Number of groups (>= 1).
+    pub group_count: usize,
 }
 
 /// One evaluation with its gradient w.r.t. `delta`.
@@ -222,7 +227,48 @@ impl MiScene {
             camera,
             bins: 24,
             min_depth: 0.5,
+            groups: Vec::new(),
+            group_count: 1,
         }
+    }
+
+    /// A scene whose points fall in groups (`groups[i]` for point `i`), each with its own
+    /// joint histogram; intensities are rank-normalised within each group.
+    pub fn grouped(
+        points: Vec<Vector3<f64>>,
+        intensities: &[f32],
+        groups: Vec<u8>,
+        image: &GrayImage,
+        camera: Camera<f64>,
+        blur_px: f64,
+    ) -> Self {
+        let group_count = groups
+            .iter()
+            .map(|&g| usize::from(g) + 1)
+            .max()
+            .unwrap_or(1);
+        let mut values = vec![0.0f32; intensities.len()];
+        for g in 0..group_count {
+            let idx: Vec<usize> = (0..intensities.len())
+                .filter(|&i| usize::from(groups.get(i).copied().unwrap_or(0)) == g)
+                .collect();
+            let own: Vec<f32> = idx.iter().map(|&i| intensities[i]).collect();
+            for (&i, v) in idx.iter().zip(rank_normalize(&own)) {
+                values[i] = v;
+            }
+        }
+        Self {
+            values,
+            groups,
+            group_count,
+            ..Self::new(points, &[], image, camera, blur_px)
+        }
+    }
+
+    /// Group of point `i`.
+    #[inline]
+    fn group(&self, i: usize) -> u8 {
+        self.groups.get(i).copied().unwrap_or(0)
     }
 
     /// The same points on the image blurred by `blur_px` (coarse-to-fine).
@@ -239,6 +285,7 @@ impl MiScene {
         Self {
             points: self.points.iter().step_by(step).copied().collect(),
             values: self.values.iter().step_by(step).copied().collect(),
+            groups: self.groups.iter().step_by(step).copied().collect(),
             ..self.clone()
         }
     }
@@ -257,29 +304,29 @@ impl MiScene {
         self.camera.project(&pc).map(|p| (p, pc))
     }
 
-    /// `(point value, image value)` of every visible point.
-    pub fn pairs(&self, t_cam_src: &Isometry3<f64>) -> Vec<(f32, f32)> {
+    /// `(group, point value, image value)` of every visible point.
+    pub fn pairs(&self, t_cam_src: &Isometry3<f64>) -> Vec<(u8, f32, f32)> {
         (0..self.points.len())
             .into_par_iter()
             .with_min_len(CHUNK)
             .filter_map(|i| {
                 let (p, _) = self.project(t_cam_src, i)?;
                 let (b, _, _) = self.image.sample(p.pixel.x, p.pixel.y)?;
-                Some((self.values[i], b))
+                Some((self.group(i), self.values[i], b))
             })
             .collect()
     }
 
-    /// Smoothed (B-spline) histogram under `t_cam_src`.
-    pub fn histogram(&self, t_cam_src: &Isometry3<f64>) -> BSplineHistogram {
-        let empty = || BSplineHistogram::new(self.bins);
+    /// Smoothed (B-spline) histograms, one per group, under `t_cam_src`.
+    pub fn histogram(&self, t_cam_src: &Isometry3<f64>) -> GroupedHistogram {
+        let empty = || GroupedHistogram::new(self.group_count, self.bins);
         (0..self.points.len())
             .into_par_iter()
             .with_min_len(CHUNK)
             .fold(empty, |mut h, i| {
                 if let Some((p, _)) = self.project(t_cam_src, i) {
                     if let Some((b, _, _)) = self.image.sample(p.pixel.x, p.pixel.y) {
-                        h.add(self.values[i], b);
+                        h.add(self.group(i), self.values[i], b);
                     }
                 }
                 h
@@ -287,34 +334,36 @@ impl MiScene {
             .reduce(empty, |a, b| a.merge(&b))
     }
 
-    /// Smoothed histogram on one thread (the grid parallelises over candidates).
-    pub fn histogram_serial(&self, t_cam_src: &Isometry3<f64>) -> BSplineHistogram {
-        let mut h = BSplineHistogram::new(self.bins);
+    /// Smoothed histograms on one thread (the grid parallelises over candidates).
+    pub fn histogram_serial(&self, t_cam_src: &Isometry3<f64>) -> GroupedHistogram {
+        let mut h = GroupedHistogram::new(self.group_count, self.bins);
         for i in 0..self.points.len() {
             if let Some((p, _)) = self.project(t_cam_src, i) {
                 if let Some((b, _, _)) = self.image.sample(p.pixel.x, p.pixel.y) {
-                    h.add(self.values[i], b);
+                    h.add(self.group(i), self.values[i], b);
                 }
             }
         }
         h
     }
 
-    /// Hard-binned MI on one thread, without building the pair list (the grid's score).
+    /// Hard-binned MI on one thread, without building the pair list (the grid's score;
+    /// groups weighted by their samples).
     pub fn hard_serial(&self, t_cam_src: &Isometry3<f64>) -> f64 {
         let bins = self.bins;
-        let mut joint = vec![0.0f64; bins * bins];
+        let mut joints = vec![vec![0.0f64; bins * bins]; self.group_count];
+        let mut counts = vec![0usize; self.group_count];
         let bin = |x: f32| ((x.clamp(0.0, 1.0) * bins as f32) as usize).min(bins - 1);
-        let mut n = 0;
         for i in 0..self.points.len() {
             if let Some((p, _)) = self.project(t_cam_src, i) {
                 if let Some((b, _, _)) = self.image.sample(p.pixel.x, p.pixel.y) {
-                    joint[bin(self.values[i]) * bins + bin(b)] += 1.0;
-                    n += 1;
+                    let g = usize::from(self.group(i)).min(self.group_count - 1);
+                    joints[g][bin(self.values[i]) * bins + bin(b)] += 1.0;
+                    counts[g] += 1;
                 }
             }
         }
-        super::histogram::score_of(&joint, bins, n).mi
+        grouped_score(&joints, &counts, bins).mi
     }
 
     /// Smoothed MI / NMI under `t_cam_src`.
@@ -322,9 +371,18 @@ impl MiScene {
         self.histogram(t_cam_src).score()
     }
 
-    /// Hard-binned MI / NMI under `t_cam_src`.
+    /// Hard-binned MI / NMI under `t_cam_src` (groups weighted by their samples).
     pub fn hard(&self, t_cam_src: &Isometry3<f64>) -> MiScore {
-        hard_mi(&self.pairs(t_cam_src), self.bins)
+        let bins = self.bins;
+        let mut joints = vec![vec![0.0f64; bins * bins]; self.group_count];
+        let mut counts = vec![0usize; self.group_count];
+        let bin = |x: f32| ((x.clamp(0.0, 1.0) * bins as f32) as usize).min(bins - 1);
+        for (g, a, b) in self.pairs(t_cam_src) {
+            let g = usize::from(g).min(self.group_count - 1);
+            joints[g][bin(a) * bins + bin(b)] += 1.0;
+            counts[g] += 1;
+        }
+        grouped_score(&joints, &counts, bins)
     }
 
     /// Smoothed MI at state `x` and its analytic gradient w.r.t. `delta` (the visible set
@@ -333,7 +391,7 @@ impl MiScene {
     pub fn evaluate(&self, param: PoseParam, x: &Isometry3<f64>) -> Evaluated {
         let t = param.t_cam_src(x);
         let r = x.rotation.to_rotation_matrix().into_inner();
-        let samples: Vec<(f32, f32, Vector6<f64>)> = (0..self.points.len())
+        let samples: Vec<(u8, f32, f32, Vector6<f64>)> = (0..self.points.len())
             .into_par_iter()
             .with_min_len(CHUNK)
             .filter_map(|i| {
@@ -341,28 +399,35 @@ impl MiScene {
                 let (b, du, dv) = self.image.sample(p.pixel.x, p.pixel.y)?;
                 let j = p.jacobian * param.point_jacobian_with(&r, &self.points[i], &pc);
                 Some((
+                    self.group(i),
                     self.values[i],
                     b,
                     (j.row(0) * du + j.row(1) * dv).transpose(),
                 ))
             })
             .collect();
-        let empty = || BSplineHistogram::new(self.bins);
+        let empty = || GroupedHistogram::new(self.group_count, self.bins);
         let hist = samples
             .par_iter()
             .with_min_len(CHUNK)
-            .fold(empty, |mut h, &(a, b, _)| {
-                h.add(a, b);
+            .fold(empty, |mut h, &(g, a, b, _)| {
+                h.add(g, a, b);
                 h
             })
             .reduce(empty, |a, b| a.merge(&b));
-        let weights = hist.gradient_weights();
+        let weights: Vec<Vec<f64>> = hist.groups.iter().map(|h| h.gradient_weights()).collect();
+        // d/ddelta of sum_k n_k MI_k / N = (1/N) sum_i d_i dMI_k(i)/db (each group's
+        // derivative before its own division by n_k).
+        let last = hist.groups.len() - 1;
         let sum = samples
             .par_iter()
             .with_min_len(CHUNK)
-            .map(|(a, b, di)| di * hist.sample_derivative(&weights, *a, *b))
+            .map(|&(g, a, b, di)| {
+                let k = usize::from(g).min(last);
+                di * hist.groups[k].sample_derivative(&weights[k], a, b)
+            })
             .reduce(Vector6::zeros, |a, b| a + b);
-        let n = hist.total.max(1.0);
+        let n = hist.total().max(1.0);
         Evaluated {
             score: hist.score(),
             gradient: sum / n,
@@ -400,4 +465,17 @@ impl MiScene {
         cells.dedup();
         cells.len()
     }
+}
+
+/// The sample-weighted MI / NMI of hard-binned per-group joint histograms.
+fn grouped_score(joints: &[Vec<f64>], counts: &[usize], bins: usize) -> MiScore {
+    if let ([joint], [n]) = (joints, counts) {
+        return score_of(joint, bins, *n);
+    }
+    weighted_score(
+        joints
+            .iter()
+            .zip(counts)
+            .map(|(j, &n)| score_of(j, bins, n)),
+    )
 }

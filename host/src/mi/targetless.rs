@@ -51,6 +51,10 @@ pub struct TargetlessOptions {
     /// Keep only the ground: points within this height (m) of the densest LiDAR-z layer
     /// of the lower half; `None` keeps all points.
     pub ground_band_m: Option<f64>,
+    /// With `ground_band_m`: keep the points off the ground band too, as a second group
+    /// with its own joint histogram (`MiScene::grouped`: the score is the
+    /// sample-weighted mean of the two groups' MI, their summed log-likelihood ratio).
+    pub off_ground_group: bool,
 }
 
 impl Default for TargetlessOptions {
@@ -67,6 +71,7 @@ impl Default for TargetlessOptions {
             min_points: 500,
             highpass_px: 30.0,
             ground_band_m: Some(0.25),
+            off_ground_group: true,
         }
     }
 }
@@ -144,6 +149,38 @@ pub fn ground_band(
         .unzip()
 }
 
+/// Group of each point: 0 within `band` (m) of [`ground_height`], else 1.
+pub fn ground_groups(points: &[Vector3<f64>], band: f64) -> Vec<u8> {
+    let ground = ground_height(points).unwrap_or(f64::NAN);
+    points
+        .iter()
+        .map(|p| u8::from((p.z - ground).abs() >= band || p.z.is_nan()))
+        .collect()
+}
+
+/// The MI scene of `calibrate_targetless` on `image` (already high-passed when
+/// configured): the ground band alone, or ground and off-ground groups, or all points.
+pub fn targetless_scene(
+    points: Vec<Vector3<f64>>,
+    intensities: &[f32],
+    image: &GrayImage,
+    camera: &Camera<f64>,
+    blur_px: f64,
+    options: &TargetlessOptions,
+) -> MiScene {
+    match options.ground_band_m {
+        Some(band) if options.off_ground_group => {
+            let groups = ground_groups(&points, band);
+            MiScene::grouped(points, intensities, groups, image, *camera, blur_px)
+        }
+        Some(band) => {
+            let (p, i) = ground_band(&points, intensities, band);
+            MiScene::new(p, &i, image, *camera, blur_px)
+        }
+        None => MiScene::new(points, intensities, image, *camera, blur_px),
+    }
+}
+
 /// Runs grid + refinement from `initial` (`T_cam_lidar`).
 pub fn calibrate_targetless(
     cloud: &PointCloud,
@@ -153,10 +190,6 @@ pub fn calibrate_targetless(
     options: &TargetlessOptions,
 ) -> Result<TargetlessResult, TargetlessError> {
     let (points, intensities) = visible_points(cloud, camera, initial, options.margin_px);
-    let (points, intensities) = match options.ground_band_m {
-        Some(band) => ground_band(&points, &intensities, band),
-        None => (points, intensities),
-    };
     let filtered;
     let image = if options.highpass_px > 0.0 {
         filtered = highpass(image, options.highpass_px);
@@ -164,15 +197,15 @@ pub fn calibrate_targetless(
     } else {
         image
     };
-    if points.len() < options.min_points {
+    let first_blur = options.refine_blur_px.first().copied().unwrap_or(1.0);
+    let scene = targetless_scene(points, &intensities, image, camera, first_blur, options);
+    if scene.points.len() < options.min_points {
         return Err(TargetlessError::TooFewVisible {
-            visible: points.len(),
+            visible: scene.points.len(),
             needed: options.min_points,
         });
     }
-    let points_used = points.len();
-    let first_blur = options.refine_blur_px.first().copied().unwrap_or(1.0);
-    let scene = MiScene::new(points, &intensities, image, *camera, first_blur);
+    let points_used = scene.points.len();
     let param = PoseParam::CamFromSource;
     let basin = options
         .basin

@@ -53,13 +53,25 @@ fn scene(n: usize, blur: f64) -> (MiScene, Isometry3<f64>) {
 
 #[test]
 fn analytic_gradient_matches_central_differences() {
-    let (mut scene, truth) = scene(30_000, 2.0);
+    let (scene, truth) = scene(30_000, 2.0);
+    gradient_matches_central_differences(scene, &truth);
+}
+
+/// The same with the points in two groups (their own histograms, the sample-weighted MI).
+#[test]
+fn grouped_analytic_gradient_matches_central_differences() {
+    let g = synthetic_ground(7, 30_000);
+    let groups: Vec<u8> = g.points.iter().map(|p| u8::from(p.x > 0.0)).collect();
+    assert!(groups.contains(&0) && groups.contains(&1));
+    let scene = MiScene::grouped(g.points, &g.intensities, groups, &g.image, g.camera, 2.0);
+    assert_eq!(scene.group_count, 2);
+    gradient_matches_central_differences(scene, &g.t_world_cam);
+}
+
+fn gradient_matches_central_differences(mut scene: MiScene, truth: &Isometry3<f64>) {
     let param = PoseParam::SourceFromCam;
     // Away from the optimum, so the gradient is not ~0.
-    let x = param.retract(
-        &truth,
-        &Vector6::new(0.004, -0.003, 0.01, 0.05, -0.04, 0.06),
-    );
+    let x = param.retract(truth, &Vector6::new(0.004, -0.003, 0.01, 0.05, -0.04, 0.06));
     // Keep the points well inside the image: the analytic gradient holds the visible set
     // fixed, the finite difference would count points crossing the border.
     let t = param.t_cam_src(&x);
@@ -77,6 +89,10 @@ fn analytic_gradient_matches_central_differences() {
     scene.points.retain(|_| *k.next().unwrap_or(&false));
     let mut k = keep.iter();
     scene.values.retain(|_| *k.next().unwrap_or(&false));
+    if !scene.groups.is_empty() {
+        let mut k = keep.iter();
+        scene.groups.retain(|_| *k.next().unwrap_or(&false));
+    }
     let g = scene.evaluate(param, &x).gradient;
     let ppu = scene.pixels_per_unit(param, &x);
     for k in 0..6 {
