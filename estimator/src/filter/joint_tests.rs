@@ -220,8 +220,7 @@ fn corners_then_a_plane_couple_the_lidar_and_camera_extrinsics() {
         .expect("corners");
     assert!(report.accepted);
     let plane = plane_seen(&ekf, 0.01);
-    let (before, _) = ekf.extrinsic_sigma(LIDAR);
-    let before_t = ekf.extrinsic_sigma(LIDAR).1;
+    let (before, before_t) = ekf.extrinsic_sigma(LIDAR);
     let report = ekf
         .update_board_plane(LIDAR, TARGET_FRAME, &plane)
         .expect("plane");

@@ -229,14 +229,14 @@ impl GroupedHistogram {
     }
 
     /// Adds another grouped histogram of the same shape (parallel reduction).
-    pub fn merge(mut self, other: &Self) -> Self {
-        for (x, y) in self.groups.iter_mut().zip(&other.groups) {
-            for (a, b) in x.joint.iter_mut().zip(&y.joint) {
-                *a += b;
-            }
-            x.total += y.total;
-        }
-        self
+    pub fn merge(self, other: &Self) -> Self {
+        let groups = self
+            .groups
+            .into_iter()
+            .zip(&other.groups)
+            .map(|(x, y)| x.merge(y))
+            .collect();
+        Self { groups }
     }
 
     /// Samples over all groups.
