@@ -64,6 +64,9 @@ pub struct FilterConfig<T: Scalar> {
     /// robust weight; real images carry blur and model errors that vary from frame to
     /// frame). 1 turns it off: the plain gate.
     pub max_noise_scale: T,
+    /// Keeps the rotation about gravity unobservable (`filter/yaw_gauge.rs`): for layouts
+    /// fed relative poses only (no static frames). Off by default.
+    pub constrain_yaw: bool,
 }
 
 impl<T: Scalar> FilterConfig<T> {
@@ -77,6 +80,7 @@ impl<T: Scalar> FilterConfig<T> {
             zero_velocity_sigma: T::lit(0.01),
             max_late_ns: 1_000_000,
             max_noise_scale: T::one(),
+            constrain_yaw: false,
         }
     }
 }
@@ -115,6 +119,8 @@ pub struct Ekf<T: Scalar, const S: usize, const C: usize, const N: usize, const 
     /// Per sensor, a direction of the extrinsic translation held at its prior (see
     /// [`Ekf::hold_translation_axis`]).
     held_translation: [Option<Vector3<T>>; S],
+    /// The IMU part of the yaw direction as propagated (`filter/yaw_gauge.rs`).
+    yaw_chain: yaw_gauge::YawDirection<T>,
 }
 
 impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> Ekf<T, S, C, N, F> {
@@ -126,7 +132,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     /// A filter at the prior `init`; time starts at the first IMU sample.
     pub fn new(config: &FilterConfig<T>, init: &InitialState<T, S>) -> Result<Self, Error> {
         let () = Self::LAYOUT_OK;
-        if !init.is_valid() || !config.imu_noise.is_valid() {
+        if !init.is_valid() || !config.imu_noise.is_valid() || (config.constrain_yaw && F > 0) {
             return Err(Error::InvalidConfig);
         }
         let mut cov = SMatrix::<T, N, N>::zeros();
@@ -169,6 +175,11 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
             pending_transition: SMatrix::identity(),
             health: HealthMonitor::new(config.health),
             held_translation: [None; S],
+            yaw_chain: if config.constrain_yaw {
+                yaw_gauge::yaw_direction(&init.imu)
+            } else {
+                [Vector3::zeros(); 3]
+            },
         })
     }
 
@@ -428,7 +439,13 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         if t_ns == self.time_ns {
             return Ok(());
         }
-        let (step, end) = self.step_to(t_ns)?;
+        let (mut step, end) = self.step_to(t_ns)?;
+        let chain = if self.config.constrain_yaw {
+            let to = yaw_gauge::yaw_direction(&step.state);
+            yaw_gauge::constrain_transition(&mut step.transition, &self.yaw_chain, &to)
+        } else {
+            self.yaw_chain
+        };
         let new_ii = Self::propagated_imu_block(&self.cov, &step.transition, &step.noise);
         let pending = propagate::transition_compose(&step.transition, &self.pending_transition);
         let finite = step.state.is_finite()
@@ -440,6 +457,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         self.cov.fixed_view_mut::<15, 15>(0, 0).copy_from(&new_ii);
         self.pending_transition = pending;
         self.imu = step.state;
+        self.yaw_chain = chain;
         self.imu_now = Some(end);
         self.time_ns = t_ns;
         Ok(())
@@ -476,3 +494,4 @@ mod reprojection;
 #[cfg(test)]
 mod tests;
 mod undo;
+mod yaw_gauge;

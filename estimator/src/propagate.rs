@@ -37,7 +37,7 @@ pub use signal::{ImuInterval, ImuSignal};
 pub const GRAVITY: f64 = 9.81;
 
 /// First indices of the IMU blocks: orientation, position, velocity, gyro bias, accel bias.
-const BLOCKS: (usize, usize, usize, usize, usize) = (
+pub(crate) const BLOCKS: (usize, usize, usize, usize, usize) = (
     imu::ORIENTATION.idx,
     imu::POSITION.idx,
     imu::VELOCITY.idx,

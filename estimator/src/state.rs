@@ -66,4 +66,7 @@ pub struct CloneState<T: Scalar> {
     pub stamp_ns: u64,
     /// The sensor that created it.
     pub sensor: SensorId,
+    /// Orientation and position parts of the unobservable yaw direction when the clone was
+    /// made (the observability constraint's chain, `filter/yaw_gauge.rs`; zero when off).
+    pub yaw_direction: [nalgebra::Vector3<T>; 2],
 }

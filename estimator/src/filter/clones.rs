@@ -93,6 +93,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
             pose: self.imu.pose(),
             stamp_ns,
             sensor: s,
+            yaw_direction: [self.yaw_chain[0], self.yaw_chain[1]],
         });
     }
 

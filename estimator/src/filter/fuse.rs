@@ -2,6 +2,7 @@
 //! every update shares (correction, NIS record, health monitor and its reaction).
 
 use super::undo::{ColumnsUndo, StepUndo};
+use super::yaw_gauge;
 use super::Ekf;
 use crate::chi2;
 use crate::health::{ExtrinsicInnovation, HealthEvent};
@@ -100,17 +101,18 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
             &self.sensors[s.index()].extrinsic,
             &meas.delta,
         );
+        let (mut h_from, mut h_to) = (lin.clone_from, lin.clone_to);
+        if self.config.constrain_yaw {
+            yaw_gauge::constrain_relative_jacobian(
+                &mut h_from,
+                &mut h_to,
+                &from.yaw_direction,
+                &to.yaw_direction,
+            );
+        }
         let mut jacobian = SparseJacobian::<T, 6, 18>::zeros();
-        jacobian.set(
-            0,
-            Layout::<S, C>::clone_orientation(from_slot).idx,
-            &lin.clone_from,
-        );
-        jacobian.set(
-            6,
-            Layout::<S, C>::clone_orientation(to_slot).idx,
-            &lin.clone_to,
-        );
+        jacobian.set(0, Layout::<S, C>::clone_orientation(from_slot).idx, &h_from);
+        jacobian.set(6, Layout::<S, C>::clone_orientation(to_slot).idx, &h_to);
         jacobian.set(12, Layout::<S, C>::extrinsic(s).idx, &lin.extrinsic);
         let measurement = Measurement {
             residual: lin.residual,

@@ -69,6 +69,7 @@ fn joint_with_clone() -> JointEkf<f64> {
         ),
         stamp_ns: STAMP,
         sensor: SOLE_SENSOR,
+        yaw_direction: [Vector3::zeros(); 2],
     });
     ekf
 }

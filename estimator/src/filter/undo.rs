@@ -27,6 +27,7 @@ struct Small<T: Scalar, const S: usize, const C: usize, const F: usize> {
     anchors: [Option<usize>; S],
     frames: [Option<crate::lie::Pose<T>>; F],
     pending_transition: SMatrix<T, 15, 15>,
+    yaw_chain: [nalgebra::Vector3<T>; 3],
 }
 
 impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> Ekf<T, S, C, N, F> {
@@ -40,6 +41,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
             anchors: self.anchors,
             frames: self.frames,
             pending_transition: self.pending_transition,
+            yaw_chain: self.yaw_chain,
         }
     }
 
@@ -52,6 +54,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         self.anchors = small.anchors;
         self.frames = small.frames;
         self.pending_transition = small.pending_transition;
+        self.yaw_chain = small.yaw_chain;
     }
 
     /// Writes saved columns `idx..idx + W` of the (symmetric) covariance and their rows,

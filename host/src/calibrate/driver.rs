@@ -194,7 +194,10 @@ pub(crate) fn start_filter<T: Scalar>(
         Ok(prior) => with_moving_start(initial, prior),
         Err(_) => initial,
     };
-    let config = FilterConfig::new(convert::imu_noise::<T>(imu_noise));
+    let config = FilterConfig {
+        constrain_yaw: options.constrain_yaw,
+        ..FilterConfig::new(convert::imu_noise::<T>(imu_noise))
+    };
     let initial = match planar {
         Some(p) => p.with_lever_arm_prior(initial),
         None => initial,

@@ -18,6 +18,10 @@ pub struct PoseImuOptions {
     pub translation_sigma_m: f64,
     /// Shortest standstill at the start that is used for the gravity/bias initialisation, s.
     pub min_standstill_s: f64,
+    /// Keep the rotation about gravity unobservable (`FilterConfig::constrain_yaw`, the
+    /// observability-constrained EKF). Off: on the planar drives it changes the consistency
+    /// little and can lose a run whose start is off (docs/planar.md).
+    pub constrain_yaw: bool,
 }
 
 impl Default for PoseImuOptions {
@@ -28,6 +32,7 @@ impl Default for PoseImuOptions {
             rotation_sigma_rad: 2f64.to_radians(),
             translation_sigma_m: 0.5,
             min_standstill_s: 0.3,
+            constrain_yaw: false,
         }
     }
 }
