@@ -343,4 +343,21 @@ mod tests {
         assert!(free_rise > 1.0);
         assert!(chain_rise <= 1.0 + 1e-9, "constrained: {chain:?}");
     }
+
+    /// A static frame turns with the yaw and its part of the direction is not tracked:
+    /// such a layout refuses the constraint with a typed error.
+    #[test]
+    fn a_layout_with_static_frames_refuses_the_constraint() {
+        use crate::{CameraImuEkf, Error, FilterConfig, InitialState};
+        let init = InitialState::<f64, 1>::at_rest(Vector3::new(0.0, 0.0, 9.81)).expect("gravity");
+        let config = FilterConfig {
+            constrain_yaw: true,
+            ..FilterConfig::new(ImuNoise::vn300())
+        };
+        assert!(matches!(
+            CameraImuEkf::new(&config, &init),
+            Err(Error::InvalidConfig)
+        ));
+        assert!(crate::PoseImuEkf::new(&config, &init).is_ok());
+    }
 }
