@@ -137,6 +137,15 @@ mod tests {
         out
     }
 
+    /// One 10 ms step of a turning, accelerating IMU.
+    fn turning_step() -> ImuInterval<f64> {
+        ImuInterval::constant(
+            Vector3::new(0.1, -0.05, 0.4),
+            Vector3::new(1.0, 0.5, 9.9),
+            0.01,
+        )
+    }
+
     /// The unconstrained transition already maps the yaw direction at its start onto the one
     /// at its end (the turn about gravity commutes with the IMU kinematics), so the
     /// constraint changes nothing along a propagated chain and acts only where an update
@@ -144,11 +153,7 @@ mod tests {
     #[test]
     fn a_transition_maps_the_yaw_direction_at_its_start_to_its_end() {
         let x = moving_state();
-        let interval = ImuInterval::constant(
-            Vector3::new(0.1, -0.05, 0.4),
-            Vector3::new(1.0, 0.5, 9.9),
-            0.01,
-        );
+        let interval = turning_step();
         let s = step(&x, &interval, &ImuNoise::vn300());
         let (from, to) = (yaw_direction(&x), yaw_direction(&s.state));
         let mapped = s.transition * stacked(&from);
@@ -160,8 +165,9 @@ mod tests {
     }
 
     /// From an estimate an update has moved (chain at the state before the update), the
-    /// constrained transition maps the chain exactly and keeps every block the structured
-    /// products rely on.
+    /// constrained transition maps the chain onto its next value, which has the propagated
+    /// estimate's orientation and velocity parts, and changes only the orientation columns
+    /// of the orientation and velocity rows.
     #[test]
     fn the_constrained_transition_maps_the_chain_and_keeps_its_structure() {
         let before = moving_state();
@@ -169,11 +175,7 @@ mod tests {
         after.rotation = before.rotation * UnitQuaternion::from_euler_angles(0.01, -0.02, 0.03);
         after.velocity += Vector3::new(0.3, -0.2, 0.05);
         after.position += Vector3::new(0.1, 0.2, -0.1);
-        let interval = ImuInterval::constant(
-            Vector3::new(0.1, -0.05, 0.4),
-            Vector3::new(1.0, 0.5, 9.9),
-            0.01,
-        );
+        let interval = turning_step();
         let s = step(&after, &interval, &ImuNoise::vn300());
         let (from, to) = (yaw_direction(&before), yaw_direction(&s.state));
         let mut phi = s.transition;
