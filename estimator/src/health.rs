@@ -164,23 +164,13 @@ impl<T: Scalar> StepDetector<T> {
         self.updates = self.updates.saturating_add(1);
     }
 
-    /// Statistic and step when the detector is ready, the statistic exceeds its
-    /// chi-square threshold at `confidence` and the estimated step is at least `min_step`
-    /// long. Both are taken only over the directions in which a step of `min_step` can be
-    /// resolved: the eigen-directions of the information `A1` where the step's 1-sigma
-    /// (at most `A1^-1/2`) is at most `factor` times `min_step`. Elsewhere (the lever arm along the axis of
-    /// planar driving, a camera's roll about its direction of travel) the estimate `A1^-1 b`
-    /// is noise amplified by a near-singular `A1` and says nothing about a knock; the
-    /// threshold is chi-square with as many dof as directions kept.
-    fn fire(
-        &self,
-        min_updates: u32,
-        confidence: Confidence,
-        (min_step, factor): (T, T),
-    ) -> Option<(T, Vector3<T>, Matrix3<T>)> {
-        if self.updates < min_updates {
-            return None;
-        }
+    /// The GLR test over the directions in which a step of `min_step` can be resolved: the
+    /// eigen-directions of the information `A1` where the step's 1-sigma (at most
+    /// `A1^-1/2`) is at most `factor` times `min_step`. Elsewhere (the lever arm along the
+    /// axis of planar driving, a camera's roll about its direction of travel) the estimate
+    /// `A1^-1 b` is noise amplified by a near-singular `A1` and says nothing about a knock.
+    /// `None` when no direction is resolvable. Thresholds are not applied here.
+    fn test(&self, (min_step, factor): (T, T)) -> Option<StepTest<T>> {
         let eig = self.info.symmetric_eigen();
         let v = eig.eigenvectors;
         let resolvable = min_step * factor;
@@ -207,12 +197,8 @@ impl<T: Scalar> StepDetector<T> {
             a1[(i, i)] = T::one();
             a2[(i, i)] = T::one();
         }
-        let threshold = chi2::quantile::<T>(kept, confidence);
         let reg = |m: &Matrix3<T>| Matrix3::identity() * (m.trace() * T::lit(1e-9));
         let statistic = score.dot(&Cholesky::new(a2 + reg(&a2))?.solve(&score));
-        if statistic <= threshold {
-            return None;
-        }
         let a1_inv = Cholesky::new(a1 + reg(&a1))?.inverse();
         let mut cov = a1_inv * a2 * a1_inv;
         for i in (0..3).filter(|i| !keep[*i]) {
@@ -221,14 +207,49 @@ impl<T: Scalar> StepDetector<T> {
                 cov[(j, i)] = T::zero();
             }
         }
-        let step = v * (a1_inv * score);
         let cov = v * cov * v.transpose();
-        (step.norm() >= min_step).then_some((
+        Some(StepTest {
             statistic,
-            step,
-            (cov + cov.transpose()) * T::lit(0.5),
-        ))
+            dof: kept,
+            step: v * (a1_inv * score),
+            step_covariance: (cov + cov.transpose()) * T::lit(0.5),
+            updates: self.updates,
+        })
     }
+
+    /// Statistic, step and its covariance when the detector is ready (`min_updates`), the
+    /// statistic of [`Self::test`] exceeds its chi-square threshold at `confidence` (with
+    /// as many dof as directions kept) and the estimated step is at least `min_step` long.
+    fn fire(
+        &self,
+        min_updates: u32,
+        confidence: Confidence,
+        (min_step, factor): (T, T),
+    ) -> Option<(T, Vector3<T>, Matrix3<T>)> {
+        if self.updates < min_updates {
+            return None;
+        }
+        let t = self.test((min_step, factor))?;
+        let fires =
+            t.statistic > chi2::quantile::<T>(t.dof, confidence) && t.step.norm() >= min_step;
+        fires.then_some((t.statistic, t.step, t.step_covariance))
+    }
+}
+
+/// The state of one step detector's GLR test, thresholds not applied (for timelines and
+/// false-alarm studies: `SensorHealth::step_tests`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepTest<T: Scalar> {
+    /// GLR statistic (chi-square with `dof` degrees of freedom under "no change").
+    pub statistic: T,
+    /// Directions tested (resolvable, see `HealthConfig::resolvable_step_factor`).
+    pub dof: usize,
+    /// Estimated step (rad or m).
+    pub step: Vector3<T>,
+    /// Its covariance.
+    pub step_covariance: Matrix3<T>,
+    /// Updates the detector has accumulated since it was last reset.
+    pub updates: u32,
 }
 
 /// Health of one sensor's calibration.
@@ -270,6 +291,16 @@ impl<T: Scalar> Default for SensorHealth<T> {
 }
 
 impl<T: Scalar> SensorHealth<T> {
+    /// The rotation and translation detectors' GLR tests as they stand (after the latest
+    /// update), thresholds not applied; `None` for a detector with no resolvable direction.
+    pub fn step_tests(&self, config: &HealthConfig<T>) -> [Option<StepTest<T>>; 2] {
+        let f = config.resolvable_step_factor;
+        [
+            self.rotation.test((config.min_rotation_step, f)),
+            self.translation.test((config.min_translation_step, f)),
+        ]
+    }
+
     /// Mean NIS per degree of freedom over the window (1 for a consistent filter).
     pub fn windowed_nis_per_dof(&self) -> T {
         if self.nis_dof == 0 {
@@ -550,6 +581,33 @@ mod tests {
                 "alarm at {k}"
             );
         }
+    }
+
+    #[test]
+    fn step_tests_report_the_glr_statistic_before_any_threshold() {
+        let config = HealthConfig::default();
+        let mut m = HealthMonitor::<f64, 1>::new(config);
+        // 0.5 sigma per update on one axis, 10 updates: below the threshold.
+        let r = 0.5 / INFO.sqrt();
+        for k in 0..10u64 {
+            let inn = innovation(Vector3::new(r, 0.0, 0.0));
+            assert!(m.record(SENSOR, k, 3.0, 6, true, Some(&inn)).is_none());
+        }
+        let [rotation, translation] = m.sensor(SENSOR).unwrap().step_tests(&config);
+        let t = rotation.expect("rotation test");
+        // b = INFO r sum l^k, A2 = INFO sum l^2k (per axis): b^2 / A2.
+        let l = config.step_forgetting;
+        let (s1, s2): (f64, f64) =
+            (0..10).fold((0.0, 0.0), |(a, b), k| (a + l.powi(k), b + l.powi(2 * k)));
+        let expected = INFO * r * r * s1 * s1 / s2;
+        assert!(
+            (t.statistic - expected).abs() < 1e-6 * expected,
+            "{t:?} vs {expected}"
+        );
+        assert_eq!((t.dof, t.updates), (3, 10));
+        assert!((t.step.x - r).abs() < 1e-9 && t.step.yz().norm() < 1e-12);
+        // The translation score is zero: statistic 0.
+        assert!(translation.expect("translation test").statistic.abs() < 1e-12);
     }
 
     #[test]

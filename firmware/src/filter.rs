@@ -349,6 +349,7 @@ fn filter_config(c: &Config) -> Result<FilterConfig<f32>, FilterError> {
             }
             fc.health.step_forgetting = m.step_forgetting;
             fc.health.resolvable_step_factor = m.resolvable_step_factor;
+            fc.health.step_confidence = confidence(m.step_confidence);
         }
     }
     Ok(fc)

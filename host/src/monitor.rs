@@ -144,6 +144,24 @@ pub struct NisPoint {
     pub accepted: bool,
     /// The windowed NIS / dof of the health monitor.
     pub window_nis_per_dof: f64,
+    /// The rotation step detector's GLR test after this update (`None` while disarmed or
+    /// with no resolvable direction).
+    pub rotation_glr: Option<GlrPoint>,
+    /// The translation step detector's GLR test after this update.
+    pub translation_glr: Option<GlrPoint>,
+}
+
+/// A step detector's GLR test at one update (docs/monitor.md, "False alarms").
+#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+pub struct GlrPoint {
+    /// The statistic (chi-square with `dof` degrees of freedom under "no change").
+    pub statistic: f64,
+    /// Directions tested.
+    pub dof: usize,
+    /// The threshold it must exceed (`HealthConfig::step_confidence`).
+    pub threshold: f64,
+    /// Length of the estimated step: deg (rotation) or mm (translation).
+    pub step: f64,
 }
 
 /// Per-DoF excitation (`1 - sigma / prior`) of the observability run at one update: rotation

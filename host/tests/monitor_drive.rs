@@ -3,14 +3,15 @@
 //!
 //! Acceptance runs (ignored by default; docs/monitor.md records their output):
 //! `cargo test --release -p msreg --test monitor_drive -- --ignored --nocapture --test-threads 1`
-//! Seeds 100-109 (knocks and unknocked runs) and 120-121 (default-run tests) were not used to
-//! choose any constant (those were chosen on seeds 1-8).
+//! Seeds 100-109 (knocks and unknocked runs), 120-121 (default-run tests) and 300-339 (false
+//! alarms) were not used to choose any constant (those were chosen on seeds 1-8, the step
+//! confidence on seeds 200-299: docs/monitor.md, "False alarms").
 
 #[path = "support/common.rs"]
 mod common;
 
 use common::par_map;
-use msreg_host::monitor::{monitor, MonitorInput, MonitorOptions, MonitorReport};
+use msreg_host::monitor::{monitor, MonitorError, MonitorInput, MonitorOptions, MonitorReport};
 use msreg_host::sim::{simulate_drive, DriveSim, DriveSimConfig, KnockTarget};
 
 const KNOCK_AT_S: f64 = 30.0;
@@ -18,6 +19,12 @@ const KNOCK_AT_S: f64 = 30.0;
 const MAX_LATENCY_S: f64 = 5.0;
 
 fn run(seed: u64, target: KnockTarget) -> (DriveSim, MonitorReport) {
+    let (sim, report) = try_run(seed, target);
+    (sim, report.expect("monitor"))
+}
+
+/// The drive and the monitor's report, or why the monitor could not start.
+fn try_run(seed: u64, target: KnockTarget) -> (DriveSim, Result<MonitorReport, MonitorError>) {
     let sim = simulate_drive(&DriveSimConfig {
         seed,
         knock_target: target,
@@ -34,7 +41,7 @@ fn run(seed: u64, target: KnockTarget) -> (DriveSim, MonitorReport) {
         pose_noise: [&noise[0], &noise[1]],
         prior: [sim.sensors[0].prior, sim.sensors[1].prior],
     };
-    let report = monitor(&input, &MonitorOptions::default()).expect("monitor");
+    let report = monitor(&input, &MonitorOptions::default());
     (sim, report)
 }
 
@@ -197,4 +204,64 @@ fn no_alarm_in_ten_unknocked_drives() {
             r.alarms
         );
     }
+}
+
+/// Largest GLR statistic of any step detector of `sensor` over the drive (between alarms),
+/// with its dof and threshold (docs/monitor.md, "False alarms").
+fn max_glr(r: &MonitorReport, sensor: &str) -> Option<(f64, usize, f64)> {
+    r.sensors
+        .iter()
+        .filter(|s| s.name == sensor)
+        .flat_map(|s| &s.nis)
+        .flat_map(|p| [p.rotation_glr, p.translation_glr])
+        .flatten()
+        .map(|g| (g.statistic, g.dof, g.threshold))
+        .max_by(|a, b| a.0.total_cmp(&b.0))
+}
+
+/// Unknocked 60 s drives on seeds 300-339, which chose nothing (the step confidence was
+/// chosen on seeds 200-299): the false alarms per drive. A drive on which the monitor cannot
+/// start (too little rotation for the dynamic alignment) is counted apart: no monitoring,
+/// no alarm. Expected under repeated testing at the default confidence and the measured
+/// count: docs/monitor.md, "False alarms".
+#[test]
+#[ignore = "acceptance: 40 drives, ~40 s release"]
+fn false_alarms_in_forty_unknocked_drives() {
+    const MAX_FALSE_ALARMS: usize = 1;
+    const MAX_NO_START: usize = 3;
+    let seeds: Vec<u64> = (300..340).collect();
+    let reports = par_map(&seeds, |s| try_run(s, KnockTarget::None).1);
+    let mut no_start = 0;
+    let mut total = 0;
+    for (seed, r) in seeds.iter().zip(&reports) {
+        let r = match r {
+            Ok(r) => r,
+            Err(e) => {
+                println!("seed {seed}: no start: {e}");
+                assert!(e.is_no_start(), "seed {seed}: {e}");
+                no_start += 1;
+                continue;
+            }
+        };
+        println!(
+            "seed {seed}: max GLR (statistic, dof, threshold) pose0 {:?} pose1 {:?}; alarms {:?}",
+            max_glr(r, "pose0"),
+            max_glr(r, "pose1"),
+            r.alarms
+                .iter()
+                .map(|a| (a.t_s, a.sensor, a.statistic))
+                .collect::<Vec<_>>()
+        );
+        total += r.alarms.len();
+    }
+    println!(
+        "false alarms in {} drives: {total}; monitor not started on {no_start}",
+        seeds.len()
+    );
+    assert!(
+        total <= MAX_FALSE_ALARMS,
+        "{total} false alarms in {} unknocked drives",
+        seeds.len()
+    );
+    assert!(no_start <= MAX_NO_START, "no start on {no_start} drives");
 }

@@ -152,6 +152,9 @@ pub struct MonitorSetup {
     pub step_forgetting: f32,
     /// `HealthConfig::resolvable_step_factor` (may be infinite: every direction tested).
     pub resolvable_step_factor: f32,
+    /// Confidence of the step detectors' chi-square threshold per test
+    /// (`HealthConfig::step_confidence`; docs/monitor.md, "False alarms").
+    pub step_confidence: Gate,
 }
 
 /// Projection of a camera onto its normalised plane (Kalibr `camera_model`).

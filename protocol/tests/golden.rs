@@ -419,6 +419,7 @@ fn monitor_config_has_exact_bytes() {
             hold_translation_axis: Some([0.0, 0.0, 1.0]),
             step_forgetting: 0.25,
             resolvable_step_factor: f32::INFINITY,
+            step_confidence: Gate::P99999,
         }),
         imu_noise: ImuNoise {
             gyro_noise_density: 0.0,
@@ -443,13 +444,14 @@ fn monitor_config_has_exact_bytes() {
     });
     let bytes = host_frame(1, &msg);
     // seq 1, variant 1 (Config), sensors variant 2 (Monitor): pose1's prior (pose, 4 f32),
-    // Some (1) + axis, forgetting, factor; noise, gate P99 = 2, gap 0, imu prior variant 1
+    // Some (1) + axis, forgetting, factor, step confidence P99999 = 6; noise, gate P99 = 2, gap 0, imu prior variant 1
     // (State) + 4 + 4 x 3 + 5 f32, sensor 0's prior, zero-velocity until 0, every 0, period 0.
     let mut body = vec![0x01, 0x01, 0x02];
     body.extend(le(&[0.0; 7]));
     body.extend(le(&[0.5, 0.0, 0.0, 0.0]));
     body.push(0x01);
     body.extend(le(&[0.0, 0.0, 1.0, 0.25, f32::INFINITY]));
+    body.push(0x06);
     body.extend(le(&[0.0; 4]));
     body.extend([0x02, 0x00, 0x01]);
     body.extend(le(&[1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0]));

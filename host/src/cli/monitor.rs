@@ -8,6 +8,7 @@ use std::path::PathBuf;
 
 use anyhow::anyhow;
 use clap::Args;
+use msreg_estimator::chi2::Confidence;
 
 use msreg_host::monitor::{monitor, DriveFiles, MonitorOptions, MonitorReport};
 
@@ -29,6 +30,37 @@ pub struct MonitorArgs {
     /// Exit 1 when an alarm was raised.
     #[arg(long)]
     pub fail_on_alarm: bool,
+    /// Confidence of the step detectors' threshold per test (the false-alarm rate per hour
+    /// of driving it gives is in docs/monitor.md, "False alarms"); default as `MonitorOptions`.
+    #[arg(long, value_enum)]
+    pub step_confidence: Option<StepConfidence>,
+    /// Forgetting factor of the step detectors per update; default as `MonitorOptions`.
+    #[arg(long)]
+    pub step_forgetting: Option<f64>,
+}
+
+/// `--step-confidence`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum StepConfidence {
+    /// 99.9 %.
+    #[value(name = "99.9")]
+    P999,
+    /// 99.99 %.
+    #[value(name = "99.99")]
+    P9999,
+    /// 99.999 %.
+    #[value(name = "99.999")]
+    P99999,
+}
+
+impl From<StepConfidence> for Confidence {
+    fn from(c: StepConfidence) -> Self {
+        match c {
+            StepConfidence::P999 => Confidence::P999,
+            StepConfidence::P9999 => Confidence::P9999,
+            StepConfidence::P99999 => Confidence::P99999,
+        }
+    }
 }
 
 /// How the command ended, for the exit code.
@@ -44,7 +76,17 @@ pub enum MonitorOutcome {
 pub fn run(args: &MonitorArgs) -> anyhow::Result<MonitorOutcome> {
     let files = DriveFiles::read(&args.dataset, args.initial.as_deref())?;
     let input = files.input()?;
-    let report = match monitor(&input, &MonitorOptions::default()) {
+    let mut options = MonitorOptions::default();
+    if let Some(c) = args.step_confidence {
+        options.step_confidence = c.into();
+    }
+    if let Some(l) = args.step_forgetting {
+        if !(l > 0.0 && l <= 1.0) {
+            return Err(anyhow!("--step-forgetting {l}: must be in (0, 1]"));
+        }
+        options.step_forgetting = l;
+    }
+    let report = match monitor(&input, &options) {
         Ok(r) => r,
         Err(e) if e.is_no_start() => return Ok(MonitorOutcome::Failed(e.to_string())),
         Err(e) => return Err(anyhow!("{}: {e}", args.dataset.display())),

@@ -72,8 +72,8 @@ fn imu_start(init: &InitialState<f64, 2>) -> ImuStart {
 }
 
 /// The tuning the wire does not carry: the device starts from `FilterConfig::new` and
-/// `HealthConfig::default()` and sets only the gate, the IMU gap, the step forgetting and
-/// the resolvable-step factor. A prior tuned in any other field could not be reproduced.
+/// `HealthConfig::default()` and sets only the gate, the IMU gap, the step forgetting, the
+/// resolvable-step factor and the step confidence. A prior tuned in any other field could not be reproduced.
 fn untransmitted_tuning_is_default(c: &FilterConfig<f64>) -> bool {
     let mut expected = FilterConfig::new(c.imu_noise);
     expected.gate = c.gate;
@@ -81,6 +81,7 @@ fn untransmitted_tuning_is_default(c: &FilterConfig<f64>) -> bool {
     expected.health = HealthConfig {
         step_forgetting: c.health.step_forgetting,
         resolvable_step_factor: c.health.resolvable_step_factor,
+        step_confidence: c.health.step_confidence,
         ..HealthConfig::default()
     };
     expected == *c
@@ -99,6 +100,7 @@ pub fn monitor_config(prior: &FilterPrior, estimate_period_ns: u32) -> Result<Co
             hold_translation_axis: prior.hold_axis.map(|a| f32x3(&a)),
             step_forgetting: c.health.step_forgetting as f32,
             resolvable_step_factor: c.health.resolvable_step_factor as f32,
+            step_confidence: gate(c.health.step_confidence),
         }),
         imu_noise: ImuNoise {
             gyro_noise_density: n.gyro_noise_density as f32,
@@ -230,6 +232,8 @@ mod tests {
         assert!((0..3).all(|k| close(held[k], axis[k])));
         assert!(close(m.step_forgetting, options.step_forgetting));
         assert!(close(m.resolvable_step_factor, 1.0));
+        assert_eq!(m.step_confidence, gate(options.step_confidence));
+        assert_eq!(m.step_confidence, Gate::P99999);
         // Each sensor's odometry: one anchor, then increments, in stamp order.
         let ekf = prior.filter().expect("filter");
         for s in MonitorEkf::<f64>::sensor_ids() {

@@ -2,7 +2,10 @@
 //! order across the two sensors), as the firmware does it.
 
 use msreg_estimator::filter::MonitorEkf;
-use msreg_estimator::health::NisStatus;
+use std::f64::consts::PI;
+
+use msreg_estimator::chi2::{self, Confidence};
+use msreg_estimator::health::{NisStatus, StepTest};
 use msreg_estimator::update::relative_pose::RelativePose;
 use msreg_estimator::update::UpdateReport;
 use msreg_estimator::{Error as FilterError, FilterConfig, HealthEvent, SensorId};
@@ -10,8 +13,8 @@ use nalgebra::Matrix3;
 
 use super::start::{self, ExtrinsicSigmas, FilterPrior, Start};
 use super::{
-    Alarm, ExcitationPoint, MonitorError, MonitorInput, MonitorReport, NisPoint, SensorReport,
-    SENSOR_NAMES,
+    Alarm, ExcitationPoint, GlrPoint, MonitorError, MonitorInput, MonitorReport, NisPoint,
+    SensorReport, SENSOR_NAMES,
 };
 use crate::calibrate::convert;
 use crate::calibrate::driver::nominal_period_ns;
@@ -32,6 +35,9 @@ pub struct MonitorOptions {
     pub observability_prior: ExtrinsicSigmas,
     /// Forgetting factor of the step detectors per update (`HealthConfig::step_forgetting`).
     pub step_forgetting: f64,
+    /// Confidence of the step detectors' chi-square threshold per test
+    /// (`HealthConfig::step_confidence`).
+    pub step_confidence: Confidence,
 }
 
 impl Default for MonitorOptions {
@@ -48,6 +54,10 @@ impl Default for MonitorOptions {
             // The default's 3 s memory (0.97 per update at 10 Hz) at the camera's 20 Hz;
             // chosen on drive seeds 1-8, which no test uses.
             step_forgetting: 0.985,
+            // 99.999 % per test: a false-alarm rate of ~0.2 per hour of driving under
+            // repeated testing (99.99 %: ~2 per hour, measured 2.4); chosen on drive seeds
+            // 200-299 (docs/monitor.md, "False alarms").
+            step_confidence: Confidence::P99999,
         }
     }
 }
@@ -316,12 +326,25 @@ impl MonitorRun {
         let r = &f.report;
         let dof = r.dof.max(1) as f64;
         let health = ekf.health().sensor(f.sensor);
+        let config = &ekf.config().health;
+        let [rotation_glr, translation_glr] = health.map_or([None, None], |h| {
+            let [r, t] = h.step_tests(config);
+            let point = |t: StepTest<f64>, unit: f64| GlrPoint {
+                statistic: t.statistic,
+                dof: t.dof,
+                threshold: chi2::quantile(t.dof, config.step_confidence),
+                step: t.step.norm() * unit,
+            };
+            [r.map(|t| point(t, 180.0 / PI)), t.map(|t| point(t, 1e3))]
+        });
         self.nis[f.sensor.index()].push(NisPoint {
             t_s: f.t_s,
             nis_per_dof: r.nis / dof,
             gate_per_dof: r.threshold / dof,
             accepted: r.accepted,
             window_nis_per_dof: health.map_or(0.0, |h| h.windowed_nis_per_dof()),
+            rotation_glr,
+            translation_glr,
         });
         if let Some(event) = &r.event {
             self.alarms.push(step_alarm(f.t_s, event));
@@ -350,6 +373,7 @@ pub fn monitor_prior(
     let start = start::start(input)?;
     let mut config = FilterConfig::new(convert::imu_noise::<f64>(input.imu_noise));
     config.health.step_forgetting = options.step_forgetting;
+    config.health.step_confidence = options.step_confidence;
     // Claim only steps the drive can resolve (the lever arm along the planar axis and a
     // camera's roll about its direction of travel cannot be, docs/monitor.md).
     config.health.resolvable_step_factor = 1.0;
