@@ -21,6 +21,29 @@ pub struct Standstill {
     pub gyro_mean: Vector3<f64>,
 }
 
+/// Odometry noise sigmas (accumulated over the standstill's increments) the pose sensor may
+/// move while the IMU is said to be at rest.
+const STILL_SIGMAS: f64 = 4.0;
+
+impl Standstill {
+    /// True when the pose sensor agrees with this standstill: an IMU moving at constant
+    /// velocity without turning reads exactly as at rest (a car cruising straight when the
+    /// recording starts: drive seeds 16 and 230), so the odometry must not move over it by
+    /// more than its increment noise `sigma_t` allows. Without poses inside the standstill
+    /// the IMU decides.
+    pub fn odometry_agrees(&self, poses: &[PoseRecord], sigma_t: f64) -> bool {
+        let Some(first) = poses.first() else {
+            return true;
+        };
+        let within = poses.iter().take_while(|p| p.stamp_ns <= self.until_ns);
+        let (count, moved) = within.fold((0usize, 0f64), |(n, m), p| {
+            (n + 1, m.max((p.position - first.position).norm()))
+        });
+        let increments = count.saturating_sub(1).max(1) as f64;
+        moved <= STILL_SIGMAS * sigma_t * increments.sqrt()
+    }
+}
+
 /// Largest deviation of a gyro sample from the first 0.1 s mean still counted as rest, rad/s.
 const REST_GYRO: f64 = 0.03;
 /// Largest deviation of an accelerometer sample from the first 0.1 s mean at rest, m/s^2.

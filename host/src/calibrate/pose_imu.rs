@@ -57,7 +57,7 @@ pub fn calibrate<T: Scalar>(
     }
     let started = Instant::now();
     let standstill = init::detect_standstill(imu, options.min_standstill_s)
-        .filter(|s| odometry_still(s, poses, input.pose_noise.translation_noise_m));
+        .filter(|s| s.odometry_agrees(poses, input.pose_noise.translation_noise_m));
     let period_ns = nominal_period_ns(poses);
     let max_interval_ns = period_ns.saturating_mul(3) / 2;
     let increments = init::pose_increments(poses, max_interval_ns);
@@ -134,26 +134,6 @@ pub fn calibrate<T: Scalar>(
     calibration.report.moving_start = describe_moving_start(&moving_start);
     calibration.report.gyro_bias_init = gyro_bias_init;
     Ok(calibration)
-}
-
-/// Odometry noise sigmas (accumulated over the standstill's increments) the pose sensor may
-/// move while the IMU is said to be at rest.
-const STILL_SIGMAS: f64 = 4.0;
-
-/// True when the pose sensor agrees with the IMU's standstill `s`: an IMU moving at
-/// constant velocity without turning reads exactly as at rest (a car cruising straight
-/// when the recording starts), so the odometry must not move over it by more than its
-/// increment noise `sigma_t` allows. Without poses inside the standstill the IMU decides.
-fn odometry_still(s: &init::Standstill, poses: &[PoseRecord], sigma_t: f64) -> bool {
-    let Some(first) = poses.first() else {
-        return true;
-    };
-    let within = poses.iter().take_while(|p| p.stamp_ns <= s.until_ns);
-    let (count, moved) = within.fold((0usize, 0f64), |(n, m), p| {
-        (n + 1, m.max((p.position - first.position).norm()))
-    });
-    let increments = count.saturating_sub(1).max(1) as f64;
-    moved <= STILL_SIGMAS * sigma_t * increments.sqrt()
 }
 
 /// The pose-IMU pipeline's measurement feed: fuses every pose whose IMU time has come.

@@ -15,8 +15,6 @@ use crate::calibrate::planar::{self, PlanarMotion};
 
 /// Shortest stationary start used for the IMU prior, s.
 const MIN_STANDSTILL_S: f64 = 1.0;
-/// Largest net displacement of `pose0` over a standstill, m (see [`odometry_at_rest`]).
-const REST_DISPLACEMENT_M: f64 = 0.05;
 /// Smallest gyro-bias sigma of a bias fitted to motion, rad/s (as the pose-IMU pipeline).
 const MIN_FITTED_GYRO_BIAS_SIGMA: f64 = 2e-3;
 /// Floors of the moving start's tilt (rad) and velocity (m/s) sigmas (as the pose-IMU
@@ -64,7 +62,7 @@ pub fn start(input: &MonitorInput) -> Result<Start, MonitorError> {
     let r0 = input.prior[0].transform.rotation;
     let increments = increments_on_imu_clock(input, 0);
     let standstill = init::detect_standstill(imu, MIN_STANDSTILL_S)
-        .filter(|s| odometry_at_rest(input, s.until_ns));
+        .filter(|s| s.odometry_agrees(input.poses[0], input.pose_noise[0].translation_noise_m));
     let fit = match &standstill {
         Some(_) => None,
         None => gyro_bias::estimate_gyro_bias(imu, &increments, &r0, &Vector3::zeros()),
@@ -85,25 +83,6 @@ pub fn start(input: &MonitorInput) -> Result<Start, MonitorError> {
         standstill,
         imu: state,
     })
-}
-
-/// Whether `pose0`'s odometry stayed put from the first IMU sample to `until_ns` (IMU
-/// clock): the IMU alone cannot tell rest from driving straight at a constant speed (drive
-/// seed 230 starts at 9 m/s on a straight, and its first 1.0 s looked like a standstill, so
-/// zero-velocity updates at 9 m/s made the filter reject every pose). At rest means a net
-/// displacement below [`REST_DISPLACEMENT_M`] or five times the odometry's noise over it.
-fn odometry_at_rest(input: &MonitorInput, until_ns: u64) -> bool {
-    let td_ns = (input.prior[0].timeshift_s * 1e9).round() as i64;
-    let t0 = input.imu.first().map_or(0, |r| r.stamp_ns);
-    let during: Vec<_> = input.poses[0]
-        .iter()
-        .filter(|p| (t0..=until_ns).contains(&p.stamp_ns.saturating_add_signed(td_ns)))
-        .collect();
-    let (Some(first), Some(last)) = (during.first(), during.last()) else {
-        return true;
-    };
-    let noise = input.pose_noise[0].translation_noise_m * ((during.len() as f64).sqrt() * 5.0);
-    (last.position - first.position).norm() < noise.max(REST_DISPLACEMENT_M)
 }
 
 fn at_rest(s: &Standstill) -> Result<(InitialState<f64, 2>, String), MonitorError> {
