@@ -17,7 +17,7 @@ pub mod orb;
 pub mod slices;
 
 use msreg_estimator::camera::Camera;
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3, Vector6};
 
 use super::scene::{MiScene, PoseParam};
 use super::search::{grid_search_batch, refine, GridAxis, GridResult, RefineOptions, Refined};
@@ -61,16 +61,23 @@ pub struct RegisterOptions {
 
 impl Default for RegisterOptions {
     fn default() -> Self {
+        let grid_half = [0.5, 0.5, 0.3, 2f64.to_radians()];
+        let [x, y, z, yaw] = grid_half;
         Self {
             init: InitOptions::default(),
-            grid_half: [0.5, 0.5, 0.3, 2f64.to_radians()],
+            grid_half,
             grid_steps: 2,
             grid_levels: 3,
             grid_points: 6000,
             grid_blur_px: 4.0,
             refine_blur_px: vec![4.0, 1.0],
             refine_subsample: vec![4, 1],
-            refine: RefineOptions::default(),
+            // The initial guess's sigma: the grid's half ranges around the initial pose (its
+            // yaw range for every rotation); unconstrained DoFs report it.
+            refine: RefineOptions {
+                prior_sigma: Vector6::new(yaw, yaw, yaw, x, y, z),
+                ..RefineOptions::default()
+            },
             max_view_deg: 70.0,
             min_points: 2000,
             slice_half_px: 3.0,
