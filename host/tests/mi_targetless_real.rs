@@ -100,6 +100,7 @@ fn tuning_options() -> TargetlessOptions {
             "blur" => b.blur_px = v.split(',').map(f).collect(),
             "keep" => b.keep = f(v) as usize,
             "sub" => b.subsample = f(v) as usize,
+            "psub" => b.probe_subsample = f(v) as usize,
             "steps" => b.steps = f(v) as usize,
             "tsteps" => b.trans_steps = f(v) as usize,
             "dofs" => b.grid_dofs = std::array::from_fn(|i| v.as_bytes()[i] == b'1'),

@@ -19,7 +19,7 @@ pub mod slices;
 use msreg_estimator::camera::Camera;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3, Vector6};
 
-use super::scene::{MiScene, PoseParam};
+use super::scene::{image_order_key, MiScene, PoseParam};
 use super::search::{grid_search_batch, refine, GridAxis, GridResult, RefineOptions, Refined};
 use crate::vision::GrayImage;
 use grid::GridScorer;
@@ -119,13 +119,9 @@ pub struct Registration {
     pub slices: Vec<MiSlice>,
 }
 
-/// Image band (px) of the memory order of [`points_in_view`].
-const BAND_PX: f64 = 16.0;
-
 /// The map points within `max_view_deg` of the optical axis and inside the image at
-/// `t_world_cam`, with their reflectivity, in image order at that pose (16 px bands of
-/// rows, each left to right): a pose near it then samples the image along its rows, so
-/// the image stays in cache (about twice as fast as the map's order).
+/// `t_world_cam`, with their reflectivity, in image order at that pose
+/// ([`image_order_key`]).
 pub fn points_in_view(
     input: &PriorMapInput,
     t_world_cam: &Isometry3<f64>,
@@ -144,7 +140,7 @@ pub fn points_in_view(
             }
             let q = input.camera.project(&pc.coords)?;
             input.camera.in_image(&q.pixel, 2.0).then(|| {
-                let key = ((q.pixel.y / BAND_PX).floor() as i64, q.pixel.x);
+                let key = image_order_key(&q.pixel);
                 (key, p.xyz, p.intensity)
             })
         })

@@ -342,3 +342,38 @@ fn a_flat_dof_under_noise_is_held_by_the_probe_and_reported_unconstrained() {
     let r = refine(&scene, param, &b.candidates[0], &refine_options);
     assert_flat_dof_reported(&r, &truth, 4, super::search::Constraint::HeldAtInitial);
 }
+
+/// Reordering for memory locality keeps the points of every `subsampled(stride)` and
+/// changes scores only by summation order.
+#[test]
+fn image_order_keeps_the_subsampled_points_and_the_scores() {
+    let g = synthetic_ground(5, 6_000);
+    let groups: Vec<u8> = g.points.iter().map(|p| u8::from(p.x > 0.0)).collect();
+    let scene = MiScene::grouped(g.points, &g.intensities, groups, &g.image, g.camera, 2.0);
+    let t = g.t_world_cam.inverse();
+    let sorted = scene.in_image_order(&t, 2);
+    let key = |s: &MiScene| {
+        let mut v: Vec<(u64, u64, u32, u8)> = (0..s.points.len())
+            .map(|i| {
+                (
+                    s.points[i].x.to_bits(),
+                    s.points[i].y.to_bits(),
+                    s.values[i].to_bits(),
+                    s.groups[i],
+                )
+            })
+            .collect();
+        v.sort_unstable();
+        v
+    };
+    assert_ne!(sorted.points, scene.points);
+    assert_eq!(key(&sorted.subsampled(2)), key(&scene.subsampled(2)));
+    assert_eq!(key(&sorted), key(&scene));
+    for s in [1, 2] {
+        let (a, b) = (
+            scene.subsampled(s).smoothed(&t).mi,
+            sorted.subsampled(s).smoothed(&t).mi,
+        );
+        assert!((a - b).abs() < 1e-12 * a.abs(), "{a} {b}");
+    }
+}
