@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, Context};
 use msreg_estimator::camera::Camera;
-use nalgebra::Isometry3;
+use nalgebra::{Isometry3, Vector6};
 use serde::Serialize;
 
 use super::outcome::Outcome;
@@ -17,7 +17,7 @@ use msreg_host::dataset::{
     list_scans, read_camera_csv, CalibrationResult, ExtrinsicEstimate, CAMERA_CSV, CAMERA_YAML,
 };
 use msreg_host::mi::scene::rank_normalize;
-use msreg_host::mi::search::{Observability, Refined};
+use msreg_host::mi::search::{default_prior_sigma, Constraint, Observability, Refined};
 use msreg_host::mi::targetless::{calibrate_targetless, TargetlessOptions, TargetlessResult};
 use msreg_host::pointcloud::{read_pcd, PointCloud};
 use msreg_host::vision::GrayImage;
@@ -54,6 +54,12 @@ pub struct RefinedSummary {
     sigma_trans_m: [f64; 3],
     observability: Vec<(String, Observability)>,
     held: Vec<String>,
+    /// Per DoF: `measured` (sigma from the MI curvature) or why it is not.
+    constraint: Vec<(String, Constraint)>,
+    /// The DoFs the MI does not constrain; their sigmas are `prior_sigma_*`.
+    unconstrained: Vec<String>,
+    prior_sigma_rot_deg: [f64; 3],
+    prior_sigma_trans_m: [f64; 3],
 }
 
 impl RefinedSummary {
@@ -70,14 +76,43 @@ impl RefinedSummary {
             n_eff: r.n_eff,
             sigma_rot_deg: estimate.sigma_rot_deg.into(),
             sigma_trans_m: estimate.sigma_trans_m.into(),
-            observability: DOF_NAMES
-                .iter()
-                .zip(&r.observability)
-                .map(|(n, o)| (n.to_string(), *o))
-                .collect(),
+            observability: named(&r.observability),
             held: held_names(r),
+            constraint: named(&r.constraint),
+            unconstrained: unconstrained_names(r),
+            prior_sigma_rot_deg: prior_rot_deg(r),
+            prior_sigma_trans_m: prior_trans_m(r),
         }
     }
+}
+
+/// Each DoF's name with its value.
+fn named<T: Copy>(values: &[T; 6]) -> Vec<(String, T)> {
+    DOF_NAMES
+        .iter()
+        .zip(values)
+        .map(|(n, v)| (n.to_string(), *v))
+        .collect()
+}
+
+/// The initial guess's rotation sigmas (deg).
+fn prior_rot_deg(r: &Refined) -> [f64; 3] {
+    std::array::from_fn(|k| r.prior_sigma[k].to_degrees())
+}
+
+/// The initial guess's translation sigmas (m).
+fn prior_trans_m(r: &Refined) -> [f64; 3] {
+    std::array::from_fn(|k| r.prior_sigma[3 + k])
+}
+
+/// Names of the DoFs the MI does not constrain (held, flat or not a maximum).
+fn unconstrained_names(r: &Refined) -> Vec<String> {
+    DOF_NAMES
+        .iter()
+        .zip(&r.constraint)
+        .filter(|(_, c)| c.is_unconstrained())
+        .map(|(n, _)| n.to_string())
+        .collect()
 }
 
 /// Names of the DoFs the refinement held at their starting value.
@@ -90,32 +125,39 @@ fn held_names(r: &Refined) -> Vec<String> {
         .collect()
 }
 
-/// Exit code 0 or 1 of a refinement: not converged, or a DoF without a clear maximum.
+/// Exit code 0 or 1 of a refinement: not converged, a DoF the MI does not constrain, or
+/// one whose sigma moves the image by more than 3 px (`poor`).
 pub fn outcome_of(refined: &Refined) -> Outcome {
+    let unconstrained: Vec<String> = DOF_NAMES
+        .iter()
+        .zip(&refined.constraint)
+        .filter(|(_, c)| c.is_unconstrained())
+        .map(|(n, c)| format!("{n}: {}", c.why()))
+        .collect();
     let poor: Vec<&str> = DOF_NAMES
         .iter()
-        .zip(&refined.observability)
-        .filter(|(_, o)| **o == Observability::Poor)
+        .zip(refined.observability.iter().zip(&refined.constraint))
+        .filter(|(_, (o, c))| **o == Observability::Poor && !c.is_unconstrained())
         .map(|(n, _)| *n)
         .collect();
+    let mut reasons = Vec::new();
+    if !unconstrained.is_empty() {
+        reasons.push(format!(
+            "the MI does not constrain {} (reported as unconstrained, with the initial \
+             guess's sigma; see docs/prior_map.md)",
+            unconstrained.join("; ")
+        ));
+    }
+    if !poor.is_empty() {
+        reasons.push(format!(
+            "one sigma of {} moves the image by more than 3 px",
+            poor.join(", ")
+        ));
+    }
     if !refined.converged {
         Outcome::NotConverged("the MI refinement hit its iteration limit".into())
-    } else if !poor.is_empty() {
-        let held = held_names(refined);
-        let held = if held.is_empty() {
-            String::new()
-        } else {
-            format!(
-                "; {} held at the initial value (the MI is flat along it within the search \
-                 range: unobservable from this pair)",
-                held.join(", ")
-            )
-        };
-        Outcome::NotConverged(format!(
-            "the MI has no clear maximum along {} (flat or not a maximum there; see \
-             docs/prior_map.md){held}",
-            poor.join(", ")
-        ))
+    } else if !reasons.is_empty() {
+        Outcome::NotConverged(reasons.join("; "))
     } else {
         Outcome::Converged
     }
@@ -146,21 +188,37 @@ pub struct TargetlessArgs<'a> {
     pub overlay: Option<&'a Path>,
 }
 
-/// The initial `T_cam_lidar` from a result file.
-fn read_initial(path: Option<&Path>) -> anyhow::Result<Isometry3<f64>> {
+/// The initial `T_cam_lidar` from a result file and its sigma per DoF of `delta` (rad, m):
+/// the file's when all six are positive, else [`default_prior_sigma`] (the search's basin).
+fn read_initial(path: Option<&Path>) -> anyhow::Result<(Isometry3<f64>, Vector6<f64>)> {
     let path = path.ok_or_else(|| {
         anyhow!("--targetless needs --initial guess.yaml (a result file with cam0_lidar0)")
     })?;
     let result = CalibrationResult::read(path)?;
-    result
+    let e = result
         .cam0_lidar0
-        .map(|e| e.transform)
-        .ok_or_else(|| anyhow!("{}: no cam0_lidar0.T_cam_lidar section", path.display()))
+        .ok_or_else(|| anyhow!("{}: no cam0_lidar0.T_cam_lidar section", path.display()))?;
+    let given = Vector6::new(
+        e.sigma_rot_deg.x.to_radians(),
+        e.sigma_rot_deg.y.to_radians(),
+        e.sigma_rot_deg.z.to_radians(),
+        e.sigma_trans_m.x,
+        e.sigma_trans_m.y,
+        e.sigma_trans_m.z,
+    );
+    let prior = if given.iter().all(|&s| s > 0.0) {
+        given
+    } else {
+        default_prior_sigma()
+    };
+    Ok((e.transform, prior))
 }
 
 /// Runs the targetless calibration; `Err` is bad input (exit code 2).
 pub fn calibrate(args: &TargetlessArgs<'_>) -> anyhow::Result<Outcome> {
-    let initial = read_initial(args.initial)?;
+    let (initial, prior_sigma) = read_initial(args.initial)?;
+    let mut options = TargetlessOptions::default();
+    options.refine.prior_sigma = prior_sigma;
     let root = args.dataset;
     let camera = read_camera_yaml(&root.join(CAMERA_YAML))?;
     let images = read_camera_csv(root.join(CAMERA_CSV))?;
@@ -172,13 +230,7 @@ pub fn calibrate(args: &TargetlessArgs<'_>) -> anyhow::Result<Outcome> {
     let scan_path = nearest_scan(root, stamp)?;
     let cloud = read_pcd(&scan_path)?;
     let clock = std::time::Instant::now();
-    let result = match calibrate_targetless(
-        &cloud,
-        &image,
-        &camera,
-        &initial,
-        &TargetlessOptions::default(),
-    ) {
+    let result = match calibrate_targetless(&cloud, &image, &camera, &initial, &options) {
         Ok(r) => r,
         Err(e) => return Ok(Outcome::NotConverged(e.to_string())),
     };
@@ -217,37 +269,56 @@ pub fn calibrate(args: &TargetlessArgs<'_>) -> anyhow::Result<Outcome> {
     Ok(outcome_of(refined))
 }
 
-/// A YAML section with the MI / NMI scores and per-DoF observability.
+/// A YAML section with the MI / NMI scores, per-DoF observability and constraint, and
+/// the initial guess's sigmas (those of the unconstrained DoFs in the result).
 pub fn mi_section(name: &str, r: &Refined) -> String {
-    let obs: Vec<String> = DOF_NAMES
-        .iter()
-        .zip(&r.observability)
-        .map(|(n, o)| format!("{n}: {}", format!("{o:?}").to_lowercase()))
-        .collect();
+    let per_dof = |f: &dyn Fn(usize) -> String| -> String {
+        let items: Vec<String> = DOF_NAMES
+            .iter()
+            .enumerate()
+            .map(|(k, n)| format!("{n}: {}", f(k)))
+            .collect();
+        items.join(", ")
+    };
+    let snake = |v: String| v.to_lowercase();
+    let constraint = per_dof(&|k| match r.constraint[k] {
+        Constraint::Measured => "measured".into(),
+        Constraint::HeldAtInitial => "held_at_initial".into(),
+        Constraint::NotAMaximum => "not_a_maximum".into(),
+        Constraint::Flat => "flat".into(),
+    });
+    let unconstrained = unconstrained_names(r).join(", ");
+    let note = if unconstrained.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "  # The MI does not constrain [{unconstrained}]: their sigmas in the result are the \
+             initial guess's\n  # (prior_sigma_*), not information from the data.\n"
+        )
+    };
     format!(
-        "{name}:\n  mi: {}\n  nmi: {}\n  mi_hard: {}\n  nmi_hard: {}\n  samples: {}\n  \
-         n_eff: {}\n  observability: {{{}}}\n  held_at_initial: [{}]\n",
+        "{name}:\n{note}  mi: {}\n  nmi: {}\n  mi_hard: {}\n  nmi_hard: {}\n  samples: {}\n  \
+         n_eff: {}\n  observability: {{{}}}\n  constraint: {{{constraint}}}\n  \
+         unconstrained: [{unconstrained}]\n  held_at_initial: [{}]\n  \
+         prior_sigma_rot_deg: {:?}\n  prior_sigma_trans_m: {:?}\n",
         r.smoothed.mi,
         r.smoothed.nmi,
         r.hard.mi,
         r.hard.nmi,
         r.smoothed.samples,
         r.n_eff,
-        obs.join(", "),
-        held_names(r).join(", ")
+        per_dof(&|k| snake(format!("{:?}", r.observability[k]))),
+        held_names(r).join(", "),
+        prior_rot_deg(r),
+        prior_trans_m(r),
     )
 }
 
 fn print_summary(output: &Path, result: &TargetlessResult, seconds: f64) {
     let r = &result.refined;
-    let names: Vec<String> = DOF_NAMES
-        .iter()
-        .zip(&r.observability)
-        .map(|(n, o)| format!("{n} {o:?}"))
-        .collect();
     eprintln!(
         "msreg: wrote {} (MI {:.4} nats, NMI {:.4}, {} points, {} grid candidates, {} \
-         iterations, {:.1} s; {}; held at the initial value: [{}])",
+         iterations, {:.1} s)",
         output.display(),
         r.smoothed.mi,
         r.smoothed.nmi,
@@ -255,9 +326,35 @@ fn print_summary(output: &Path, result: &TargetlessResult, seconds: f64) {
         result.grid_evaluations,
         r.iterations,
         seconds,
-        names.join(", "),
-        held_names(r).join(", ")
     );
+    eprint!("{}", dof_table(r));
+}
+
+/// One line per DoF: its sigma and observability, or `unconstrained` and why (with the
+/// initial guess's sigma that the result carries for it).
+pub fn dof_table(r: &Refined) -> String {
+    let mut text = String::from("msreg: per DoF (rotations in deg, translations in cm):\n");
+    for (k, name) in DOF_NAMES.iter().enumerate() {
+        let (scale, unit) = if k < 3 {
+            (1f64.to_degrees(), "deg")
+        } else {
+            (100.0, "cm")
+        };
+        let prior = r.prior_sigma[k] * scale;
+        let line = match r.constraint[k] {
+            Constraint::Measured => format!(
+                "sigma {:.3} {unit} ({})",
+                r.covariance[(k, k)].max(0.0).sqrt() * scale,
+                format!("{:?}", r.observability[k]).to_lowercase()
+            ),
+            c => format!(
+                "unconstrained: {}; the result carries the initial guess's sigma {prior:.3} {unit}",
+                c.why()
+            ),
+        };
+        text.push_str(&format!("  {name:<6} {line}\n"));
+    }
+    text
 }
 
 fn make_report(

@@ -11,7 +11,7 @@ use clap::Args;
 use nalgebra::Isometry3;
 use serde::Serialize;
 
-use super::mi::{mi_section, outcome_of, write_overlay, RefinedSummary};
+use super::mi::{dof_table, mi_section, outcome_of, write_overlay, RefinedSummary};
 use super::outcome::Outcome;
 use msreg_host::dataset::ExtrinsicEstimate;
 use msreg_host::mi::prior_map::init::{InitError, Initialisation};
@@ -159,6 +159,7 @@ pub fn calibrate(args: &CalibratePriorMap) -> anyhow::Result<Outcome> {
         report.survey_median_px_initial,
         seconds
     );
+    eprint!("{}", dof_table(r));
     if let Some(path) = &args.report {
         msreg_host::report::write_report_with_images(path, &report, &[before, overlay])?;
     }

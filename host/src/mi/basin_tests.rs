@@ -7,7 +7,7 @@ use nalgebra::Vector6;
 use super::basin::{basin_search, parabola, probe, BasinOptions, ProbeSpec};
 use super::scene::{MiScene, PoseParam};
 use super::search::{
-    grid_search_multi, refine, GridAxis, Observability, RefineOptions, UNCONSTRAINED_VARIANCE,
+    grid_search_multi, refine, Constraint, GridAxis, Observability, RefineOptions,
 };
 use super::synthetic::synthetic_ground;
 use crate::vision::GrayImage;
@@ -115,7 +115,13 @@ fn refinement_keeps_a_held_dof_at_its_start_and_reports_it_unconstrained() {
     assert_eq!(r.x.translation.z.to_bits(), start.translation.z.to_bits());
     assert_eq!(r.held, options.held);
     assert_eq!(r.observability[5], Observability::Poor);
-    assert!((r.covariance[(5, 5)] - UNCONSTRAINED_VARIANCE).abs() < 1e-3);
+    // Its sigma is the initial guess's, uncorrelated with the others.
+    assert_eq!(r.constraint[5], Constraint::HeldAtInitial);
+    assert_eq!(
+        r.covariance[(5, 5)].to_bits(),
+        options.prior_sigma[5].powi(2).to_bits()
+    );
+    assert!((0..5).all(|k| r.covariance[(k, 5)] == 0.0));
     // The free DoFs still move towards the truth (x, y errors shrink from 6 / 5 cm).
     let d = r.x.translation.vector - g.t_world_cam.translation.vector;
     assert!(d.x.abs() < 0.03 && d.y.abs() < 0.03, "{d:?}");

@@ -17,9 +17,9 @@ pub mod orb;
 pub mod slices;
 
 use msreg_estimator::camera::Camera;
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3, Vector6};
 
-use super::scene::{MiScene, PoseParam};
+use super::scene::{image_order_key, MiScene, PoseParam};
 use super::search::{grid_search_batch, refine, GridAxis, GridResult, RefineOptions, Refined};
 use crate::vision::GrayImage;
 use grid::GridScorer;
@@ -61,16 +61,23 @@ pub struct RegisterOptions {
 
 impl Default for RegisterOptions {
     fn default() -> Self {
+        let grid_half = [0.5, 0.5, 0.3, 2f64.to_radians()];
+        let [x, y, z, yaw] = grid_half;
         Self {
             init: InitOptions::default(),
-            grid_half: [0.5, 0.5, 0.3, 2f64.to_radians()],
+            grid_half,
             grid_steps: 2,
             grid_levels: 3,
             grid_points: 6000,
             grid_blur_px: 4.0,
             refine_blur_px: vec![4.0, 1.0],
             refine_subsample: vec![4, 1],
-            refine: RefineOptions::default(),
+            // The initial guess's sigma: the grid's half ranges around the initial pose (its
+            // yaw range for every rotation); unconstrained DoFs report it.
+            refine: RefineOptions {
+                prior_sigma: Vector6::new(yaw, yaw, yaw, x, y, z),
+                ..RefineOptions::default()
+            },
             max_view_deg: 70.0,
             min_points: 2000,
             slice_half_px: 3.0,
@@ -112,13 +119,9 @@ pub struct Registration {
     pub slices: Vec<MiSlice>,
 }
 
-/// Image band (px) of the memory order of [`points_in_view`].
-const BAND_PX: f64 = 16.0;
-
 /// The map points within `max_view_deg` of the optical axis and inside the image at
-/// `t_world_cam`, with their reflectivity, in image order at that pose (16 px bands of
-/// rows, each left to right): a pose near it then samples the image along its rows, so
-/// the image stays in cache (about twice as fast as the map's order).
+/// `t_world_cam`, with their reflectivity, in image order at that pose
+/// ([`image_order_key`]).
 pub fn points_in_view(
     input: &PriorMapInput,
     t_world_cam: &Isometry3<f64>,
@@ -137,7 +140,7 @@ pub fn points_in_view(
             }
             let q = input.camera.project(&pc.coords)?;
             input.camera.in_image(&q.pixel, 2.0).then(|| {
-                let key = ((q.pixel.y / BAND_PX).floor() as i64, q.pixel.x);
+                let key = image_order_key(&q.pixel);
                 (key, p.xyz, p.intensity)
             })
         })

@@ -243,6 +243,18 @@ pub struct RefineOptions {
     /// DoFs of `delta` held at the starting value (not stepped; reported unconstrained and
     /// `poor`): those the MI does not determine.
     pub held: [bool; 6],
+    /// One sigma of the initial guess per DoF of `delta` (rad, m; positive): the
+    /// uncertainty the start already has. A DoF about which the MI gives less information
+    /// than this is reported unconstrained, with this sigma ([`Constraint`]).
+    pub prior_sigma: Vector6<f64>,
+}
+
+/// The initial guess's sigma of `--targetless` unless the guess file gives one: the
+/// basin it searches (`BasinOptions::default`: 2 deg per rotation axis, 10 cm per
+/// translation axis; issue 15's perturbations reach that far).
+pub fn default_prior_sigma() -> Vector6<f64> {
+    let r = 2f64.to_radians();
+    Vector6::new(r, r, r, 0.10, 0.10, 0.10)
 }
 
 impl Default for RefineOptions {
@@ -255,6 +267,7 @@ impl Default for RefineOptions {
             cell_px: 3.0,
             hessian_every: 4,
             held: [false; 6],
+            prior_sigma: default_prior_sigma(),
         }
     }
 }
@@ -267,8 +280,48 @@ pub enum Observability {
     Strong,
     /// 0.5 to 3 px.
     Weak,
-    /// More than 3 px, or the MI is flat / not a maximum along it.
+    /// More than 3 px, or unconstrained ([`Constraint`]).
     Poor,
+}
+
+/// What determines a DoF's reported sigma.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Constraint {
+    /// The MI's curvature: it gives more information about the DoF than the initial
+    /// guess's sigma does (the posterior variance is below half the prior's).
+    Measured,
+    /// Held at the initial value ([`RefineOptions::held`]): the search found the MI flat
+    /// along it; sigma = the initial guess's.
+    HeldAtInitial,
+    /// The MI curves upwards along it (the end is not a maximum there; with the curvature's
+    /// magnitude it would be measured); sigma = the initial guess's.
+    NotAMaximum,
+    /// The MI is (nearly) flat along it: its curvature gives less information than the
+    /// initial guess's sigma; sigma = the initial guess's.
+    Flat,
+}
+
+impl Constraint {
+    /// True unless [`Constraint::Measured`].
+    pub fn is_unconstrained(self) -> bool {
+        self != Self::Measured
+    }
+
+    /// Why, in words (for messages).
+    pub fn why(self) -> &'static str {
+        match self {
+            Self::Measured => "determined by the MI curvature",
+            Self::HeldAtInitial => {
+                "held at the initial value (the MI profile along it is flat within the search \
+                 range)"
+            }
+            Self::NotAMaximum => "the MI curves upwards along it (not a maximum)",
+            Self::Flat => {
+                "the MI is flat along it (less information than the initial guess's sigma)"
+            }
+        }
+    }
 }
 
 /// A refined pose with its curvature-based uncertainty.
@@ -282,8 +335,15 @@ pub struct Refined {
     pub hard: MiScore,
     /// Hessian of the smoothed MI w.r.t. `delta` at the optimum.
     pub hessian: Matrix6<f64>,
-    /// `(n_eff * (-H))^-1`, `[omega (rad); v (m)]`.
+    /// `[omega (rad); v (m)]`: the inverse of the MI's information `n_eff (-H)` on its
+    /// positive eigen-directions plus the initial guess's (`diag(prior_sigma^-2)`), with
+    /// the rows and columns of unconstrained DoFs replaced by the prior's variance alone
+    /// ([`uncertainty`]); no sigma exceeds the prior's.
     pub covariance: Matrix6<f64>,
+    /// What determines each DoF's sigma.
+    pub constraint: [Constraint; 6],
+    /// The initial guess's sigma ([`RefineOptions::prior_sigma`]).
+    pub prior_sigma: Vector6<f64>,
     /// Independent samples assumed (occupied image cells).
     pub n_eff: usize,
     /// Mean image motion per unit of each DoF (px/rad, px/m).
@@ -392,22 +452,51 @@ pub fn refine(
     finish(scene, param, x, &fd, options, iterations, converged)
 }
 
-/// Variance assigned along a direction of zero or negative MI curvature (unconstrained).
-pub const UNCONSTRAINED_VARIANCE: f64 = 1e6;
-
-/// Inverse of the information on its positive eigen-directions; directions where the MI
-/// is flat or curves upwards (not a maximum) get [`UNCONSTRAINED_VARIANCE`].
-fn covariance_of(information: &Matrix6<f64>) -> Matrix6<f64> {
-    let eig = SymmetricEigen::new(*information);
-    let top = eig.eigenvalues.max().max(0.0);
-    let inv = eig.eigenvalues.map(|e| {
-        if e > 1e-12 * top && e > 0.0 {
-            1.0 / e
+/// The reported covariance and what determines each DoF, from the MI's `information`
+/// (`n_eff (-H)`, held rows and columns zeroed) and the initial guess's `prior_sigma`.
+/// The MI informs only along its positive eigen-directions (a direction of zero or upward
+/// curvature carries none), so the posterior is `P = (I+ + P0^-1)^-1` with `I+` the
+/// positive part. A DoF is measured when `P_kk < prior_k^2 / 2` (the MI gives at least as
+/// much information about it as the guess); otherwise it is unconstrained: not a maximum
+/// when the curvature's magnitude (`|I|` in place of `I+`) would have measured it, else
+/// flat. Unconstrained DoFs get the prior's variance and no correlation.
+pub fn uncertainty(
+    information: &Matrix6<f64>,
+    held: &[bool; 6],
+    prior_sigma: &Vector6<f64>,
+) -> (Matrix6<f64>, [Constraint; 6]) {
+    let prior_var = prior_sigma.map(|s| s.abs().max(1e-12).powi(2));
+    let prior_info = Matrix6::from_diagonal(&prior_var.map(f64::recip));
+    let eig = SymmetricEigen::new(mask_held(information, held, 0.0));
+    let with = |f: fn(f64) -> f64| {
+        let info = eig.eigenvectors
+            * Matrix6::from_diagonal(&eig.eigenvalues.map(f))
+            * eig.eigenvectors.transpose();
+        let total = info + prior_info;
+        total
+            .cholesky()
+            .map_or(Matrix6::from_diagonal(&prior_var), |c| c.inverse())
+    };
+    let posterior = with(|e| e.max(0.0));
+    let magnitude = with(f64::abs);
+    let constraint: [Constraint; 6] = std::array::from_fn(|k| {
+        if held[k] {
+            Constraint::HeldAtInitial
+        } else if posterior[(k, k)] < 0.5 * prior_var[k] {
+            Constraint::Measured
+        } else if magnitude[(k, k)] < 0.5 * prior_var[k] {
+            Constraint::NotAMaximum
         } else {
-            UNCONSTRAINED_VARIANCE
+            Constraint::Flat
         }
     });
-    eig.eigenvectors * Matrix6::from_diagonal(&inv) * eig.eigenvectors.transpose()
+    let free = |k: usize| !constraint[k].is_unconstrained();
+    let covariance = Matrix6::from_fn(|i, j| match (free(i) && free(j), i == j) {
+        (true, _) => posterior[(i, j)],
+        (false, true) => prior_var[i],
+        (false, false) => 0.0,
+    });
+    (covariance, constraint)
 }
 
 fn finish(
@@ -424,13 +513,11 @@ fn finish(
     let n_eff = scene.occupied_cells(&t, options.cell_px).max(1);
     // Held DoFs carry no information (their rows and columns are zeroed).
     let information = mask_held(&(-h * n_eff as f64), &options.held, 0.0);
-    let covariance = covariance_of(&information);
+    let (covariance, constraint) = uncertainty(&information, &options.held, &options.prior_sigma);
     let ppu = scene.pixels_per_unit(param, &x);
-    let free_block = mask_held(&information, &options.held, 1.0);
-    let definite = SymmetricEigen::new(free_block).eigenvalues.min() > 0.0;
     let observability = std::array::from_fn(|k| {
         let px = covariance[(k, k)].max(0.0).sqrt() * ppu[k];
-        if options.held[k] || !definite || !px.is_finite() || px > 3.0 {
+        if constraint[k].is_unconstrained() || !px.is_finite() || px > 3.0 {
             Observability::Poor
         } else if px > 0.5 {
             Observability::Weak
@@ -444,6 +531,8 @@ fn finish(
         hard: scene.hard(&t),
         hessian: h,
         covariance,
+        constraint,
+        prior_sigma: options.prior_sigma,
         n_eff,
         pixels_per_unit: ppu,
         observability,

@@ -198,7 +198,10 @@ pub fn calibrate_targetless(
         image
     };
     let first_blur = options.refine_blur_px.first().copied().unwrap_or(1.0);
-    let scene = targetless_scene(points, &intensities, image, camera, first_blur, options);
+    // In image order at the guess (cache locality), keeping the lattice's subsample.
+    let stride = options.basin.as_ref().map_or(1, |b| b.subsample);
+    let scene = targetless_scene(points, &intensities, image, camera, first_blur, options)
+        .in_image_order(initial, stride);
     if scene.points.len() < options.min_points {
         return Err(TargetlessError::TooFewVisible {
             visible: scene.points.len(),
