@@ -169,8 +169,14 @@ impl<T: Scalar> StepDetector<T> {
     /// `A1^-1/2`) is at most `factor` times `min_step`. Elsewhere (the lever arm along the
     /// axis of planar driving, a camera's roll about its direction of travel) the estimate
     /// `A1^-1 b` is noise amplified by a near-singular `A1` and says nothing about a knock.
-    /// `None` when no direction is resolvable. Thresholds are not applied here.
-    fn test(&self, (min_step, factor): (T, T)) -> Option<StepTest<T>> {
+    /// `None` when no direction is resolvable, or when `(statistic, dof)` fails `accept`
+    /// (then the step and its covariance, most of the cost, are not formed: the
+    /// per-update path on the device).
+    fn test(
+        &self,
+        (min_step, factor): (T, T),
+        accept: impl Fn(T, usize) -> bool,
+    ) -> Option<StepTest<T>> {
         let eig = self.info.symmetric_eigen();
         let v = eig.eigenvectors;
         let resolvable = min_step * factor;
@@ -199,6 +205,9 @@ impl<T: Scalar> StepDetector<T> {
         }
         let reg = |m: &Matrix3<T>| Matrix3::identity() * (m.trace() * T::lit(1e-9));
         let statistic = score.dot(&Cholesky::new(a2 + reg(&a2))?.solve(&score));
+        if !accept(statistic, kept) {
+            return None;
+        }
         let a1_inv = Cholesky::new(a1 + reg(&a1))?.inverse();
         let mut cov = a1_inv * a2 * a1_inv;
         for i in (0..3).filter(|i| !keep[*i]) {
@@ -229,10 +238,9 @@ impl<T: Scalar> StepDetector<T> {
         if self.updates < min_updates {
             return None;
         }
-        let t = self.test((min_step, factor))?;
-        let fires =
-            t.statistic > chi2::quantile::<T>(t.dof, confidence) && t.step.norm() >= min_step;
-        fires.then_some((t.statistic, t.step, t.step_covariance))
+        let above = |statistic: T, dof: usize| statistic > chi2::quantile::<T>(dof, confidence);
+        let t = self.test((min_step, factor), above)?;
+        (t.step.norm() >= min_step).then_some((t.statistic, t.step, t.step_covariance))
     }
 }
 
@@ -296,8 +304,10 @@ impl<T: Scalar> SensorHealth<T> {
     pub fn step_tests(&self, config: &HealthConfig<T>) -> [Option<StepTest<T>>; 2] {
         let f = config.resolvable_step_factor;
         [
-            self.rotation.test((config.min_rotation_step, f)),
-            self.translation.test((config.min_translation_step, f)),
+            self.rotation
+                .test((config.min_rotation_step, f), |_, _| true),
+            self.translation
+                .test((config.min_translation_step, f), |_, _| true),
         ]
     }
 
