@@ -105,14 +105,18 @@ fn prior_trans_m(r: &Refined) -> [f64; 3] {
     std::array::from_fn(|k| r.prior_sigma[3 + k])
 }
 
-/// Names of the DoFs the MI does not constrain (held, flat or not a maximum).
-fn unconstrained_names(r: &Refined) -> Vec<String> {
+/// The DoFs the MI does not constrain (held, flat or not a maximum), with why.
+fn unconstrained(r: &Refined) -> impl Iterator<Item = (&'static str, Constraint)> + '_ {
     DOF_NAMES
         .iter()
         .zip(&r.constraint)
         .filter(|(_, c)| c.is_unconstrained())
-        .map(|(n, _)| n.to_string())
-        .collect()
+        .map(|(n, c)| (*n, *c))
+}
+
+/// Names of the DoFs the MI does not constrain.
+fn unconstrained_names(r: &Refined) -> Vec<String> {
+    unconstrained(r).map(|(n, _)| n.to_string()).collect()
 }
 
 /// Names of the DoFs the refinement held at their starting value.
@@ -128,10 +132,7 @@ fn held_names(r: &Refined) -> Vec<String> {
 /// Exit code 0 or 1 of a refinement: not converged, a DoF the MI does not constrain, or
 /// one whose sigma moves the image by more than 3 px (`poor`).
 pub fn outcome_of(refined: &Refined) -> Outcome {
-    let unconstrained: Vec<String> = DOF_NAMES
-        .iter()
-        .zip(&refined.constraint)
-        .filter(|(_, c)| c.is_unconstrained())
+    let unconstrained: Vec<String> = unconstrained(refined)
         .map(|(n, c)| format!("{n}: {}", c.why()))
         .collect();
     let poor: Vec<&str> = DOF_NAMES
@@ -281,12 +282,7 @@ pub fn mi_section(name: &str, r: &Refined) -> String {
         items.join(", ")
     };
     let snake = |v: String| v.to_lowercase();
-    let constraint = per_dof(&|k| match r.constraint[k] {
-        Constraint::Measured => "measured".into(),
-        Constraint::HeldAtInitial => "held_at_initial".into(),
-        Constraint::NotAMaximum => "not_a_maximum".into(),
-        Constraint::Flat => "flat".into(),
-    });
+    let constraint = per_dof(&|k| r.constraint[k].as_str().into());
     let unconstrained = unconstrained_names(r).join(", ");
     let note = if unconstrained.is_empty() {
         String::new()

@@ -308,6 +308,16 @@ impl Constraint {
         self != Self::Measured
     }
 
+    /// The name in files (as serialised).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Measured => "measured",
+            Self::HeldAtInitial => "held_at_initial",
+            Self::NotAMaximum => "not_a_maximum",
+            Self::Flat => "flat",
+        }
+    }
+
     /// Why, in words (for messages).
     pub fn why(self) -> &'static str {
         match self {
