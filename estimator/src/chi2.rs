@@ -30,6 +30,11 @@ impl Confidence {
         self as usize
     }
 
+    /// The confidence as a probability (0.999 for 99.9 %).
+    pub fn probability(self) -> f64 {
+        [0.90, 0.95, 0.99, 0.995, 0.999, 0.9999, 0.99999][self.column()]
+    }
+
     /// The standard normal quantile at this confidence.
     pub fn normal_quantile(self) -> f64 {
         [

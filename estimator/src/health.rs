@@ -11,6 +11,19 @@
 //!   `b = sum l^k H_e^T S^-1 r_k` has covariance `A2 = sum l^2k H_e^T S^-1 H_e` under "no
 //!   jump", so `b^T A2^-1 b ~ chi2(3)`; a knock makes it grow with every update.
 //!
+//! - a jump-anchored detector for a knock: a knocked sensor's odometry moves with its mounting,
+//!   so the one increment spanning the knock carries the whole rotation `delta` in its rotation
+//!   residual (the Jacobian `E` w.r.t. a rotation of the mounting at the increment's end stamp
+//!   only). An increment whose residual, read that way, exceeds the chi-square(3) quantile is
+//!   a candidate: a knock, or an odometry glitch. While it is pending the sensor is **held
+//!   out** of the filter (its updates are tested, not fused: `HealthMonitor::holds_out`), so
+//!   neither hypothesis drags the shared IMU state, and the increments after it decide by
+//!   Wald's sequential test between "the mounting moved by `delta`" (each residual has mean
+//!   `H_R delta`) and "no change": the log-likelihood ratio
+//!   `L = |delta| s - |delta|^2 a / 2`, `s = sum u^T H_R^T S^-1 r_k`,
+//!   `a = sum u^T H_R^T S^-1 H_R u`, `u = delta / |delta|`, fires above `ln(1 / alpha)` and
+//!   drops the candidate below `ln(beta)`.
+//!
 //! Excitation (how much each extrinsic sigma shrank from its prior) is read off the filter
 //! covariance by `Ekf::excitation`.
 
@@ -68,6 +81,15 @@ pub struct HealthConfig<T: Scalar> {
     /// step: the re-convergence is the reaction itself (the rest of the same knock, which the
     /// opened covariance absorbs), not another knock, as for the first arming.
     pub rearm_factor: T,
+    /// Confidence of the jump test that makes an increment a knock candidate (chi-square(3)
+    /// on its rotation residual read as the mounting moving inside it).
+    pub jump_confidence: Confidence,
+    /// Most updates a candidate stays pending (and its sensor held out) before it is dropped
+    /// undecided (0: the jump-anchored detector is off).
+    pub jump_window_updates: u32,
+    /// The sequential test's miss probability `beta`: a candidate the increments since make
+    /// this unlikely is dropped. Its false-alarm probability is `1 - step_confidence`.
+    pub jump_miss: T,
 }
 
 impl<T: Scalar> Default for HealthConfig<T> {
@@ -89,6 +111,12 @@ impl<T: Scalar> Default for HealthConfig<T> {
             min_translation_step: T::lit(0.005),
             resolvable_step_factor: T::lit(f64::INFINITY),
             rearm_factor: T::lit(2.0),
+            // Under "no change" a share 1 - c of the increments becomes a candidate and holds
+            // its sensor out for at most `jump_window_updates`: at 99.99 % and 100 updates
+            // (5 s at 20 Hz) at most 1 % of a sensor's updates go unfused.
+            jump_confidence: Confidence::P9999,
+            jump_window_updates: 100,
+            jump_miss: T::lit(0.01),
         }
     }
 }
@@ -260,6 +288,59 @@ pub struct StepTest<T: Scalar> {
     pub updates: u32,
 }
 
+/// A knock candidate: an increment whose rotation residual reads as the mounting having
+/// rotated by `step` between its stamps, and the one-dof test of the increments after it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct JumpCandidate<T: Scalar> {
+    /// The jump statistic (chi-square(3) under "no change").
+    statistic: T,
+    /// The mounting's rotation inside the increment (right perturbation of `R_I_S`), rad.
+    step: Vector3<T>,
+    /// Its covariance, rad^2.
+    covariance: Matrix3<T>,
+    /// `sum u^T H_R^T S^-1 r` over the increments since.
+    score: T,
+    /// `sum u^T H_R^T S^-1 H_R u`: the score's variance under "no change".
+    info: T,
+    /// Increments seen since.
+    updates: u32,
+}
+
+impl<T: Scalar> JumpCandidate<T> {
+    /// A candidate from one increment's end-rotation innovation, when its statistic passes
+    /// `threshold` and the rotation is at least `min_step` long.
+    fn from_increment(inn: &ExtrinsicInnovation<T>, threshold: T, min_step: T) -> Option<Self> {
+        let chol = Cholesky::new(inn.jump_info)?;
+        let step = chol.solve(&inn.jump_score);
+        let statistic = inn.jump_score.dot(&step);
+        (statistic > threshold && step.norm() >= min_step).then(|| Self {
+            statistic,
+            step,
+            covariance: chol.inverse(),
+            score: T::zero(),
+            info: T::zero(),
+            updates: 0,
+        })
+    }
+
+    /// Adds one later increment's persistent signature along the candidate's direction;
+    /// the log-likelihood ratio of "the mounting moved by `step`" against "no change" over
+    /// the increments since.
+    fn confirm(&mut self, inn: &ExtrinsicInnovation<T>) -> T {
+        let length = self.step.norm();
+        let u = self.step / length;
+        self.score += u.dot(&inn.rotation_score);
+        self.info += u.dot(&(inn.rotation_info * u));
+        self.updates = self.updates.saturating_add(1);
+        self.log_likelihood_ratio()
+    }
+
+    fn log_likelihood_ratio(&self) -> T {
+        let length = self.step.norm();
+        length * self.score - length * length * self.info * T::lit(0.5)
+    }
+}
+
 /// Health of one sensor's calibration.
 #[derive(Clone, Debug)]
 pub struct SensorHealth<T: Scalar> {
@@ -279,6 +360,8 @@ pub struct SensorHealth<T: Scalar> {
     /// Rotation and translation sigma (largest axis) the extrinsic must come back under
     /// before the detectors re-arm after a reaction.
     rearm_below: Option<(T, T)>,
+    /// The pending knock candidate.
+    jump: Option<JumpCandidate<T>>,
 }
 
 impl<T: Scalar> Default for SensorHealth<T> {
@@ -294,6 +377,7 @@ impl<T: Scalar> Default for SensorHealth<T> {
             steps_detected: 0,
             last_event: None,
             rearm_below: None,
+            jump: None,
         }
     }
 }
@@ -309,6 +393,13 @@ impl<T: Scalar> SensorHealth<T> {
             self.translation
                 .test((config.min_translation_step, f), |_, _| true),
         ]
+    }
+
+    /// The pending knock candidate as it stands: `(jump statistic, jump, log-likelihood
+    /// ratio of the increments since, increments since)`; `None` without a candidate.
+    pub fn jump_test(&self) -> Option<(T, Vector3<T>, T, u32)> {
+        self.jump
+            .map(|c| (c.statistic, c.step, c.log_likelihood_ratio(), c.updates))
     }
 
     /// Mean NIS per degree of freedom over the window (1 for a consistent filter).
@@ -333,6 +424,41 @@ impl<T: Scalar> SensorHealth<T> {
         } else {
             NisStatus::Consistent
         }
+    }
+
+    /// The jump-anchored detector on one increment: a new candidate (which its own
+    /// increment cannot confirm), or the pending one's sequential test. `(2 L, step,
+    /// covariance)` when the increments since confirm it (`L > ln(1 / alpha)`, `alpha = 1 -
+    /// step_confidence`); the candidate is dropped when they refute it (`L < ln(beta)`) or
+    /// after `jump_window_updates`.
+    fn jump_step(
+        &mut self,
+        inn: &ExtrinsicInnovation<T>,
+        config: &HealthConfig<T>,
+    ) -> Option<(T, Vector3<T>, Matrix3<T>)> {
+        if config.jump_window_updates == 0 {
+            return None;
+        }
+        let threshold = chi2::quantile::<T>(3, config.jump_confidence);
+        if let Some(fresh) = JumpCandidate::from_increment(inn, threshold, config.min_rotation_step)
+        {
+            if self.jump.is_none_or(|c| c.statistic <= fresh.statistic) {
+                self.jump = Some(fresh);
+            }
+            return None;
+        }
+        let candidate = self.jump.as_mut()?;
+        let llr = candidate.confirm(inn);
+        let c = *candidate;
+        let alpha = 1.0 - config.step_confidence.probability();
+        if llr > T::lit(-libm::log(alpha)) {
+            return Some((llr * T::lit(2.0), c.step, c.covariance));
+        }
+        let beta = T::lit(libm::log(config.jump_miss.to_f64()));
+        if llr < beta || c.updates >= config.jump_window_updates {
+            self.jump = None;
+        }
+        None
     }
 
     fn record_nis(&mut self, nis: T, dof: usize, config: &HealthConfig<T>) {
@@ -362,6 +488,12 @@ pub struct ExtrinsicInnovation<T: Scalar> {
     pub translation_info: Matrix3<T>,
     /// `H_p^T S^-1 r`.
     pub translation_score: Vector3<T>,
+    /// `E^T S^-1 E` with `E` the Jacobian w.r.t. a rotation of the mounting at the end
+    /// stamp of an increment only (the mounting moved between its two stamps); zero for a
+    /// measurement that is not an increment.
+    pub jump_info: Matrix3<T>,
+    /// `E^T S^-1 r`.
+    pub jump_score: Vector3<T>,
 }
 
 /// The monitor for `S` sensors.
@@ -405,6 +537,14 @@ impl<T: Scalar, const S: usize> HealthMonitor<T, S> {
             && sigma_translation < config.arm_sigma_translation
     }
 
+    /// Whether sensor `s` is held out of the filter: a knock candidate of it is pending, so
+    /// its updates are tested but not fused until the candidate is confirmed or dropped.
+    pub fn holds_out(&self, s: SensorId) -> bool {
+        self.sensors
+            .get(s.index())
+            .is_some_and(|h| h.jump.is_some())
+    }
+
     /// Holds sensor `s`'s detectors until its extrinsic sigmas are back within
     /// `rearm_factor` of the given values (its sigmas before the filter reacted to a step).
     pub fn hold_until_reconverged(&mut self, s: SensorId, sigma_rotation: T, sigma_translation: T) {
@@ -443,11 +583,16 @@ impl<T: Scalar, const S: usize> HealthMonitor<T, S> {
             .add(&inn.translation_info, &inn.translation_score, l);
         let confidence = config.step_confidence;
         let min = config.step_min_updates;
-        let event = if let Some((statistic, step, step_covariance)) = health.rotation.fire(
-            min,
-            confidence,
-            (config.min_rotation_step, config.resolvable_step_factor),
-        ) {
+        let jump = health.jump_step(inn, &config);
+        let rotation = health
+            .rotation
+            .fire(
+                min,
+                confidence,
+                (config.min_rotation_step, config.resolvable_step_factor),
+            )
+            .or(jump);
+        let event = if let Some((statistic, step, step_covariance)) = rotation {
             Some(HealthEvent::RotationStep {
                 sensor: s,
                 stamp_ns,
@@ -481,6 +626,7 @@ impl<T: Scalar, const S: usize> HealthMonitor<T, S> {
             for h in self.sensors.iter_mut() {
                 h.rotation = StepDetector::new();
                 h.translation = StepDetector::new();
+                h.jump = None;
             }
         }
         event
@@ -520,6 +666,8 @@ mod tests {
             rotation_score: r * INFO,
             translation_info: Matrix3::identity() * INFO,
             translation_score: Vector3::zeros(),
+            jump_info: Matrix3::zeros(),
+            jump_score: Vector3::zeros(),
         }
     }
 
@@ -560,6 +708,8 @@ mod tests {
                 rotation_score: Vector3::new(1.5e3, 0.0, 0.0),
                 translation_info: info,
                 translation_score: Vector3::zeros(),
+                jump_info: Matrix3::zeros(),
+                jump_score: Vector3::zeros(),
             };
             assert!(
                 m.record(SENSOR, k, 3.0, 6, true, Some(&inn)).is_none(),
@@ -585,11 +735,129 @@ mod tests {
                 rotation_score: Vector3::new(0.0, 0.0, 3.0 * (INFO * 1e-3).sqrt()),
                 translation_info: info,
                 translation_score: Vector3::zeros(),
+                jump_info: Matrix3::zeros(),
+                jump_score: Vector3::zeros(),
             };
             assert!(
                 m.record(SENSOR, k, 3.0, 6, true, Some(&inn)).is_none(),
                 "alarm at {k}"
             );
+        }
+    }
+
+    /// An increment whose rotation residual is `jump` (rad), at `INFO` per axis, with no
+    /// persistent signature.
+    fn jump_increment(jump: Vector3<f64>) -> ExtrinsicInnovation<f64> {
+        ExtrinsicInnovation {
+            jump_info: Matrix3::identity() * INFO,
+            jump_score: jump * INFO,
+            ..innovation(Vector3::zeros())
+        }
+    }
+
+    /// Persistent signature per increment: a step of `step` seen at 1/100 of the jump's
+    /// information (the conjugation `delta x theta_k` of a 0.1 rad increment), plus a
+    /// zero-mean +-1 sigma alternation.
+    fn after_jump(step: Vector3<f64>, k: u64) -> ExtrinsicInnovation<f64> {
+        let info = INFO * 1e-2;
+        let noise = if k % 2 == 0 { 1.0 } else { -1.0 } * info.sqrt();
+        ExtrinsicInnovation {
+            rotation_info: Matrix3::identity() * info,
+            rotation_score: step * info + Vector3::new(noise, -noise, noise),
+            ..innovation(Vector3::zeros())
+        }
+    }
+
+    #[test]
+    fn a_jump_confirmed_by_the_increments_after_it_fires_with_the_jump() {
+        let config = HealthConfig::default();
+        let mut m = HealthMonitor::<f64, 1>::new(config);
+        let knock = Vector3::new(0.0, 1.0, -1.0).normalize() * 1f64.to_radians();
+        assert!(m
+            .record(SENSOR, 0, 50.0, 6, false, Some(&jump_increment(knock)))
+            .is_none());
+        assert!(
+            m.holds_out(SENSOR),
+            "a pending candidate holds its sensor out"
+        );
+        // Per increment the log-likelihood ratio gains |delta|^2 a / 2 = 0.15 on average
+        // ((0.0175 rad)^2 * 1e3 / 2), so ln(1 / 1e-4) = 9.2 takes ~60 increments; the 3-dof
+        // GLR with forgetting (threshold 21.1 at 99.99 %, ~66-update memory) saturates near
+        // 0.3 * 33 = 10 and never fires.
+        let fired = (1..100u64)
+            .find_map(|k| {
+                m.record(SENSOR, k, 6.0, 6, true, Some(&after_jump(knock, k)))
+                    .map(|e| (k, e))
+            })
+            .expect("a confirmed jump must fire");
+        let (k, event) = fired;
+        assert!((40..90).contains(&k), "fired at {k}");
+        let HealthEvent::RotationStep {
+            step,
+            step_covariance,
+            statistic,
+            ..
+        } = event
+        else {
+            panic!("{event:?}");
+        };
+        assert!(statistic > chi2::quantile::<f64>(1, config.step_confidence));
+        // The step is the jump's estimate, with the jump's covariance.
+        assert!((step - knock).norm() < 1e-12, "{step:?}");
+        assert!((step_covariance - Matrix3::identity() / INFO).norm() < 1e-12);
+    }
+
+    #[test]
+    fn a_glitch_the_increments_after_it_do_not_confirm_raises_no_alarm() {
+        let mut m = HealthMonitor::<f64, 1>::new(HealthConfig::default());
+        let glitch = Vector3::new(0.0, 1.0, -1.0).normalize() * 1f64.to_radians();
+        assert!(m
+            .record(SENSOR, 0, 50.0, 6, false, Some(&jump_increment(glitch)))
+            .is_none());
+        // Zero-mean afterwards, or the persistent signature of the opposite step. The
+        // log-likelihood ratio falls by 0.15 per increment (+-0.8 from the alternation):
+        // below ln(0.01) = -4.6 after 30-35, when the candidate is dropped and the sensor
+        // fused again.
+        for k in 1..150u64 {
+            let inn = after_jump(Vector3::zeros(), k);
+            assert!(
+                m.record(SENSOR, k, 6.0, 6, true, Some(&inn)).is_none(),
+                "{k}"
+            );
+            if !(25..=35).contains(&k) {
+                assert_eq!(m.holds_out(SENSOR), k < 25, "{k}");
+            }
+        }
+        let mut m = HealthMonitor::<f64, 1>::new(HealthConfig::default());
+        m.record(SENSOR, 0, 50.0, 6, false, Some(&jump_increment(glitch)));
+        for k in 1..90u64 {
+            let inn = after_jump(-glitch, k);
+            assert!(
+                m.record(SENSOR, k, 6.0, 6, true, Some(&inn)).is_none(),
+                "{k}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_jump_below_the_test_or_the_smallest_step_is_no_candidate() {
+        let config = HealthConfig::default();
+        // 4.7 sigma per axis on two axes (chi-square 45 > 16.3) but 0.12 deg long
+        // (information 1e7 per axis), and 2 sigma (chi-square 8) but 1 deg long.
+        let precise = ExtrinsicInnovation {
+            jump_info: Matrix3::identity() * 1e7,
+            jump_score: Vector3::new(0.0, 1.0, 1.0) * 1.5e4,
+            ..innovation(Vector3::zeros())
+        };
+        let vague = ExtrinsicInnovation {
+            jump_info: Matrix3::identity() * 8e3,
+            jump_score: Vector3::new(0.0, 1.0, 1.0).normalize() * 1f64.to_radians() * 8e3,
+            ..innovation(Vector3::zeros())
+        };
+        for jump in [precise, vague] {
+            let mut m = HealthMonitor::<f64, 1>::new(config);
+            m.record(SENSOR, 0, 50.0, 6, false, Some(&jump));
+            assert!(m.sensor(SENSOR).unwrap().jump.is_none(), "{jump:?}");
         }
     }
 

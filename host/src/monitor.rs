@@ -149,6 +149,25 @@ pub struct NisPoint {
     pub rotation_glr: Option<GlrPoint>,
     /// The translation step detector's GLR test after this update.
     pub translation_glr: Option<GlrPoint>,
+    /// The pending knock candidate after this update, if any.
+    pub jump: Option<JumpPoint>,
+}
+
+/// A knock candidate (an increment whose rotation residual reads as the mounting moving
+/// inside it) and the test of the increments since (docs/monitor.md, "The method").
+#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+pub struct JumpPoint {
+    /// The jump's statistic (chi-square(3) under "no change").
+    pub statistic: f64,
+    /// The jump, deg.
+    pub step_deg: f64,
+    /// The confirmation statistic (chi-square(1)), negative when the increments since point
+    /// against the jump.
+    pub confirmation: f64,
+    /// The threshold the confirmation must exceed.
+    pub threshold: f64,
+    /// Increments since the candidate.
+    pub updates: u32,
 }
 
 /// A step detector's GLR test at one update (docs/monitor.md, "False alarms").

@@ -15,7 +15,7 @@ use crate::update::{
     relative_pose, zero_velocity, Gain, Measurement, SparseJacobian, UpdateKind, UpdateReport,
 };
 use crate::Error;
-use nalgebra::{SMatrix, SVector, Vector3};
+use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
 impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> Ekf<T, S, C, N, F> {
     /// Fuses a relative pose of sensor `s` (eq. 3.19-3.21). Its start must be the sensor's
@@ -125,6 +125,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
             meas.stamp_to_ns,
             &measurement,
             Some(&lin.extrinsic),
+            Some(&lin.extrinsic_end_rotation),
         )
     }
 
@@ -158,6 +159,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
             sample.stamp_ns,
             &measurement,
             None,
+            None,
         )
     }
 
@@ -171,17 +173,24 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         stamp_ns: u64,
         meas: &Measurement<T, M, L>,
         extrinsic_jacobian: Option<&SMatrix<T, M, 6>>,
+        end_rotation: Option<&SMatrix<T, M, 3>>,
     ) -> Result<UpdateReport<T>, Error> {
         self.flush_transition();
         let (holds, count) = self.holds();
         let threshold = chi2::quantile::<T>(M, self.config.gate);
         let mut gain = Gain::empty();
         gain.compute_into(&self.cov, meas, threshold, &holds[..count])?;
+        // A sensor with a pending knock candidate is tested, not fused (`health` module).
+        let held_out = sensor.is_some_and(|s| self.health.holds_out(s));
+        if held_out {
+            gain.accepted = false;
+        }
         self.correct(&gain)?;
         let innovation = extrinsic_jacobian.map(|h_e| {
             extrinsic_innovation(
                 &h_e.fixed_columns::<3>(0).clone_owned(),
                 &h_e.fixed_columns::<3>(3).clone_owned(),
+                end_rotation,
                 &gain.innovation_inverse,
                 &gain.weighted_residual,
             )
@@ -391,19 +400,30 @@ struct Corrected<T: Scalar, const S: usize, const C: usize, const F: usize> {
 
 /// The innovation of one update projected on a sensor's extrinsic (for the step detector):
 /// `H_e^T S^-1 H_e` and `H_e^T S^-1 r` for the rotation and the translation block of
-/// `H_e = [h_rotation h_translation]` (the off-diagonal blocks are not needed).
+/// `H_e = [h_rotation h_translation]` (the off-diagonal blocks are not needed), and the same
+/// for `E = end_rotation`, the Jacobian w.r.t. a rotation of the mounting at an increment's
+/// end stamp only (zero where the measurement is not an increment).
 pub(super) fn extrinsic_innovation<T: Scalar, const M: usize>(
     h_rotation: &SMatrix<T, M, 3>,
     h_translation: &SMatrix<T, M, 3>,
+    end_rotation: Option<&SMatrix<T, M, 3>>,
     innovation_inverse: &SMatrix<T, M, M>,
     weighted_residual: &SVector<T, M>,
 ) -> ExtrinsicInnovation<T> {
-    let rotation_t = h_rotation.transpose();
-    let translation_t = h_translation.transpose();
+    let project = |h: &SMatrix<T, M, 3>| {
+        let ht = h.transpose();
+        (ht * innovation_inverse * h, ht * weighted_residual)
+    };
+    let (rotation_info, rotation_score) = project(h_rotation);
+    let (translation_info, translation_score) = project(h_translation);
+    let (jump_info, jump_score) =
+        end_rotation.map_or((Matrix3::zeros(), Vector3::zeros()), project);
     ExtrinsicInnovation {
-        rotation_info: rotation_t * innovation_inverse * h_rotation,
-        rotation_score: rotation_t * weighted_residual,
-        translation_info: translation_t * innovation_inverse * h_translation,
-        translation_score: translation_t * weighted_residual,
+        rotation_info,
+        rotation_score,
+        translation_info,
+        translation_score,
+        jump_info,
+        jump_score,
     }
 }

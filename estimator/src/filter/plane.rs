@@ -67,6 +67,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
             meas.stamp_ns,
             &measurement,
             Some(&extrinsic),
+            None,
         )
     }
 

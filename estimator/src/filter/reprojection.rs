@@ -341,6 +341,7 @@ impl<T: Scalar> Image<T> {
         extrinsic_innovation(
             &u.fixed_columns::<3>(EXTRINSIC_ROTATION_AT).clone_owned(),
             &u.fixed_columns::<3>(EXTRINSIC_TRANSLATION_AT).clone_owned(),
+            None,
             &gain.innovation_inverse,
             &gain.weighted_residual,
         )
@@ -354,5 +355,7 @@ fn no_innovation<T: Scalar>() -> ExtrinsicInnovation<T> {
         rotation_score: Vector3::zeros(),
         translation_info: Matrix3::zeros(),
         translation_score: Vector3::zeros(),
+        jump_info: Matrix3::zeros(),
+        jump_score: Vector3::zeros(),
     }
 }

@@ -71,6 +71,10 @@ pub struct RelativePoseJacobians<T: Scalar> {
     pub clone_to: SMatrix<T, 6, 6>,
     /// w.r.t. the extrinsic `[dtheta_I_S, dp_I_S]`.
     pub extrinsic: SMatrix<T, 6, 6>,
+    /// w.r.t. a rotation of the mounting at the end stamp only, `R_I_S Exp(dtheta)` there
+    /// and `R_I_S` at the start: the signature of a knock inside the increment (the health
+    /// monitor's jump test). `[I; 0]`: the rotation residual is that rotation.
+    pub extrinsic_end_rotation: SMatrix<T, 6, 3>,
 }
 
 /// The predicted motion `T_Si_Sj` of the sensor.
@@ -141,11 +145,16 @@ pub fn linearize<T: Scalar>(
         .fixed_view_mut::<3, 3>(3, 3)
         .copy_from(&(r_ct * (r_it * r_j - eye)));
 
+    let mut extrinsic_end_rotation = SMatrix::<T, 6, 3>::zeros();
+    extrinsic_end_rotation
+        .fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&eye);
     RelativePoseJacobians {
         residual,
         clone_from,
         clone_to,
         extrinsic,
+        extrinsic_end_rotation,
     }
 }
 
@@ -208,6 +217,28 @@ mod tests {
             .fixed_view_mut::<6, 6>(0, 12)
             .copy_from(&lin.extrinsic);
         assert_mat_close(&analytic, &numeric, 1e-7);
+    }
+
+    #[test]
+    fn end_rotation_jacobian_matches_central_differences() {
+        // The mounting rotated by d at the end stamp only: T_I_S^-1 T_Ii^-1 T_Ij T_I_S'.
+        let (ii, ij, ext) = poses();
+        let lin = linearize(&ii, &ij, &ext, &predict(&ii, &ij, &ext));
+        let nominal = predict(&ii, &ij, &ext);
+        let numeric = central_diff::<6, 3>(|d| {
+            let moved = ext
+                .inverse()
+                .compose(&ii.inverse())
+                .compose(&ij)
+                .compose(&ext.boxplus(&d, &Vector3::zeros()));
+            let mut out = Vector6::zeros();
+            out.fixed_rows_mut::<3>(0)
+                .copy_from(&log(&(nominal.rotation.inverse() * moved.rotation)));
+            out.fixed_rows_mut::<3>(3)
+                .copy_from(&(moved.translation - nominal.translation));
+            out
+        });
+        assert_mat_close(&lin.extrinsic_end_rotation, &numeric, 1e-7);
     }
 
     #[test]

@@ -13,8 +13,8 @@ use nalgebra::Matrix3;
 
 use super::start::{self, ExtrinsicSigmas, FilterPrior, Start};
 use super::{
-    Alarm, ExcitationPoint, GlrPoint, MonitorError, MonitorInput, MonitorReport, NisPoint,
-    SensorReport, SENSOR_NAMES,
+    Alarm, ExcitationPoint, GlrPoint, JumpPoint, MonitorError, MonitorInput, MonitorReport,
+    NisPoint, SensorReport, SENSOR_NAMES,
 };
 use crate::calibrate::convert;
 use crate::calibrate::driver::nominal_period_ns;
@@ -345,6 +345,15 @@ impl MonitorRun {
             window_nis_per_dof: health.map_or(0.0, |h| h.windowed_nis_per_dof()),
             rotation_glr,
             translation_glr,
+            jump: health.and_then(|h| h.jump_test()).map(
+                |(statistic, step, confirmation, updates)| JumpPoint {
+                    statistic,
+                    step_deg: step.norm().to_degrees(),
+                    confirmation,
+                    threshold: chi2::quantile(1, config.step_confidence),
+                    updates,
+                },
+            ),
         });
         if let Some(event) = &r.event {
             self.alarms.push(step_alarm(f.t_s, event));
