@@ -14,9 +14,15 @@ pub(super) const T0: u64 = 1_700_000_000_000_000_000;
 
 /// A filter spinning and accelerating with the given time-offset prior.
 fn moving_filter(time_offset: f64) -> PoseImuEkf<f64> {
-    let mut init = InitialState::<f64, 1>::at_rest(Vector3::new(0.0, 0.0, 9.81))
-        .expect("gravity")
-        .with_time_offset(SOLE_SENSOR, time_offset, 0.01);
+    moving_filter_from(
+        InitialState::<f64, 1>::at_rest(Vector3::new(0.0, 0.0, 9.81))
+            .expect("gravity")
+            .with_time_offset(SOLE_SENSOR, time_offset, 0.01),
+    )
+}
+
+/// A filter from `init`, spinning and accelerating.
+fn moving_filter_from(mut init: InitialState<f64, 1>) -> PoseImuEkf<f64> {
     init.imu.velocity = Vector3::new(0.7, -0.3, 0.2);
     init.imu.rotation = UnitQuaternion::from_euler_angles(0.3, -0.2, 1.0);
     let mut ekf = PoseImuEkf::new(&FilterConfig::new(ImuNoise::vn300()), &init).expect("prior");
@@ -262,22 +268,11 @@ type Reports = heapless::Vec<crate::update::UpdateReport<f64>, 32>;
 /// A spinning filter (as `moving_filter`) whose extrinsic has converged: its step detectors
 /// are armed from the start.
 fn converged_moving_filter() -> PoseImuEkf<f64> {
-    let mut init = InitialState::<f64, 1>::at_rest(Vector3::new(0.0, 0.0, 9.81))
-        .expect("gravity")
-        .with_extrinsic(SOLE_SENSOR, Pose::identity(), 1e-3, 1e-3);
-    init.imu.velocity = Vector3::new(0.7, -0.3, 0.2);
-    init.imu.rotation = UnitQuaternion::from_euler_angles(0.3, -0.2, 1.0);
-    let mut ekf = PoseImuEkf::new(&FilterConfig::new(ImuNoise::vn300()), &init).expect("prior");
-    for k in 0..=96u64 {
-        ekf.propagate(&ImuSample {
-            stamp_ns: T0 + k * 2_500_000,
-            gyro: Vector3::new(1.2, -0.8, 0.5),
-            accel: Vector3::new(0.5, 1.0, 9.0),
-        })
-        .expect("sample");
-    }
-    look_ahead(&mut ekf);
-    ekf
+    moving_filter_from(
+        InitialState::<f64, 1>::at_rest(Vector3::new(0.0, 0.0, 9.81))
+            .expect("gravity")
+            .with_extrinsic(SOLE_SENSOR, Pose::identity(), 1e-3, 1e-3),
+    )
 }
 
 /// Feeds 10 Hz relative poses of the motion the filter predicts, with pose `k` of the

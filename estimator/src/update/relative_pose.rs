@@ -171,6 +171,13 @@ fn perturbed_prediction(
     let pert = |p: &Pose<f64>, k: usize| p.boxplus(&v(k), &v(k + 3));
     let nominal = predict(t_g_ii, t_g_ij, t_i_s);
     let moved = predict(&pert(t_g_ii, 0), &pert(t_g_ij, 6), &pert(t_i_s, 12));
+    tangent_at(&nominal, &moved)
+}
+
+/// `moved` in the tangent space at `nominal`, in the residual's convention (rotation as a
+/// right perturbation, translation as a difference).
+#[cfg(test)]
+fn tangent_at(nominal: &Pose<f64>, moved: &Pose<f64>) -> Vector6<f64> {
     let mut out = Vector6::zeros();
     out.fixed_rows_mut::<3>(0)
         .copy_from(&log(&(nominal.rotation.inverse() * moved.rotation)));
@@ -231,12 +238,7 @@ mod tests {
                 .compose(&ii.inverse())
                 .compose(&ij)
                 .compose(&ext.boxplus(&d, &Vector3::zeros()));
-            let mut out = Vector6::zeros();
-            out.fixed_rows_mut::<3>(0)
-                .copy_from(&log(&(nominal.rotation.inverse() * moved.rotation)));
-            out.fixed_rows_mut::<3>(3)
-                .copy_from(&(moved.translation - nominal.translation));
-            out
+            tangent_at(&nominal, &moved)
         });
         assert_mat_close(&lin.extrinsic_end_rotation, &numeric, 1e-7);
     }
