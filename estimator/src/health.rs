@@ -583,15 +583,14 @@ impl<T: Scalar, const S: usize> HealthMonitor<T, S> {
             .add(&inn.translation_info, &inn.translation_score, l);
         let confidence = config.step_confidence;
         let min = config.step_min_updates;
-        let jump = health.jump_step(inn, &config);
-        let rotation = health
-            .rotation
-            .fire(
+        // A confirmed jump first: its step estimate is one increment's direct measurement.
+        let rotation = health.jump_step(inn, &config).or_else(|| {
+            health.rotation.fire(
                 min,
                 confidence,
                 (config.min_rotation_step, config.resolvable_step_factor),
             )
-            .or(jump);
+        });
         let event = if let Some((statistic, step, step_covariance)) = rotation {
             Some(HealthEvent::RotationStep {
                 sensor: s,
