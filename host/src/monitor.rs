@@ -204,10 +204,13 @@ pub struct SensorReport {
     pub excitation: Vec<ExcitationPoint>,
     /// Per-DoF observability at the end of the observability run.
     pub observability: Vec<DofObservability>,
-    /// Updates fused / rejected by the gate / skipped (with reasons in `skipped`).
+    /// Updates fused / rejected by the gate / held out / skipped (with reasons in `skipped`).
     pub accepted: usize,
     /// Rejected by the gate.
     pub rejected: usize,
+    /// Tested but not fused because a knock candidate of the sensor was pending
+    /// (`HealthMonitor::holds_out`).
+    pub held_out: usize,
     /// Measurements that could not be used, with the reason.
     pub skipped: Vec<String>,
     /// The monitor's final estimate (in the report as `final_*`).

@@ -70,6 +70,8 @@ struct KnockOutcome {
     latency: f64,
     /// Alarms on the other sensor.
     cross: usize,
+    /// Updates held out of the filter while a knock candidate was tested (pose0, pose1).
+    held_out: [usize; 2],
 }
 
 /// One knocked run, printed.
@@ -87,14 +89,17 @@ fn knocked(seed: u64, target: KnockTarget) -> KnockOutcome {
     let latency = first.t_s - KNOCK_AT_S;
     let turned = turned_deg(&sim, KNOCK_AT_S, first.t_s);
     println!(
-        "seed {seed}: knock on {name}: first alarm {} {} at +{latency:.2} s (turned {turned:.0} deg); alarms {alarms:?}",
-        first.sensor, first.kind
+        "seed {seed}: knock on {name}: first alarm {} {} at +{latency:.2} s (turned {turned:.0} deg); alarms {alarms:?}; held out {:?}",
+        first.sensor,
+        first.kind,
+        r.sensors.iter().map(|s| s.held_out).collect::<Vec<_>>()
     );
     KnockOutcome {
         seed,
         right_sensor: first.sensor == name,
         latency,
         cross: r.alarms.iter().filter(|a| a.sensor == other).count(),
+        held_out: [0, 1].map(|k| r.sensors[k].held_out),
     }
 }
 
@@ -142,6 +147,8 @@ fn camera_knock_is_flagged_on_the_camera_and_unobservable_dofs_are_named() {
     let o = knocked(120, KnockTarget::Pose1);
     check_knock(&o);
     assert_eq!(o.cross, 0, "the LiDAR was flagged too");
+    // The knock's own increment made a candidate: the camera was held out until confirmed.
+    assert!(o.held_out[0] == 0 && o.held_out[1] > 0, "{:?}", o.held_out);
     let (_, r) = run(121, KnockTarget::None);
     assert!(r.alarms.is_empty(), "false alarm: {:?}", r.alarms);
     check_unobservable_named(&r);

@@ -157,10 +157,11 @@ pub fn print_report(r: &MonitorReport) {
     }
     for s in &r.sensors {
         println!(
-            "{}: {} updates fused, {} rejected, {} skipped; final estimate moved {:.3} deg, {:.1} mm from the calibration of record",
+            "{}: {} updates fused, {} rejected by the gate, {} held out while a knock candidate was tested, {} skipped; final estimate moved {:.3} deg, {:.1} mm from the calibration of record",
             s.name,
             s.accepted,
             s.rejected,
+            s.held_out,
             s.skipped.len(),
             s.rotation_change_deg,
             s.translation_change_m * 1e3

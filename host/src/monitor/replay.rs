@@ -210,6 +210,14 @@ fn fuse_next(ekf: &mut MonitorEkf<f64>, s: SensorId, feed: &mut Feed) -> Option<
     }
 }
 
+/// Updates not fused because a knock candidate was pending when they came (the update
+/// before left one: `NisPoint::jump`).
+fn held_out(nis: &[NisPoint]) -> usize {
+    nis.windows(2)
+        .filter(|w| w[0].jump.is_some() && !w[1].accepted)
+        .count()
+}
+
 /// The due step (of either sensor) with the earliest IMU time.
 fn earliest_due(ekf: &MonitorEkf<f64>, feeds: &[Feed; 2]) -> Option<SensorId> {
     MonitorEkf::<f64>::sensor_ids()
@@ -441,10 +449,12 @@ pub fn monitor(
             &ekf.extrinsic_covariance(s),
         );
         let prior = &input.prior[s.index()].transform;
+        let held_out = held_out(&nis);
         sensors.push(SensorReport {
             name: SENSOR_NAMES[s.index()],
             accepted: nis.iter().filter(|p| p.accepted).count(),
-            rejected: nis.iter().filter(|p| !p.accepted).count(),
+            rejected: nis.iter().filter(|p| !p.accepted).count() - held_out,
+            held_out,
             nis,
             excitation,
             observability,
