@@ -132,7 +132,11 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
     /// A filter at the prior `init`; time starts at the first IMU sample.
     pub fn new(config: &FilterConfig<T>, init: &InitialState<T, S>) -> Result<Self, Error> {
         let () = Self::LAYOUT_OK;
-        if !init.is_valid() || !config.imu_noise.is_valid() || (config.constrain_yaw && F > 0) {
+        if !init.is_valid()
+            || !config.imu_noise.is_valid()
+            || !config.health.is_valid()
+            || (config.constrain_yaw && F > 0)
+        {
             return Err(Error::InvalidConfig);
         }
         let mut cov = SMatrix::<T, N, N>::zeros();

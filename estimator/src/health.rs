@@ -92,6 +92,22 @@ pub struct HealthConfig<T: Scalar> {
     pub jump_miss: T,
 }
 
+impl<T: Scalar> HealthConfig<T> {
+    /// True when the settings can be used: forgetting in (0, 1], the sequential test's
+    /// miss probability in (0, 1), the smallest steps and the factors positive.
+    pub fn is_valid(&self) -> bool {
+        let positive = |x: T| x > T::zero();
+        positive(self.step_forgetting)
+            && self.step_forgetting <= T::one()
+            && positive(self.jump_miss)
+            && self.jump_miss < T::one()
+            && positive(self.min_rotation_step)
+            && positive(self.min_translation_step)
+            && positive(self.resolvable_step_factor)
+            && positive(self.rearm_factor)
+    }
+}
+
 impl<T: Scalar> Default for HealthConfig<T> {
     fn default() -> Self {
         Self {
@@ -130,7 +146,9 @@ pub enum HealthEvent<T: Scalar> {
         sensor: SensorId,
         /// Stamp of the update that triggered it, ns.
         stamp_ns: u64,
-        /// GLR statistic (chi-square(3) under "no change").
+        /// GLR statistic (chi-square with as many dof as directions tested under "no
+        /// change"), or, for a confirmed knock candidate, `2 L` (twice the sequential
+        /// test's log-likelihood ratio).
         statistic: T,
         /// Estimated step (right perturbation of `R_I_S`), rad.
         step: Vector3<T>,
@@ -300,8 +318,10 @@ struct JumpCandidate<T: Scalar> {
     covariance: Matrix3<T>,
     /// `sum u^T H_R^T S^-1 r` over the increments since.
     score: T,
-    /// `sum u^T H_R^T S^-1 H_R u`: the score's variance under "no change".
-    info: T,
+    /// `A = sum H_R^T S^-1 H_R` over the increments since.
+    info: Matrix3<T>,
+    /// The extrinsic rotation covariance at the latest of them.
+    extrinsic_covariance: Matrix3<T>,
     /// Increments seen since.
     updates: u32,
 }
@@ -318,7 +338,8 @@ impl<T: Scalar> JumpCandidate<T> {
             step,
             covariance: chol.inverse(),
             score: T::zero(),
-            info: T::zero(),
+            info: Matrix3::zeros(),
+            extrinsic_covariance: inn.rotation_covariance,
             updates: 0,
         })
     }
@@ -327,17 +348,31 @@ impl<T: Scalar> JumpCandidate<T> {
     /// the log-likelihood ratio of "the mounting moved by `step`" against "no change" over
     /// the increments since.
     fn confirm(&mut self, inn: &ExtrinsicInnovation<T>) -> T {
-        let length = self.step.norm();
-        let u = self.step / length;
-        self.score += u.dot(&inn.rotation_score);
-        self.info += u.dot(&(inn.rotation_info * u));
+        self.score += self.direction().dot(&inn.rotation_score);
+        self.info += inn.rotation_info;
+        self.extrinsic_covariance = inn.rotation_covariance;
         self.updates = self.updates.saturating_add(1);
         self.log_likelihood_ratio()
     }
 
+    fn direction(&self) -> Vector3<T> {
+        self.step / self.step.norm()
+    }
+
+    /// `L = mu (s - mu / 2) / v`: `s ~ N(mu, v)` under the jump, `N(0, v)` without, with
+    /// `mu = |step| a`, `a = u^T A u`, and `v = a + (A u)^T P (A u)`: the held-out residuals
+    /// share the extrinsic estimate's error (covariance `P`), which no update corrects
+    /// while the sensor is held out.
     fn log_likelihood_ratio(&self) -> T {
-        let length = self.step.norm();
-        length * self.score - length * length * self.info * T::lit(0.5)
+        let u = self.direction();
+        let au = self.info * u;
+        let a = u.dot(&au);
+        let v = a + au.dot(&(self.extrinsic_covariance * au));
+        if v <= T::zero() {
+            return T::zero();
+        }
+        let mu = self.step.norm() * a;
+        mu * (self.score - mu * T::lit(0.5)) / v
     }
 }
 
@@ -426,26 +461,30 @@ impl<T: Scalar> SensorHealth<T> {
         }
     }
 
-    /// The jump-anchored detector on one increment: a new candidate (which its own
-    /// increment cannot confirm), or the pending one's sequential test. `(2 L, step,
-    /// covariance)` when the increments since confirm it (`L > ln(1 / alpha)`, `alpha = 1 -
-    /// step_confidence`); the candidate is dropped when they refute it (`L < ln(beta)`) or
-    /// after `jump_window_updates`.
+    /// The jump-anchored detector on one increment (`fused`: whether the filter applied
+    /// it). An unfused increment whose rotation residual reads as a jump becomes the
+    /// candidate unless a stronger one is pending; every other increment feeds the pending
+    /// candidate's sequential test. `(2 L, step, covariance)` when the increments since
+    /// confirm it (`L > ln(1 / alpha)`, `alpha = 1 - step_confidence`); the candidate is
+    /// dropped when they refute it (`L < ln(beta)`) or after `jump_window_updates`.
     fn jump_step(
         &mut self,
         inn: &ExtrinsicInnovation<T>,
+        fused: bool,
         config: &HealthConfig<T>,
     ) -> Option<(T, Vector3<T>, Matrix3<T>)> {
         if config.jump_window_updates == 0 {
             return None;
         }
         let threshold = chi2::quantile::<T>(3, config.jump_confidence);
-        if let Some(fresh) = JumpCandidate::from_increment(inn, threshold, config.min_rotation_step)
-        {
-            if self.jump.is_none_or(|c| c.statistic <= fresh.statistic) {
+        let fresh = (!fused)
+            .then(|| JumpCandidate::from_increment(inn, threshold, config.min_rotation_step))
+            .flatten();
+        if let Some(fresh) = fresh {
+            if self.jump.is_none_or(|c| c.statistic < fresh.statistic) {
                 self.jump = Some(fresh);
+                return None;
             }
-            return None;
         }
         let candidate = self.jump.as_mut()?;
         let llr = candidate.confirm(inn);
@@ -494,6 +533,9 @@ pub struct ExtrinsicInnovation<T: Scalar> {
     pub jump_info: Matrix3<T>,
     /// `E^T S^-1 r`.
     pub jump_score: Vector3<T>,
+    /// The covariance of the extrinsic rotation estimate when the update was computed: the
+    /// error every held-out residual shares (the sequential test's variance includes it).
+    pub rotation_covariance: Matrix3<T>,
 }
 
 /// The monitor for `S` sensors.
@@ -573,7 +615,11 @@ impl<T: Scalar, const S: usize> HealthMonitor<T, S> {
             health.rejected = health.rejected.saturating_add(1);
         }
         health.record_nis(nis, dof, &config);
-        let inn = innovation?;
+        let Some(inn) = innovation else {
+            // Disarmed: no candidate may stay pending (it would hold the sensor out for good).
+            health.jump = None;
+            return None;
+        };
         let l = config.step_forgetting;
         health
             .rotation
@@ -584,7 +630,7 @@ impl<T: Scalar, const S: usize> HealthMonitor<T, S> {
         let confidence = config.step_confidence;
         let min = config.step_min_updates;
         // A confirmed jump first: its step estimate is one increment's direct measurement.
-        let rotation = health.jump_step(inn, &config).or_else(|| {
+        let rotation = health.jump_step(inn, accepted, &config).or_else(|| {
             health.rotation.fire(
                 min,
                 confidence,
@@ -621,10 +667,13 @@ impl<T: Scalar, const S: usize> HealthMonitor<T, S> {
             health.steps_detected = health.steps_detected.saturating_add(1);
             health.last_event = event;
             // The filter's reaction to a step also settles what the other sensors saw of
-            // it through the shared IMU state: every detector starts again.
+            // it through the shared IMU state: every GLR detector starts again. A knock
+            // candidate rests on its own sensor's increment and stays, but the event's.
             for h in self.sensors.iter_mut() {
                 h.rotation = StepDetector::new();
                 h.translation = StepDetector::new();
+            }
+            if let Some(h) = self.sensors.get_mut(s.index()) {
                 h.jump = None;
             }
         }
@@ -667,6 +716,7 @@ mod tests {
             translation_score: Vector3::zeros(),
             jump_info: Matrix3::zeros(),
             jump_score: Vector3::zeros(),
+            rotation_covariance: Matrix3::zeros(),
         }
     }
 
@@ -709,6 +759,7 @@ mod tests {
                 translation_score: Vector3::zeros(),
                 jump_info: Matrix3::zeros(),
                 jump_score: Vector3::zeros(),
+                rotation_covariance: Matrix3::zeros(),
             };
             assert!(
                 m.record(SENSOR, k, 3.0, 6, true, Some(&inn)).is_none(),
@@ -736,6 +787,7 @@ mod tests {
                 translation_score: Vector3::zeros(),
                 jump_info: Matrix3::zeros(),
                 jump_score: Vector3::zeros(),
+                rotation_covariance: Matrix3::zeros(),
             };
             assert!(
                 m.record(SENSOR, k, 3.0, 6, true, Some(&inn)).is_none(),
@@ -858,6 +910,95 @@ mod tests {
             m.record(SENSOR, 0, 50.0, 6, false, Some(&jump));
             assert!(m.sensor(SENSOR).unwrap().jump.is_none(), "{jump:?}");
         }
+    }
+
+    /// The knock of `a_jump_confirmed_by_the_increments_after_it_fires_with_the_jump`: the
+    /// update index it fires at, if any, after `setup` ran on the monitor after the jump.
+    fn confirmed_at(
+        after: impl Fn(Vector3<f64>, u64) -> ExtrinsicInnovation<f64>,
+        setup: impl Fn(&mut HealthMonitor<f64, 2>),
+    ) -> Option<u64> {
+        let mut m = HealthMonitor::<f64, 2>::new(HealthConfig::default());
+        let knock = Vector3::new(0.0, 1.0, -1.0).normalize() * 1f64.to_radians();
+        m.record(SENSOR, 0, 50.0, 6, false, Some(&jump_increment(knock)));
+        setup(&mut m);
+        (1..200u64).find(|k| {
+            m.record(SENSOR, *k, 6.0, 6, false, Some(&after(knock, *k)))
+                .is_some()
+        })
+    }
+
+    #[test]
+    fn later_increments_that_are_candidates_themselves_still_confirm_the_first() {
+        // A large knock with large later increments: each later residual is a weaker jump
+        // of its own (0.9 of the first here: chi-square 24.7 against 30.5, both above the
+        // 21.1 of a candidate) and must feed the test, not stall it.
+        let plain = confirmed_at(after_jump, |_| ()).expect("plain");
+        let weaker = confirmed_at(
+            |knock, k| ExtrinsicInnovation {
+                jump_info: Matrix3::identity() * INFO,
+                jump_score: knock * 0.9 * INFO,
+                ..after_jump(knock, k)
+            },
+            |_| (),
+        )
+        .expect("later candidates must feed the test");
+        assert_eq!(plain, weaker);
+    }
+
+    #[test]
+    fn the_extrinsic_uncertainty_shared_by_the_held_out_residuals_slows_the_test() {
+        // With the extrinsic estimate's own error (0.3 deg sigma) shared by every held-out
+        // residual, the same evidence counts for less.
+        let plain = confirmed_at(after_jump, |_| ()).expect("plain");
+        let sigma = 0.3f64.to_radians();
+        let shared = confirmed_at(
+            |knock, k| ExtrinsicInnovation {
+                rotation_covariance: Matrix3::identity() * sigma * sigma,
+                ..after_jump(knock, k)
+            },
+            |_| (),
+        );
+        assert!(shared.is_none_or(|k| k > plain), "{shared:?} vs {plain}");
+    }
+
+    #[test]
+    fn a_candidate_survives_another_sensors_event_but_not_its_own_disarming() {
+        let other = SensorId::at::<1, 2>();
+        // Another sensor's step resets the GLR detectors, not this sensor's candidate.
+        let plain = confirmed_at(after_jump, |_| ()).expect("plain");
+        let kept = confirmed_at(after_jump, |m| {
+            let big = innovation(Vector3::new(0.05, 0.0, 0.0));
+            assert!((0..40u64).any(|k| m.record(other, k, 6.0, 6, true, Some(&big)).is_some()));
+            assert!(m.holds_out(SENSOR));
+        });
+        assert_eq!(kept, Some(plain));
+        // A disarmed update (no innovation) drops it: it would hold the sensor out for good.
+        let mut m = HealthMonitor::<f64, 1>::new(HealthConfig::default());
+        let knock = Vector3::new(0.0, 1.0, 0.0) * 1f64.to_radians();
+        m.record(SENSOR, 0, 50.0, 6, false, Some(&jump_increment(knock)));
+        assert!(m.holds_out(SENSOR));
+        m.record(SENSOR, 1, 6.0, 6, false, None);
+        assert!(!m.holds_out(SENSOR));
+    }
+
+    #[test]
+    fn a_fused_increment_is_no_candidate_and_bad_settings_are_refused() {
+        let mut m = HealthMonitor::<f64, 1>::new(HealthConfig::default());
+        let knock = Vector3::new(0.0, 1.0, 0.0) * 1f64.to_radians();
+        m.record(SENSOR, 0, 20.0, 6, true, Some(&jump_increment(knock)));
+        assert!(
+            !m.holds_out(SENSOR),
+            "a fused increment was absorbed, not held"
+        );
+        for jump_miss in [0.0, 1.0, -0.1, f64::NAN] {
+            let c = HealthConfig {
+                jump_miss,
+                ..HealthConfig::default()
+            };
+            assert!(!c.is_valid(), "{jump_miss}");
+        }
+        assert!(HealthConfig::<f32>::default().is_valid());
     }
 
     #[test]

@@ -44,8 +44,12 @@ pub struct UpdateReport<T: Scalar> {
     pub nis: T,
     /// Gate threshold the NIS was compared with.
     pub threshold: T,
-    /// False when the gate rejected the measurement (state then untouched by it).
+    /// False when the gate rejected the measurement or it was held out (state then
+    /// untouched by it).
     pub accepted: bool,
+    /// Not fused because a knock candidate of its sensor was pending (the health monitor's
+    /// jump-anchored detector): tested, not gated out. Implies `!accepted`.
+    pub held_out: bool,
     /// A health event this update triggered (e.g. a detected extrinsic step).
     pub event: Option<crate::health::HealthEvent<T>>,
 }

@@ -140,8 +140,10 @@ pub struct NisPoint {
     pub nis_per_dof: f64,
     /// The gate / dof (99.9 % chi-square).
     pub gate_per_dof: f64,
-    /// Fused (inside the gate).
+    /// Fused (inside the gate, not held out).
     pub accepted: bool,
+    /// Held out: a knock candidate of the sensor was pending (`SensorReport::held_out`).
+    pub held_out: bool,
     /// The windowed NIS / dof of the health monitor.
     pub window_nis_per_dof: f64,
     /// The rotation step detector's GLR test after this update (`None` while disarmed or
@@ -161,10 +163,10 @@ pub struct JumpPoint {
     pub statistic: f64,
     /// The jump, deg.
     pub step_deg: f64,
-    /// The confirmation statistic (chi-square(1)), negative when the increments since point
-    /// against the jump.
+    /// The sequential test's log-likelihood ratio of the increments since ("the mounting
+    /// moved by the jump" against "no change"); below `ln(0.01)` the candidate is dropped.
     pub confirmation: f64,
-    /// The threshold the confirmation must exceed.
+    /// The threshold it must exceed, `ln(1 / alpha)` with `alpha = 1 - step_confidence`.
     pub threshold: f64,
     /// Increments since the candidate.
     pub updates: u32,

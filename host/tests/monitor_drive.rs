@@ -240,6 +240,7 @@ fn false_alarms_in_forty_unknocked_drives() {
     let reports = par_map(&seeds, |s| try_run(s, KnockTarget::None).1);
     let mut no_start = 0;
     let mut total = 0;
+    let (mut held, mut updates) = ([0usize; 2], [0usize; 2]);
     for (seed, r) in seeds.iter().zip(&reports) {
         let r = match r {
             Ok(r) => r,
@@ -260,7 +261,15 @@ fn false_alarms_in_forty_unknocked_drives() {
                 .collect::<Vec<_>>()
         );
         total += r.alarms.len();
+        for (k, s) in r.sensors.iter().enumerate() {
+            held[k] += s.held_out;
+            updates[k] += s.nis.len();
+        }
     }
+    println!(
+        "updates held out while a knock candidate was tested: pose0 {} of {}, pose1 {} of {}",
+        held[0], updates[0], held[1], updates[1]
+    );
     println!(
         "false alarms in {} drives: {total}; monitor not started on {no_start}",
         seeds.len()

@@ -185,22 +185,26 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         if held_out {
             gain.accepted = false;
         }
-        self.correct(&gain)?;
-        let innovation = extrinsic_jacobian.map(|h_e| {
-            extrinsic_innovation(
-                &h_e.fixed_columns::<3>(0).clone_owned(),
-                &h_e.fixed_columns::<3>(3).clone_owned(),
-                end_rotation,
-                &gain.innovation_inverse,
-                &gain.weighted_residual,
-            )
+        let innovation = sensor.zip(extrinsic_jacobian).map(|(s, h_e)| {
+            let b = Layout::<S, C>::extrinsic_rotation(s);
+            ExtrinsicInnovation {
+                rotation_covariance: self.cov.fixed_view::<3, 3>(b.idx, b.idx).clone_owned(),
+                ..extrinsic_innovation(
+                    &h_e.fixed_columns::<3>(0).clone_owned(),
+                    &h_e.fixed_columns::<3>(3).clone_owned(),
+                    end_rotation,
+                    &gain.innovation_inverse,
+                    &gain.weighted_residual,
+                )
+            }
         });
+        self.correct(&gain)?;
         Ok(self.record_update(
             kind,
             sensor,
             stamp_ns,
             (gain.nis, M, gain.threshold),
-            gain.accepted,
+            (gain.accepted, held_out),
             innovation.as_ref(),
         ))
     }
@@ -226,7 +230,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         sensor: Option<SensorId>,
         stamp_ns: u64,
         (nis, dof, threshold): (T, usize, T),
-        accepted: bool,
+        (accepted, held_out): (bool, bool),
         innovation: Option<&ExtrinsicInnovation<T>>,
     ) -> UpdateReport<T> {
         let event = sensor.and_then(|s| {
@@ -254,6 +258,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
             nis,
             threshold,
             accepted,
+            held_out,
             event,
         }
     }
@@ -425,5 +430,6 @@ pub(super) fn extrinsic_innovation<T: Scalar, const M: usize>(
         translation_score,
         jump_info,
         jump_score,
+        rotation_covariance: Matrix3::zeros(),
     }
 }

@@ -108,7 +108,7 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
             Some(s),
             meas.stamp_ns,
             outcome.stats,
-            outcome.accepted,
+            (outcome.accepted, false),
             Some(&outcome.innovation),
         ))
     }
@@ -357,5 +357,6 @@ fn no_innovation<T: Scalar>() -> ExtrinsicInnovation<T> {
         translation_score: Vector3::zeros(),
         jump_info: Matrix3::zeros(),
         jump_score: Vector3::zeros(),
+        rotation_covariance: Matrix3::zeros(),
     }
 }

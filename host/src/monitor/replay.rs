@@ -210,14 +210,6 @@ fn fuse_next(ekf: &mut MonitorEkf<f64>, s: SensorId, feed: &mut Feed) -> Option<
     }
 }
 
-/// Updates not fused because a knock candidate was pending when they came (the update
-/// before left one: `NisPoint::jump`).
-fn held_out(nis: &[NisPoint]) -> usize {
-    nis.windows(2)
-        .filter(|w| w[0].jump.is_some() && !w[1].accepted)
-        .count()
-}
-
 /// The due step (of either sensor) with the earliest IMU time.
 fn earliest_due(ekf: &MonitorEkf<f64>, feeds: &[Feed; 2]) -> Option<SensorId> {
     MonitorEkf::<f64>::sensor_ids()
@@ -350,6 +342,7 @@ impl MonitorRun {
             nis_per_dof: r.nis / dof,
             gate_per_dof: r.threshold / dof,
             accepted: r.accepted,
+            held_out: r.held_out,
             window_nis_per_dof: health.map_or(0.0, |h| h.windowed_nis_per_dof()),
             rotation_glr,
             translation_glr,
@@ -358,7 +351,7 @@ impl MonitorRun {
                     statistic,
                     step_deg: step.norm().to_degrees(),
                     confirmation,
-                    threshold: chi2::quantile(1, config.step_confidence),
+                    threshold: -(1.0 - config.step_confidence.probability()).ln(),
                     updates,
                 },
             ),
@@ -449,12 +442,11 @@ pub fn monitor(
             &ekf.extrinsic_covariance(s),
         );
         let prior = &input.prior[s.index()].transform;
-        let held_out = held_out(&nis);
         sensors.push(SensorReport {
             name: SENSOR_NAMES[s.index()],
             accepted: nis.iter().filter(|p| p.accepted).count(),
-            rejected: nis.iter().filter(|p| !p.accepted).count() - held_out,
-            held_out,
+            rejected: nis.iter().filter(|p| !p.accepted && !p.held_out).count(),
+            held_out: nis.iter().filter(|p| p.held_out).count(),
             nis,
             excitation,
             observability,

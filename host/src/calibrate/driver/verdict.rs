@@ -132,7 +132,8 @@ impl Run {
     ) {
         if report.accepted {
             self.accepted += 1;
-        } else {
+        } else if !report.held_out {
+            // Held out while a knock candidate was tested: not a gate rejection.
             self.rejected += 1;
         }
         self.nis_sum += report.nis.to_f64();
