@@ -350,6 +350,8 @@ fn filter_config(c: &Config) -> Result<FilterConfig<f32>, FilterError> {
             fc.health.step_forgetting = m.step_forgetting;
             fc.health.resolvable_step_factor = m.resolvable_step_factor;
             fc.health.step_confidence = confidence(m.step_confidence);
+            // The knock's own increment, as `msreg monitor` (docs/estimator.md).
+            fc.health = fc.health.with_jump_detector();
         }
     }
     Ok(fc)

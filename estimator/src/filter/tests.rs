@@ -25,7 +25,9 @@ fn moving_filter(time_offset: f64) -> PoseImuEkf<f64> {
 fn moving_filter_from(mut init: InitialState<f64, 1>) -> PoseImuEkf<f64> {
     init.imu.velocity = Vector3::new(0.7, -0.3, 0.2);
     init.imu.rotation = UnitQuaternion::from_euler_angles(0.3, -0.2, 1.0);
-    let mut ekf = PoseImuEkf::new(&FilterConfig::new(ImuNoise::vn300()), &init).expect("prior");
+    let mut config = FilterConfig::new(ImuNoise::vn300());
+    config.health = config.health.with_jump_detector();
+    let mut ekf = PoseImuEkf::new(&config, &init).expect("prior");
     for k in 0..=96u64 {
         ekf.propagate(&ImuSample {
             stamp_ns: T0 + k * 2_500_000,

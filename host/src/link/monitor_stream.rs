@@ -72,8 +72,9 @@ fn imu_start(init: &InitialState<f64, 2>) -> ImuStart {
 }
 
 /// The tuning the wire does not carry: the device starts from `FilterConfig::new` and
-/// `HealthConfig::default()` and sets only the gate, the IMU gap, the step forgetting, the
-/// resolvable-step factor and the step confidence. A prior tuned in any other field could not be reproduced.
+/// `HealthConfig::default()` with the jump-anchored detector on (its monitoring session)
+/// and sets only the gate, the IMU gap, the step forgetting, the resolvable-step factor and
+/// the step confidence. A prior tuned in any other field could not be reproduced.
 fn untransmitted_tuning_is_default(c: &FilterConfig<f64>) -> bool {
     let mut expected = FilterConfig::new(c.imu_noise);
     expected.gate = c.gate;
@@ -82,7 +83,7 @@ fn untransmitted_tuning_is_default(c: &FilterConfig<f64>) -> bool {
         step_forgetting: c.health.step_forgetting,
         resolvable_step_factor: c.health.resolvable_step_factor,
         step_confidence: c.health.step_confidence,
-        ..HealthConfig::default()
+        ..HealthConfig::default().with_jump_detector()
     };
     expected == *c
 }

@@ -387,6 +387,8 @@ pub fn monitor_prior(
     // Claim only steps the drive can resolve (the lever arm along the planar axis and a
     // camera's roll about its direction of travel cannot be, docs/monitor.md).
     config.health.resolvable_step_factor = 1.0;
+    // The knock's own increment (docs/estimator.md), as on the device.
+    config.health = config.health.with_jump_detector();
     let sigmas = input.prior.map(|p| ExtrinsicSigmas {
         rotation: p
             .sigma_rot_deg
