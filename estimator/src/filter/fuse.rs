@@ -125,7 +125,8 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
             meas.stamp_to_ns,
             &measurement,
             Some(&lin.extrinsic),
-            Some(&lin.extrinsic_end_rotation),
+            // The knock test's projection only where the detector runs (the vehicle monitor).
+            (self.config.health.jump_window_updates > 0).then_some(&lin.extrinsic_end_rotation),
         )
     }
 
