@@ -130,7 +130,8 @@ struct SimulatePoseImu {
     /// Pose sensor rate, Hz.
     #[arg(long, default_value_t = 10.0)]
     pose_rate: f64,
-    /// Motion: hand-held (every axis excited, still start) or a car-like planar drive.
+    /// Motion: hand-held (every axis excited, still start), a car-like planar drive, or a
+    /// car's calibration figure-eight.
     #[arg(long, value_enum, default_value_t = MotionArg::Handheld)]
     motion: MotionArg,
 }
@@ -142,6 +143,8 @@ enum MotionArg {
     Handheld,
     /// A car on a plane (figure-eight with wiggles, +-2 deg suspension roll / pitch).
     Drive,
+    /// A car's calibration manoeuvre: a clean parking-lot figure-eight with tight turns.
+    FigureEight,
 }
 
 #[derive(Subcommand)]
@@ -333,9 +336,11 @@ fn simulate_pose_imu(args: &SimulatePoseImu) -> Result<(), Failure> {
     };
     config.pose.time_offset_s = args.time_offset_ms * 1e-3;
     config.pose.rate_hz = args.pose_rate;
-    if args.motion == MotionArg::Drive {
-        config.trajectory.motion = sim::MotionKind::Drive(sim::DriveConfig::default());
-    }
+    config.trajectory.motion = match args.motion {
+        MotionArg::Handheld => sim::MotionKind::Handheld,
+        MotionArg::Drive => sim::MotionKind::Drive(sim::DriveConfig::default()),
+        MotionArg::FigureEight => sim::MotionKind::Drive(sim::DriveConfig::figure_eight()),
+    };
     let data = sim::simulate_pose_imu(&config).map_err(|e| anyhow!("simulate: {e}"))?;
     data.write(&args.out_dir)?;
     eprintln!(

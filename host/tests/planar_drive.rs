@@ -7,9 +7,13 @@
 //! Measured (120 s drives, 10 Hz odometry with 0.2 deg / 5 mm per increment, seeds 1-5,
 //! offsets -13 .. +15 ms): rotation 0.09-0.21 deg, horizontal lever arm 8-24 mm with
 //! 11-15 mm sigma per axis, time offset within 1.01 ms, exit 0. The bounds below are 3x the
-//! worst of these. The issue's 1 cm horizontal bound is out of reach at this odometry noise:
-//! the lever arm across the axis shows only as `w x p`, 0.03 x p per 0.1 s increment at the
-//! drive's ~0.3 rad/s against 5 mm of noise (docs/planar.md).
+//! worst of these. The issue's 1 cm horizontal bound is out of reach on this drive at this
+//! odometry noise: the lever arm across the axis shows only as `w x p`, 0.03 x p per 0.1 s
+//! increment at the drive's ~0.3 rad/s against 5 mm of noise (docs/planar.md).
+//!
+//! A calibration manoeuvre carries that information: ten minutes of a parking-lot
+//! figure-eight (`DriveConfig::figure_eight`) meet the issue's 0.2 deg and 1 cm on every
+//! seed, with the same odometry, and are consistent over 30 more seeds (the last two tests).
 
 #[path = "support/common.rs"]
 mod common;
@@ -25,13 +29,19 @@ const SEEDS: [u64; 5] = [1, 2, 3, 4, 5];
 const DURATION_S: f64 = 120.0;
 
 fn drive(seed: u64) -> SimDataset {
+    drive_of(sim::DriveConfig::default(), seed, DURATION_S)
+}
+
+/// A drive of this shape and length; the time offset `((7 seed) mod 41) - 20` ms, inside
+/// +-20 ms (seeds 1-5: -13 .. +15 ms).
+fn drive_of(shape: sim::DriveConfig, seed: u64, duration_s: f64) -> SimDataset {
     let mut c = SimConfig {
         seed,
-        duration_s: DURATION_S,
+        duration_s,
         ..SimConfig::default()
     };
-    c.trajectory.motion = sim::MotionKind::Drive(sim::DriveConfig::default());
-    c.pose.time_offset_s = (seed as f64 * 7.0 - 20.0) * 1e-3;
+    c.trajectory.motion = sim::MotionKind::Drive(shape);
+    c.pose.time_offset_s = (((7 * seed) % 41) as f64 - 20.0) * 1e-3;
     simulate(&c)
 }
 
@@ -156,12 +166,18 @@ fn a_car_cruising_straight_is_not_at_rest() {
 
 #[test]
 fn cli_exits_0_and_warns_that_the_height_is_not_observable() {
+    for (motion, duration) in [("drive", "120"), ("figure-eight", "600")] {
+        cli_warns_that_the_height_is_not_observable(motion, duration);
+    }
+}
+
+fn cli_warns_that_the_height_is_not_observable(motion: &str, duration: &str) {
     let dir = tempfile::tempdir().expect("tempdir");
     let data = dir.path().join("drive");
     let msreg = env!("CARGO_BIN_EXE_msreg");
     let sim = Command::new(msreg)
-        .args(["simulate", "pose-imu", "--motion", "drive", "--seed", "3"])
-        .args(["--duration", "120"])
+        .args(["simulate", "pose-imu", "--motion", motion, "--seed", "3"])
+        .args(["--duration", duration])
         .arg(&data)
         .output()
         .expect("run msreg");
@@ -174,10 +190,10 @@ fn cli_exits_0_and_warns_that_the_height_is_not_observable() {
         .output()
         .expect("run msreg");
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert_eq!(out.status.code(), Some(0), "{motion}: {stderr}");
     assert!(
         stderr.contains("warning: translation along") && stderr.contains("not observable"),
-        "{stderr}"
+        "{motion}: {stderr}"
     );
 }
 
@@ -236,4 +252,129 @@ fn the_yaw_constraint_does_not_explain_the_lever_arm_over_confidence() {
     );
     assert!(free > hi && constrained > hi);
     assert!((constrained / free - 1.0).abs() < 0.25);
+}
+
+/// What one figure-eight run gives: the errors, and each estimate's NEES.
+struct FigureEightRun {
+    converged: bool,
+    events: usize,
+    rotation_deg: f64,
+    rotation_nees: f64,
+    across_m: f64,
+    across_nees: f64,
+    time_offset_ms: f64,
+    time_offset_nees: f64,
+}
+
+fn figure_eight(seed: u64) -> (FigureEightRun, SimDataset, PoseImuCalibration) {
+    let data = drive_of(sim::DriveConfig::figure_eight(), seed, FIGURE_EIGHT_S);
+    let c = calibrate::<f64>(&data, &PoseImuOptions::default());
+    let truth = data.t_imu_pose;
+    let td = c.time_offset_s - data.time_offset_s;
+    let run = FigureEightRun {
+        converged: c.report.converged,
+        events: c.report.events.len(),
+        rotation_deg: rotation_error_deg(&c, &truth),
+        rotation_nees: rotation_consistency(&data, &c).0,
+        across_m: held_split(&c, &truth.translation.vector).2,
+        across_nees: lever_arm_nees_across(&c, &truth.translation.vector),
+        time_offset_ms: td * 1e3,
+        time_offset_nees: (td / c.time_offset_sigma_s).powi(2),
+    };
+    println!(
+        "seed {seed}: rotation {:.3} deg (NEES {:.2}), lever arm across the axis {:.1} mm \
+         (NEES {:.2}), t_d {:+.3} ms (NEES {:.2}), events {}",
+        run.rotation_deg,
+        run.rotation_nees,
+        run.across_m * 1e3,
+        run.across_nees,
+        run.time_offset_ms,
+        run.time_offset_nees,
+        run.events
+    );
+    (run, data, c)
+}
+
+/// Sums of the rotation (3 dof), lever-arm (2 dof) and time-offset (1 dof) NEES, each
+/// asserted inside its 95 % chi-square band.
+fn assert_nees_bands(runs: &[FigureEightRun]) {
+    let n = runs.len() as f64;
+    for (name, dof, sum) in [
+        (
+            "rotation",
+            3.0,
+            runs.iter().map(|r| r.rotation_nees).sum::<f64>(),
+        ),
+        (
+            "lever arm across",
+            2.0,
+            runs.iter().map(|r| r.across_nees).sum(),
+        ),
+        (
+            "time offset",
+            1.0,
+            runs.iter().map(|r| r.time_offset_nees).sum(),
+        ),
+    ] {
+        let (lo, hi) = chi_square_band(dof * n);
+        println!(
+            "{name} NEES {sum:.1} over {} dof, band [{lo:.1}, {hi:.1}]",
+            dof * n
+        );
+        assert!(
+            (lo..hi).contains(&sum),
+            "{name} NEES {sum} outside [{lo}, {hi}]"
+        );
+    }
+}
+
+/// Ten minutes of a calibration figure-eight (`DriveConfig::figure_eight`).
+const FIGURE_EIGHT_S: f64 = 600.0;
+
+/// The issue's planar acceptance: with a drive that carries the information (a 10 min
+/// parking-lot figure-eight, the same odometry noise as above), the rotation is within
+/// 0.2 deg and the lever arm across the axis within 1 cm on every seed, each estimate is
+/// inside its 3 sigma, the height is held and reported not observable, and no health event
+/// is raised. (The NEES bands need more than five seeds: the next test.)
+///
+/// Measured (seeds 1-5): rotation 0.017-0.178 deg, lever arm 1.1-2.7 mm, t_d within
+/// 0.76 ms (sigma 0.6-0.7 ms). The bounds are the issue's, under 3x the worst of these.
+#[test]
+fn a_calibration_figure_eight_meets_the_issue_bounds() {
+    let runs = par_map(&SEEDS, figure_eight);
+    for (seed, (run, data, c)) in SEEDS.iter().zip(&runs) {
+        assert!(run.converged, "seed {seed}: {:?}", c.report.reasons);
+        assert_eq!(run.events, 0, "seed {seed}: {:?}", c.report.events);
+        assert!(
+            run.rotation_deg < 0.2,
+            "seed {seed}: {} deg",
+            run.rotation_deg
+        );
+        assert!(run.across_m < 0.01, "seed {seed}: {} m", run.across_m);
+        assert!(
+            run.time_offset_nees < 9.0,
+            "seed {seed}: t_d beyond 3 sigma"
+        );
+        assert!(inside_three_sigma(c, &data.t_imu_pose), "seed {seed}");
+        let (axis, along, _) = held_split(c, &data.t_imu_pose.translation.vector);
+        let held = c.report.observability.last().expect("rows");
+        assert!(axis.z.abs() > 0.99, "seed {seed}: axis {axis}");
+        assert!(along.abs() < 1e-9, "seed {seed}: height moved to {along}");
+        assert!(held.status == "not observable" && held.sigma >= 0.8 * held.prior_sigma);
+    }
+}
+
+/// Consistency over 30 more figure-eights (seeds 11-40; about 35 s on 2 cores): the NEES
+/// sums of the rotation, the lever arm across the axis and the time offset inside their
+/// 95 % bands. Measured: 111.1 over 90 dof, 72.4 over 60, 28.0 over 30; all converged, no
+/// event; the worst rotation 0.180 deg and lever arm 6.8 mm.
+#[test]
+fn figure_eights_are_consistent_over_thirty_seeds() {
+    let seeds: Vec<u64> = (11..=40).collect();
+    let runs = par_map(&seeds, |seed| figure_eight(seed).0);
+    for (seed, run) in seeds.iter().zip(&runs) {
+        assert!(run.converged && run.events == 0, "seed {seed}");
+        assert!(run.rotation_deg < 0.2 && run.across_m < 0.01, "seed {seed}");
+    }
+    assert_nees_bands(&runs);
 }

@@ -8,8 +8,12 @@ use rand_chacha::ChaCha8Rng;
 use super::{gravity_in_g, DriveConfig, MotionKind, Trajectory, TrajectoryConfig};
 
 fn drive(seed: u64) -> Trajectory {
+    drive_of(DriveConfig::default(), seed)
+}
+
+fn drive_of(drive: DriveConfig, seed: u64) -> Trajectory {
     let config = TrajectoryConfig {
-        motion: MotionKind::Drive(DriveConfig::default()),
+        motion: MotionKind::Drive(drive),
         ..TrajectoryConfig::default()
     };
     Trajectory::random(&config, &mut ChaCha8Rng::seed_from_u64(seed))
@@ -92,4 +96,41 @@ fn drive_turns_mostly_about_the_vertical() {
         other += w.x * w.x + w.y * w.y;
     }
     assert!(other < 0.05 * yaw, "{other} vs {yaw}");
+}
+
+/// The calibration figure-eight stays within what a car can do in a parking lot: a turning
+/// radius of 5 m or more, at most 3 m/s^2 sideways, and turns about twice as fast as the
+/// default drive's (rms yaw rate).
+#[test]
+fn figure_eight_turns_like_a_car_in_a_parking_lot() {
+    for seed in 0..5 {
+        let traj = drive_of(DriveConfig::figure_eight(), seed);
+        let (mut min_radius, mut max_lateral, mut max_tilt) = (f64::INFINITY, 0.0_f64, 0.0_f64);
+        let (mut min_speed, mut max_speed, mut yaw_sq) = (f64::INFINITY, 0.0_f64, 0.0);
+        let n = 6_000;
+        for k in 0..n {
+            let t = 0.01 * f64::from(k);
+            let (r, _) = traj.pose(t);
+            let v = traj.velocity(t);
+            let yaw_rate = (r * traj.body_rate(t)).z;
+            min_speed = min_speed.min(v.norm());
+            max_speed = max_speed.max(v.norm());
+            min_radius = min_radius.min(v.norm() / yaw_rate.abs());
+            max_lateral = max_lateral.max(v.norm() * yaw_rate.abs());
+            let (roll, pitch, _) = r.euler_angles();
+            max_tilt = max_tilt.max(roll.abs()).max(pitch.abs());
+            yaw_sq += yaw_rate * yaw_rate;
+        }
+        let rms = (yaw_sq / f64::from(n)).sqrt();
+        eprintln!(
+            "seed {seed}: speed {min_speed:.1}-{max_speed:.1} m/s, radius >= {min_radius:.1} m, \
+             lateral <= {max_lateral:.2} m/s^2, tilt {:.2} deg, yaw rate rms {rms:.2} rad/s",
+            max_tilt.to_degrees()
+        );
+        assert!(min_speed > 3.5 && max_speed < 8.0);
+        assert!(min_radius > 5.0, "{min_radius}");
+        assert!(max_lateral < 3.0, "{max_lateral}");
+        assert!(max_tilt.to_degrees() < 2.0, "{max_tilt}");
+        assert!((0.35..0.55).contains(&rms), "{rms}");
+    }
 }
