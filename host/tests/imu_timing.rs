@@ -34,9 +34,21 @@ const MAX_TIME_OFFSET_ERROR_S: f64 = 0.2e-3;
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[allow(clippy::enum_variant_names)]
 enum Pipeline {
+    /// The simulator's default odometry: 0.2 deg / 5 mm per 10 Hz increment.
     PoseImu,
+    /// A precise odometry (a hand-held LiDAR odometry): 0.05 deg / 1 mm per 10 Hz increment.
+    PoseImuPrecise,
     LidarImu,
     CameraImu,
+}
+
+impl Pipeline {
+    /// Whether the 0.2 ms bound is asserted on every seed. Not for the pose-IMU runs on the
+    /// default odometry, whose own information gives `t_d` sigmas of 0.13-0.29 ms: there a
+    /// seed must be within the bound or 3 sigma, and the bias is judged over the seeds.
+    fn strict(self) -> bool {
+        self != Pipeline::PoseImu
+    }
 }
 
 /// One calibration judged against the truth.
@@ -114,12 +126,16 @@ enum Start {
     PeakMotion,
 }
 
-fn pose_imu(seed: u64, rate_hz: f64, duration_s: f64, start: Start) -> Outcome {
+fn pose_imu(seed: u64, rate_hz: f64, duration_s: f64, start: Start, precise: bool) -> Outcome {
     let mut config = SimConfig {
         seed,
         duration_s,
         ..SimConfig::default()
     };
+    if precise {
+        config.pose.rotation_noise_rad = 0.05_f64.to_radians();
+        config.pose.translation_noise_m = 0.001;
+    }
     config.imu.rate_hz = rate_hz;
     config.pose.time_offset_s = drawn_offset_s(seed);
     let mut data = common::simulate(&config);
@@ -130,8 +146,18 @@ fn pose_imu(seed: u64, rate_hz: f64, duration_s: f64, start: Start) -> Outcome {
     }
     let c = common::calibrate::<f64>(&data, &PoseImuOptions::default());
     let status = (c.report.converged, c.report.events.len());
-    let id = (Pipeline::PoseImu, rate_hz, seed);
-    judge(id, &c, &data.t_imu_pose, data.time_offset_s, status)
+    let pipeline = if precise {
+        Pipeline::PoseImuPrecise
+    } else {
+        Pipeline::PoseImu
+    };
+    judge(
+        (pipeline, rate_hz, seed),
+        &c,
+        &data.t_imu_pose,
+        data.time_offset_s,
+        status,
+    )
 }
 
 fn lidar_imu(seed: u64, rate_hz: f64, duration_s: f64) -> Outcome {
@@ -203,7 +229,8 @@ fn run_from(
     start: Start,
 ) -> Vec<Outcome> {
     par_map(seeds, |seed| match pipeline {
-        Pipeline::PoseImu => pose_imu(seed, rate_hz, duration_s, start),
+        Pipeline::PoseImu => pose_imu(seed, rate_hz, duration_s, start, false),
+        Pipeline::PoseImuPrecise => pose_imu(seed, rate_hz, duration_s, start, true),
         Pipeline::LidarImu => lidar_imu(seed, rate_hz, duration_s),
         Pipeline::CameraImu => camera_imu(seed, rate_hz, duration_s, start),
     })
@@ -276,6 +303,23 @@ fn camera_imu_time_offset_is_unbiased_at_400_and_200_hz() {
     }
 }
 
+/// Seed 1009 at 200 Hz with the precise odometry: while the pipeline fused the increments of
+/// its standstill, the time offset wandered from -3 to +59 ms across its prior (truth
+/// -7.4 ms), the first moving increment pulled it to a 6-sigma-wrong value, the gate refused
+/// 33 increments and the monitor raised a `rotation_step` alarm at 6 s. Increments surely at
+/// rest now only anchor the odometry (docs/initialisation.md).
+#[test]
+fn a_standstill_does_not_move_the_time_offset() {
+    let o = pose_imu(1009, 200.0, 60.0, Start::AtRest, true);
+    print(&o);
+    assert!(o.converged && o.alarms == 0, "{o:?}");
+    assert!(
+        o.offset_error_ms.abs() < MAX_TIME_OFFSET_ERROR_S * 1e3,
+        "{o:?}"
+    );
+    assert!(o.inside_three_sigma, "{o:?}");
+}
+
 /// Moving starts (issue 11): the pose-IMU and camera-IMU runs cut to start at peak motion
 /// (no standstill: dynamic initialisation) meet the same bounds, with no health alarm. One
 /// seed per pipeline here, plus camera-IMU seed 2000, which diverged (first image NIS 1.4e6,
@@ -301,7 +345,7 @@ fn moving_start_at_peak_motion_is_unbiased() {
 /// The checks of one acceptance cell (one pipeline, rate and start over 10 seeds), as
 /// messages of what failed (empty: it passed), after printing every seed and the summary:
 /// every seed converged (exit 0) with no health alarm, its time-offset error within the
-/// bound (or 3 sigma, see [`assert_unbiased`]); the sum over seeds of the squared
+/// bound (or 3 sigma where the bound is not [`Pipeline::strict`]); the sum over seeds of the squared
 /// time-offset z-scores inside the two-sided 95 % band of a chi-square with one DoF per seed,
 /// and their mean error (the bias a held-sample propagation gives, dt / 2, is 6-20 sigma
 /// here) below the bound; NEES summed over the cell inside its two-sided 95 %
@@ -313,7 +357,11 @@ fn check_cell(label: &str, outcomes: &[Outcome]) -> Vec<String> {
     }
     let mut failures = Vec::new();
     for o in outcomes {
-        let bound_ms = (MAX_TIME_OFFSET_ERROR_S * 1e3).max(3.0 * o.offset_sigma_ms);
+        let bound_ms = if o.pipeline.strict() {
+            MAX_TIME_OFFSET_ERROR_S * 1e3
+        } else {
+            (MAX_TIME_OFFSET_ERROR_S * 1e3).max(3.0 * o.offset_sigma_ms)
+        };
         if !o.converged || o.alarms > 0 || o.offset_error_ms.abs() >= bound_ms {
             failures.push(format!("{label}: seed {}: {o:?}", o.seed));
         }
@@ -388,6 +436,15 @@ fn acceptance(pipeline: Pipeline, seeds: std::ops::Range<u64>, start: Start) {
 #[ignore = "acceptance run, ~15 s on 2 cores"]
 fn ten_seeds_pose_imu() {
     acceptance(Pipeline::PoseImu, 1000..1010, Start::AtRest);
+}
+
+/// Pose-IMU with a precise odometry, at rest and from a moving start: with the information
+/// there (`t_d` sigma well under 0.2 / 3 ms), the 0.2 ms bound holds on every seed.
+#[test]
+#[ignore = "acceptance run, ~5 s on 2 cores"]
+fn ten_seeds_pose_imu_precise_odometry() {
+    acceptance(Pipeline::PoseImuPrecise, 1000..1010, Start::AtRest);
+    acceptance(Pipeline::PoseImuPrecise, 2000..2010, Start::PeakMotion);
 }
 
 #[test]

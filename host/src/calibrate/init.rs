@@ -26,6 +26,14 @@ pub struct Standstill {
 const STILL_SIGMAS: f64 = 4.0;
 
 impl Standstill {
+    /// The last sensor stamp surely taken at rest: a measurement stamped `t_S` was taken at
+    /// IMU time `t_S + t_d`, and the time offset is within 3 sigma of its prior (mean zero,
+    /// `time_offset_sigma_s`).
+    pub fn surely_at_rest_until_ns(&self, time_offset_sigma_s: f64) -> u64 {
+        let margin_ns = (3.0 * time_offset_sigma_s.abs() * 1e9) as u64;
+        self.until_ns.saturating_sub(margin_ns)
+    }
+
     /// True when the pose sensor agrees with this standstill: an IMU moving at constant
     /// velocity without turning reads exactly as at rest (a car cruising straight when the
     /// recording starts: drive seeds 16 and 230), so the odometry must not move over it by

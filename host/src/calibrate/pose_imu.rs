@@ -95,6 +95,9 @@ pub fn calibrate<T: Scalar>(
         run: Run::new(first_imu.stamp_ns, period_ns),
         poses,
         next_pose: 0,
+        rest_until_ns: standstill
+            .as_ref()
+            .map(|s| s.surely_at_rest_until_ns(options.time_offset_sigma_s)),
         sigma_r: input.pose_noise.rotation_noise_rad,
         sigma_t: input.pose_noise.translation_noise_m,
     };
@@ -141,6 +144,9 @@ struct PoseFeed<'a> {
     run: Run,
     poses: &'a [PoseRecord],
     next_pose: usize,
+    /// Poses stamped up to here were taken at rest whatever the time offset: they anchor
+    /// the odometry instead of being fused (see `fuse_due`).
+    rest_until_ns: Option<u64>,
     sigma_r: f64,
     sigma_t: f64,
 }
@@ -158,6 +164,13 @@ impl<T: Scalar> ImuHooks<T> for PoseFeed<'_> {
             }
             if index == 0 {
                 self.run.skip(pose.stamp_ns, "before the first IMU sample");
+            } else if self.rest_until_ns.is_some_and(|t| pose.stamp_ns <= t) {
+                // An increment at rest is the identity whatever the extrinsic and the time
+                // offset, so it tells neither. Fused, its time-offset Jacobian (built from
+                // the estimated velocity and noisy rates) lets the offset wander tens of ms
+                // across its unobservable prior, outside the linear range of the motion that
+                // follows (docs/initialisation.md). The ZUPTs hold the IMU meanwhile.
+                self.run.anchor(ekf, pose);
             } else {
                 self.run.fuse_pose(ekf, pose, self.sigma_r, self.sigma_t);
             }

@@ -71,6 +71,14 @@ impl Run {
             .push(format!("{sensor} stamp {stamp_ns}: {why}"));
     }
 
+    /// Starts a new odometry segment at `pose`, fusing nothing.
+    pub(crate) fn anchor<T: Scalar>(&mut self, ekf: &mut PoseImuEkf<T>, pose: &PoseRecord) {
+        match ekf.anchor(SOLE_SENSOR, pose.stamp_ns) {
+            Ok(()) => self.previous = Some(*pose),
+            Err(e) => self.skip(pose.stamp_ns, &format!("cannot anchor: {e}")),
+        }
+    }
+
     /// Anchors a new odometry segment or fuses the increment from the previous pose.
     pub(crate) fn fuse_pose<T: Scalar>(
         &mut self,
@@ -83,10 +91,7 @@ impl Run {
             .previous
             .filter(|p| pose.stamp_ns - p.stamp_ns <= self.max_interval_ns);
         let Some(prev) = previous else {
-            match ekf.anchor(SOLE_SENSOR, pose.stamp_ns) {
-                Ok(()) => self.previous = Some(*pose),
-                Err(e) => self.skip(pose.stamp_ns, &format!("cannot anchor: {e}")),
-            }
+            self.anchor(ekf, pose);
             return;
         };
         // Odometry noise accumulates per increment: an interval spanning several nominal
