@@ -5,9 +5,9 @@
 //! reported not observable and never claimed.
 //!
 //! Measured (120 s drives, 10 Hz odometry with 0.2 deg / 5 mm per increment, seeds 1-5,
-//! offsets -13 .. +15 ms): rotation 0.09-0.21 deg, horizontal lever arm 8-24 mm with
-//! 11-15 mm sigma per axis, time offset within 1.01 ms, exit 0. The bounds below are 3x the
-//! worst of these. The issue's 1 cm horizontal bound is out of reach on this drive at this
+//! offsets -13 .. +15 ms): rotation 0.08-0.18 deg, horizontal lever arm 4-26 mm with
+//! 11-15 mm sigma per axis, time offset within 1.09 ms, exit 0. The bounds below are about
+//! 3x the worst of these (the lever arm's 2.8x). The issue's 1 cm horizontal bound is out of reach on this drive at this
 //! odometry noise: the lever arm across the axis shows only as `w x p`, 0.03 x p per 0.1 s
 //! increment at the drive's ~0.3 rad/s against 5 mm of noise (docs/planar.md).
 //!
@@ -209,20 +209,25 @@ fn lever_arm_nees_across(c: &PoseImuCalibration, truth: &Vector3<f64>) -> f64 {
     e.dot(&(s.try_inverse().expect("invertible") * e))
 }
 
-/// The observability-constrained filter (`PoseImuOptions::constrain_yaw`) against the
-/// default one on drives 1-30: the lever arm across the axis is over-confident in both, so
-/// the spurious information about the yaw about gravity (which the constraint provably
-/// removes: `estimator/src/filter/yaw_gauge.rs`) is not what makes it. About 10 min on
-/// 2 cores: `cargo test --release -p msreg --test planar_drive -- --ignored --nocapture`.
+/// The observability-constrained filter (`PoseImuOptions::constrain_yaw`, the default under
+/// planar motion) against the unconstrained one on drives 1-30, both from the
+/// direction-of-travel start. Measured: lever arm across the axis NEES 133.4 unconstrained
+/// against 63.7 constrained over the 29 seeds both converge on (58 dof, band
+/// [38.8, 80.9]); seed 11, where the unconstrained filter ends 19 cm off with a 14 mm sigma
+/// (NEES 192), does not converge constrained and says so (exit 1). The spurious information
+/// about the rotation about gravity (`estimator/src/filter/yaw_gauge.rs`) is what made the
+/// lever arm over-confident; before the travel start, the scan's 4-21 deg start errors hid
+/// it (docs/planar.md). About 15 s on 2 cores:
+/// `cargo test --release -p msreg --test planar_drive -- --ignored --nocapture yaw`.
 #[test]
 #[ignore]
-fn the_yaw_constraint_does_not_explain_the_lever_arm_over_confidence() {
+fn the_yaw_constraint_makes_the_lever_arm_consistent() {
     let seeds: Vec<u64> = (1..=30).collect();
     let runs = par_map(&seeds, |seed| {
         let data = drive(seed);
         let run = |constrain_yaw| {
             let options = PoseImuOptions {
-                constrain_yaw,
+                constrain_yaw: Some(constrain_yaw),
                 ..PoseImuOptions::default()
             };
             let c = calibrate::<f64>(&data, &options);
@@ -247,11 +252,13 @@ fn the_yaw_constraint_does_not_explain_the_lever_arm_over_confidence() {
     }
     let (lo, hi) = chi_square_band(dof);
     println!(
-        "lever arm NEES over {dof} dof: {free:.1} default, {constrained:.1} constrained \
+        "lever arm NEES over {dof} dof: {free:.1} unconstrained, {constrained:.1} constrained \
          (band [{lo:.1}, {hi:.1}])"
     );
-    assert!(free > hi && constrained > hi);
-    assert!((constrained / free - 1.0).abs() < 0.25);
+    assert!(free > hi, "unconstrained {free}");
+    assert!((lo..hi).contains(&constrained), "constrained {constrained}");
+    let lost = runs.iter().filter(|(_, b)| !b.0).count();
+    assert!(lost <= 1, "{lost} constrained runs did not converge");
 }
 
 /// What one figure-eight run gives: the errors, and each estimate's NEES.
@@ -337,8 +344,8 @@ const FIGURE_EIGHT_S: f64 = 600.0;
 /// inside its 3 sigma, the height is held and reported not observable, and no health event
 /// is raised. (The NEES bands need more than five seeds: the next test.)
 ///
-/// Measured (seeds 1-5): rotation 0.017-0.178 deg, lever arm 1.1-2.7 mm, t_d within
-/// 0.76 ms (sigma 0.6-0.7 ms). The bounds are the issue's, under 3x the worst of these.
+/// Measured (seeds 1-5): rotation 0.018-0.181 deg, lever arm 1.2-3.2 mm, t_d within
+/// 0.88 ms (sigma 0.6-0.7 ms). The bounds are the issue's, under 3x the worst of these.
 #[test]
 fn a_calibration_figure_eight_meets_the_issue_bounds() {
     let runs = par_map(&SEEDS, figure_eight);
@@ -366,8 +373,8 @@ fn a_calibration_figure_eight_meets_the_issue_bounds() {
 
 /// Consistency over 30 more figure-eights (seeds 11-40; about 35 s on 2 cores): the NEES
 /// sums of the rotation, the lever arm across the axis and the time offset inside their
-/// 95 % bands. Measured: 111.1 over 90 dof, 72.4 over 60, 28.0 over 30; all converged, no
-/// event; the worst rotation 0.180 deg and lever arm 6.8 mm.
+/// 95 % bands. Measured: 105.1 over 90 dof, 60.6 over 60, 27.6 over 30; all converged, no
+/// event; the worst rotation 0.174 deg and lever arm 7.9 mm.
 #[test]
 fn figure_eights_are_consistent_over_thirty_seeds() {
     let seeds: Vec<u64> = (11..=40).collect();

@@ -195,7 +195,7 @@ pub(crate) fn start_filter<T: Scalar>(
         Err(_) => initial,
     };
     let config = FilterConfig {
-        constrain_yaw: options.constrain_yaw,
+        constrain_yaw: options.constrain_yaw.unwrap_or(planar.is_some()),
         ..FilterConfig::new(convert::imu_noise::<T>(imu_noise))
     };
     let initial = match planar {

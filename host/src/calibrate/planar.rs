@@ -5,9 +5,11 @@
 //! - The hand-eye rotation (eq. 3.3-3.5) fixes only the alignment of the two rotation axes
 //!   (two of three DoF): rotation increments about one axis say nothing about the rotation
 //!   about it. [`detect`] finds the axis in both frames and that alignment.
-//! - The rotation about the axis ("yaw" of the extrinsic) shows in the translation: the IMU's
+//! - The rotation about the axis ("yaw" of the extrinsic) shows in the translation. For a
+//!   vehicle that moves along its own forward axis, [`travel::travel_yaw`] takes the
+//!   direction of travel in the sensor's frame onto the one the IMU sees. Otherwise the IMU's
 //!   accelerations, rotated into the odometry frame, must integrate to the odometry's
-//!   translations. [`fit_yaw`] scans it with the dynamic initialisation's linear alignment
+//!   translations: [`fit_yaw`] scans it with the dynamic initialisation's linear alignment
 //!   ([`super::dynamic_init`]) as the cost.
 //! - The lever arm perpendicular to the axis shows through the yaw rate (`w x p`); the
 //!   component along the axis (the height, for a level IMU) moves every pose of the drive
@@ -28,6 +30,7 @@ use crate::dataset::{ImuRecord, PoseRecord};
 
 pub mod heading;
 pub mod tilt;
+pub mod travel;
 
 /// Largest second / first eigenvalue of the IMU rotation scatter treated as planar motion:
 /// the rms rate about every other axis is under a third (`sqrt 0.1`) of the rate about the
@@ -131,11 +134,43 @@ pub struct YawFit {
     pub rotation: UnitQuaternion<f64>,
     /// The angle about `axis_imu` added to the alignment, rad.
     pub angle_rad: f64,
-    /// 1-sigma of the angle from the cost's curvature (scaled by its residual variance), rad.
+    /// 1-sigma of the angle, rad.
     pub sigma_rad: f64,
-    /// Median cost over the scan / best cost: about 1 when the translations do not tell
-    /// the angle (no acceleration or turn in the window).
-    pub contrast: f64,
+    /// How it was found.
+    pub method: YawMethod,
+}
+
+/// How the rotation about the axis was found.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum YawMethod {
+    /// From the direction of travel ([`travel::travel_yaw`]); the sigma is the heading fit's
+    /// jackknife over its windows.
+    Travel {
+        /// Rms sideways over rms forward displacement of the odometry's increments.
+        side_ratio: f64,
+        /// Windows of the IMU-side fit.
+        windows: usize,
+    },
+    /// From the scan of the alignment cost ([`fit_yaw`]); the sigma is the cost's curvature.
+    Scan {
+        /// Median cost over the scan / best cost: about 1 when the translations do not tell
+        /// the angle (no acceleration or turn in the window).
+        contrast: f64,
+    },
+}
+
+impl From<travel::TravelYaw> for YawFit {
+    fn from(t: travel::TravelYaw) -> Self {
+        Self {
+            rotation: t.rotation,
+            angle_rad: t.angle_rad,
+            sigma_rad: t.sigma_rad,
+            method: YawMethod::Travel {
+                side_ratio: t.travel.side_ratio,
+                windows: t.heading.windows,
+            },
+        }
+    }
 }
 
 /// Why the angle about the axis could not be found.
@@ -205,7 +240,7 @@ pub fn fit_yaw(
         rotation: rotation_at(angle),
         angle_rad: angle,
         sigma_rad: curvature_sigma(&cost, angle),
-        contrast,
+        method: YawMethod::Scan { contrast },
     })
 }
 
@@ -257,9 +292,10 @@ pub struct PlanarStart {
 /// The window the yaw scan aligns over, s: longer than the dynamic initialisation's, since
 /// a vehicle accelerates and turns less often than a hand-held rig.
 const YAW_WINDOW_S: f64 = 15.0;
-/// Smallest prior 1-sigma of the rotation after a yaw fit, deg: the fit's curvature sigma
+/// Smallest prior 1-sigma of the rotation after a yaw fit, deg: the scan's curvature sigma
 /// ignores the drift of the odometry's absolute orientation over the window, and its
-/// errors on the simulated drives reach 11 deg (docs/planar.md).
+/// errors on the simulated drives reach 21 deg (docs/planar.md). The direction of travel
+/// is within 2 deg there, and keeps the same floor: a wide prior costs it nothing.
 const MIN_YAW_PRIOR_SIGMA_DEG: f64 = 10.0;
 /// Shortest pose interval of the yaw scan, s: 0.2 s keeps the alignment small (75
 /// intervals over the window) while each interval still integrates a measurable turn.
@@ -310,12 +346,24 @@ impl PlanarStart {
     pub fn describe(&self) -> String {
         let a = self.motion.axis_imu;
         let yaw = match &self.yaw {
-            Ok(y) => format!(
-                "rotation about it from the translations: {:.2} deg from the axis alignment (sigma {:.3} deg, contrast {:.1})",
-                y.angle_rad.to_degrees(),
-                y.sigma_rad.to_degrees(),
-                y.contrast
-            ),
+            Ok(y) => {
+                let how = match y.method {
+                    YawMethod::Travel {
+                        side_ratio,
+                        windows,
+                    } => format!(
+                        "the direction of travel (sideways share {side_ratio:.3}, {windows} windows)"
+                    ),
+                    YawMethod::Scan { contrast } => {
+                        format!("the translations (scan contrast {contrast:.1})")
+                    }
+                };
+                format!(
+                    "rotation about it from {how}: {:.2} deg from the axis alignment (sigma {:.3} deg)",
+                    y.angle_rad.to_degrees(),
+                    y.sigma_rad.to_degrees(),
+                )
+            }
             Err(e) => format!("rotation about it unknown ({e}): started wide open"),
         };
         format!(
@@ -344,6 +392,9 @@ pub fn planar_start(
         ..DynamicInitOptions::default()
     };
     let yaw_at = |motion: &PlanarMotion, gyro_bias: Vector3<f64>| {
+        if let Some(t) = travel::travel_yaw(imu, poses, &gyro_bias, motion) {
+            return Ok(YawFit::from(t));
+        }
         let input = DynamicInitInput {
             imu,
             poses,

@@ -19,9 +19,10 @@ pub struct PoseImuOptions {
     /// Shortest standstill at the start that is used for the gravity/bias initialisation, s.
     pub min_standstill_s: f64,
     /// Keep the rotation about gravity unobservable (`FilterConfig::constrain_yaw`, the
-    /// observability-constrained EKF). Off: on the planar drives it changes the consistency
-    /// little and can lose a run whose start is off (docs/planar.md).
-    pub constrain_yaw: bool,
+    /// observability-constrained EKF). `None`: on under planar motion, where the default
+    /// EKF's spurious information about that rotation leaves the lever arm over-confident
+    /// (docs/planar.md, "The yaw constraint"), off otherwise.
+    pub constrain_yaw: Option<bool>,
 }
 
 impl Default for PoseImuOptions {
@@ -32,7 +33,7 @@ impl Default for PoseImuOptions {
             rotation_sigma_rad: 2f64.to_radians(),
             translation_sigma_m: 0.5,
             min_standstill_s: 0.3,
-            constrain_yaw: false,
+            constrain_yaw: None,
         }
     }
 }

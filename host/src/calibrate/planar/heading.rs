@@ -120,10 +120,10 @@ impl<'a> Strapdown<'a> {
     }
 }
 
-/// Wheel speed along the base's forward axis at `t_ns`: the odometry's displacement in its
-/// own body frame over the pose intervals whose midpoints lie within [`SPEED_SPAN_S`] of it,
-/// over their duration.
-fn wheel_speed(poses: &[PoseRecord], t_ns: u64) -> Option<f64> {
+/// Speed along `forward` (the base's forward axis in the odometry's body frame: `x` for a
+/// wheel odometry) at `t_ns`: the odometry's displacement in its own body frame over the
+/// pose intervals whose midpoints lie within [`SPEED_SPAN_S`] of it, over their duration.
+fn wheel_speed(poses: &[PoseRecord], forward: &Vector3<f64>, t_ns: u64) -> Option<f64> {
     let half = (0.5 * SPEED_SPAN_S * 1e9) as u64;
     let (from, to) = (t_ns.saturating_sub(half), t_ns + half);
     let start = poses
@@ -137,7 +137,7 @@ fn wheel_speed(poses: &[PoseRecord], t_ns: u64) -> Option<f64> {
         }
         if mid >= from {
             let body = pair[0].rotation.inverse() * (pair[1].position - pair[0].position);
-            path += body.x;
+            path += body.dot(forward);
             time += (pair[1].stamp_ns - pair[0].stamp_ns) as f64 * 1e-9;
         }
     }
@@ -161,14 +161,18 @@ struct Interval {
     s_b: f64,
 }
 
-/// The intervals of the window starting at `start` (those with speeds at both ends).
-fn intervals(poses: &[PoseRecord], start: u64) -> Vec<Interval> {
+/// The intervals of the window starting at `start` (those with speeds along `forward` at
+/// both ends).
+fn intervals(poses: &[PoseRecord], forward: &Vector3<f64>, start: u64) -> Vec<Interval> {
     let steps = (HEADING_WINDOW_S / NODE_S).round() as u64;
     let node_ns = (NODE_S * 1e9) as u64;
     (0..steps)
         .filter_map(|j| {
             let (a, b) = (start + j * node_ns, start + (j + 1) * node_ns);
-            let (s_a, s_b) = (wheel_speed(poses, a)?, wheel_speed(poses, b)?);
+            let (s_a, s_b) = (
+                wheel_speed(poses, forward, a)?,
+                wheel_speed(poses, forward, b)?,
+            );
             Some(Interval {
                 start,
                 a,
@@ -288,7 +292,8 @@ fn yaw_of(u: &Vector3<f64>, tilt: &UnitQuaternion<f64>) -> f64 {
     level.y.atan2(level.x)
 }
 
-fn wrap(angle: f64) -> f64 {
+/// `angle` wrapped into `[-pi, pi)`.
+pub(crate) fn wrap(angle: f64) -> f64 {
     (angle + PI).rem_euclid(2.0 * PI) - PI
 }
 
@@ -304,12 +309,14 @@ fn solve(n: &GlobalMatrix, b: &Global, fixed: bool) -> Option<Global> {
 }
 
 /// The yaw of `R_I_S` (see the module docs) from `imu` (starting gyro bias `gyro_bias`,
-/// refined) and the wheel odometry `poses`, at the roll and pitch of `tilt` (`R_I_S` at zero
-/// yaw); `None` with fewer than [`MIN_WINDOWS`] windows or when the drive neither
-/// accelerates nor turns.
+/// refined) and the odometry `poses` whose body moves along `forward` (`x` for a wheel
+/// odometry), at the roll and pitch of `tilt` (`R_I_S` at zero yaw, for `forward = x`; in
+/// general `yaw_rad` is the angle of `u` about `tilt`'s `z` from its `x`); `None` with fewer
+/// than [`MIN_WINDOWS`] windows or when the drive neither accelerates nor turns.
 pub fn nonholonomic_yaw(
     imu: &[ImuRecord],
     poses: &[PoseRecord],
+    forward: &Vector3<f64>,
     gyro_bias: &Vector3<f64>,
     tilt: &UnitQuaternion<f64>,
 ) -> Option<HeadingFit> {
@@ -321,7 +328,7 @@ pub fn nonholonomic_yaw(
     let windows: Vec<Vec<Interval>> = (0..)
         .map(|k| first + 1 + k * window_ns)
         .take_while(|start| start + window_ns < last)
-        .map(|start| intervals(poses, start))
+        .map(|start| intervals(poses, forward, start))
         .filter(|w| w.len() >= 3)
         .collect();
     if windows.len() < MIN_WINDOWS {

@@ -27,7 +27,8 @@ pub(super) fn refuse_rotation(
         .flatten()
     {
         Some(t) => {
-            let yaw = heading::nonholonomic_yaw(imu, poses, gyro_bias, &t.rotation());
+            let forward = Vector3::x();
+            let yaw = heading::nonholonomic_yaw(imu, poses, &forward, gyro_bias, &t.rotation());
             tilt_only(calibration, (&t, yaw.as_ref()), problem);
         }
         None => {

@@ -26,8 +26,14 @@ fn fit(seed: u64, yaw_deg: f64, slip: f64, drive: DriveConfig) -> (f64, f64) {
         ..WheelDriveConfig::default()
     });
     let tilt = tilt::gravity_tilt(&sim.imu, 0.05).expect("six windows");
-    let fit = nonholonomic_yaw(&sim.imu, &sim.poses, &Vector3::zeros(), &tilt.rotation())
-        .expect("a drive that accelerates and turns");
+    let fit = nonholonomic_yaw(
+        &sim.imu,
+        &sim.poses,
+        &Vector3::x(),
+        &Vector3::zeros(),
+        &tilt.rotation(),
+    )
+    .expect("a drive that accelerates and turns");
     assert_eq!(fit.windows, 11);
     // The reported rotation keeps gravity's vertical and turns the forward axis by the yaw.
     let rotation = fit.rotation(&tilt.rotation());
@@ -100,8 +106,15 @@ fn a_drive_too_short_for_four_windows_has_no_fit() {
         ..WheelDriveConfig::default()
     });
     let level = UnitQuaternion::identity();
-    assert!(nonholonomic_yaw(&sim.imu, &sim.poses, &Vector3::zeros(), &level).is_none());
-    assert!(nonholonomic_yaw(&sim.imu, &[], &Vector3::zeros(), &level).is_none());
+    assert!(nonholonomic_yaw(
+        &sim.imu,
+        &sim.poses,
+        &Vector3::x(),
+        &Vector3::zeros(),
+        &level
+    )
+    .is_none());
+    assert!(nonholonomic_yaw(&sim.imu, &[], &Vector3::x(), &Vector3::zeros(), &level).is_none());
 }
 
 /// The velocity-increment model is right: without noise, biases, suspension or bumps (the
@@ -134,7 +147,14 @@ fn without_noise_the_model_is_exact() {
         yaw_rate_scale: 3.0,
         ..WheelDriveConfig::default()
     });
-    let fit = nonholonomic_yaw(&sim.imu, &sim.poses, &Vector3::zeros(), &tilt0).expect("fit");
+    let fit = nonholonomic_yaw(
+        &sim.imu,
+        &sim.poses,
+        &Vector3::x(),
+        &Vector3::zeros(),
+        &tilt0,
+    )
+    .expect("fit");
     let error = wrap(fit.yaw_rad - yaw).to_degrees();
     println!(
         "noise-free: error {error:.2e} deg, sigma {:.2e} deg, scale {:.6}, gyro bias {:.1e}",
