@@ -7,7 +7,7 @@
 //! Measured (120 s drives, 10 Hz odometry with 0.2 deg / 5 mm per increment, seeds 1-5,
 //! offsets -13 .. +15 ms): rotation 0.08-0.18 deg, horizontal lever arm 4-26 mm with
 //! 11-15 mm sigma per axis, time offset within 1.09 ms, exit 0. The bounds below are about
-//! 3x the worst of these (the lever arm's 2.8x). The issue's 1 cm horizontal bound is out of reach on this drive at this
+//! 3x the worst of these (rotation 0.55 deg, lever arm 72 mm: 2.8x). The issue's 1 cm horizontal bound is out of reach on this drive at this
 //! odometry noise: the lever arm across the axis shows only as `w x p`, 0.03 x p per 0.1 s
 //! increment at the drive's ~0.3 rad/s against 5 mm of noise (docs/planar.md).
 //!
@@ -81,7 +81,7 @@ fn planar_drive_holds_the_height_and_recovers_the_rest() {
         );
         assert!(c.report.converged, "seed {seed}: {:?}", c.report.reasons);
         assert!(axis.z.abs() > 0.99, "seed {seed}: axis {axis}");
-        assert!(rot < 0.63, "seed {seed}: rotation {rot} deg");
+        assert!(rot < 0.55, "seed {seed}: rotation {rot} deg");
         assert!(across < 0.072, "seed {seed}: lever arm across {across} m");
         assert!(td.abs() < 3.0, "seed {seed}: time offset {td} ms");
         // The height is never claimed: its value and sigma stay at the prior.
@@ -217,10 +217,8 @@ fn lever_arm_nees_across(c: &PoseImuCalibration, truth: &Vector3<f64>) -> f64 {
 /// (NEES 192), does not converge constrained and says so (exit 1). The spurious information
 /// about the rotation about gravity (`estimator/src/filter/yaw_gauge.rs`) is what made the
 /// lever arm over-confident; before the travel start, the scan's 4-21 deg start errors hid
-/// it (docs/planar.md). About 15 s on 2 cores:
-/// `cargo test --release -p msreg --test planar_drive -- --ignored --nocapture yaw`.
+/// it (docs/planar.md). About 15 s on 2 cores.
 #[test]
-#[ignore]
 fn the_yaw_constraint_makes_the_lever_arm_consistent() {
     let seeds: Vec<u64> = (1..=30).collect();
     let runs = par_map(&seeds, |seed| {
@@ -345,7 +343,9 @@ const FIGURE_EIGHT_S: f64 = 600.0;
 /// is raised. (The NEES bands need more than five seeds: the next test.)
 ///
 /// Measured (seeds 1-5): rotation 0.018-0.181 deg, lever arm 1.2-3.2 mm, t_d within
-/// 0.88 ms (sigma 0.6-0.7 ms). The bounds are the issue's, under 3x the worst of these.
+/// 0.88 ms (sigma 0.6-0.7 ms). The bounds are the issue's: 1.1x the worst rotation (0.2 deg
+/// is about 3 sigma of the mounting's roll here, docs/planar.md) and 3.1x the worst lever
+/// arm.
 #[test]
 fn a_calibration_figure_eight_meets_the_issue_bounds() {
     let runs = par_map(&SEEDS, figure_eight);

@@ -93,8 +93,7 @@ pub fn detect(pairs: &[RotationPair]) -> Option<PlanarMotion> {
     if agreement < 0.0 {
         axis_sensor = -axis_sensor;
     }
-    let alignment = UnitQuaternion::rotation_between(&axis_sensor, &axis_imu)
-        .unwrap_or_else(|| UnitQuaternion::from_scaled_axis(orthogonal_unit(&axis_imu) * PI));
+    let alignment = rotation_between(&axis_sensor, &axis_imu);
     Some(PlanarMotion {
         axis_imu,
         axis_sensor,
@@ -102,6 +101,13 @@ pub fn detect(pairs: &[RotationPair]) -> Option<PlanarMotion> {
         alignment,
         pairs: pairs.len(),
     })
+}
+
+/// The shortest rotation taking unit `from` onto unit `to` (a half turn about an axis
+/// across them when they are opposite).
+fn rotation_between(from: &Vector3<f64>, to: &Vector3<f64>) -> UnitQuaternion<f64> {
+    UnitQuaternion::rotation_between(from, to)
+        .unwrap_or_else(|| UnitQuaternion::from_scaled_axis(orthogonal_unit(to) * PI))
 }
 
 /// (second / first eigenvalue, unit eigenvector of the first) of a scatter matrix.

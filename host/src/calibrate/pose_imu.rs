@@ -15,7 +15,7 @@ use super::driver::report::{PoseImuCalibration, PoseImuOptions, Timing};
 use super::driver::verdict::{finish, Run};
 use super::driver::{
     describe_moving_start, drive_imu, hand_eye_and_gyro_bias, nominal_period_ns, start_filter,
-    starting_gyro_bias, FilterStart, ImuHooks,
+    starting_gyro_bias, time_offset_sigma_s, FilterStart, ImuHooks,
 };
 use super::init::{self};
 use super::planar::{self};
@@ -97,7 +97,7 @@ pub fn calibrate<T: Scalar>(
         next_pose: 0,
         rest_until_ns: standstill
             .as_ref()
-            .map(|s| s.surely_at_rest_until_ns(options.time_offset_sigma_s)),
+            .map(|s| s.surely_at_rest_until_ns(time_offset_sigma_s(options))),
         sigma_r: input.pose_noise.rotation_noise_rad,
         sigma_t: input.pose_noise.translation_noise_m,
     };
@@ -125,7 +125,14 @@ pub fn calibrate<T: Scalar>(
         calibration.report.reasons.insert(0, problem);
         calibration.report.converged = false;
     }
-    calibration.report.planar = planar.as_ref().map_or_else(String::new, |p| p.describe());
+    calibration.report.planar = planar.as_ref().map_or_else(String::new, |p| {
+        let constrained = options.constrain_yaw.unwrap_or(true);
+        let how = if constrained { "kept" } else { "not kept" };
+        format!(
+            "{}; the rotation about gravity {how} unobservable (`constrain_yaw`)",
+            p.describe()
+        )
+    });
     if let Some(problem) = scale_problem {
         trust::refuse_rotation(
             &mut calibration,
@@ -170,7 +177,7 @@ impl<T: Scalar> ImuHooks<T> for PoseFeed<'_> {
                 // the estimated velocity and noisy rates) lets the offset wander tens of ms
                 // across its unobservable prior, outside the linear range of the motion that
                 // follows (docs/initialisation.md). The ZUPTs hold the IMU meanwhile.
-                self.run.anchor(ekf, pose);
+                self.run.anchor_at_rest(ekf, pose);
             } else {
                 self.run.fuse_pose(ekf, pose, self.sigma_r, self.sigma_t);
             }

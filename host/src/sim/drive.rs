@@ -63,9 +63,10 @@ impl Default for DriveConfig {
 impl DriveConfig {
     /// A calibration manoeuvre rather than a commute: a clean figure-eight in a parking lot,
     /// about 46 x 19 m, at 3.8-7.8 m/s, with no lane changes. Its tightest turn has a radius
-    /// of 5.3 m or more (a car's turning circle) and about 2.7 m/s^2 of lateral acceleration,
-    /// so the suspension rolls it by up to about 1.5 deg. It turns at 0.37-0.44 rad/s rms
-    /// against the default drive's 0.20-0.26 (wiggles aside), and the information about the
+    /// of 5.3 m or more (a car's turning circle; 5.7-6.1 m measured on seeds 0-4) and at most
+    /// about 2.7 m/s^2 of lateral acceleration (2.4-2.6 measured), so the suspension rolls it
+    /// by up to about 1.5 deg. It turns at 0.37-0.44 rad/s rms (0.39-0.42 measured) against
+    /// the default drive's 0.20-0.26 (wiggles aside), and the information about the
     /// mounting's roll and the lever arm across the turn axis grows with the square of that
     /// rate (docs/planar.md, "Meeting the bounds: a calibration figure-eight").
     pub fn figure_eight() -> Self {

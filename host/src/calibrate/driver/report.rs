@@ -19,9 +19,10 @@ pub struct PoseImuOptions {
     /// Shortest standstill at the start that is used for the gravity/bias initialisation, s.
     pub min_standstill_s: f64,
     /// Keep the rotation about gravity unobservable (`FilterConfig::constrain_yaw`, the
-    /// observability-constrained EKF). `None`: on under planar motion, where the default
+    /// observability-constrained EKF). `None`: on under planar motion, where the plain
     /// EKF's spurious information about that rotation leaves the lever arm over-confident
-    /// (docs/planar.md, "The yaw constraint"), off otherwise.
+    /// (docs/planar.md, "The start from the direction of travel, and the yaw constraint
+    /// on"), off otherwise.
     pub constrain_yaw: Option<bool>,
 }
 
@@ -111,6 +112,10 @@ pub struct PoseImuReport {
     pub updates_accepted: usize,
     /// Relative-pose updates rejected by the gate.
     pub updates_rejected: usize,
+    /// Poses taken surely at rest (the initial standstill), which anchor the odometry
+    /// instead of being fused: an increment at rest tells neither the extrinsic nor the time
+    /// offset.
+    pub poses_at_rest: usize,
     /// Poses skipped (before the IMU, after a filter error), with reasons.
     pub poses_skipped: Vec<String>,
     /// Mean NIS per degree of freedom of all relative-pose updates (1 if consistent).

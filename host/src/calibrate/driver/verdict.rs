@@ -28,6 +28,8 @@ pub(crate) struct Run {
     pub(crate) skipped: Vec<String>,
     pub(crate) accepted: usize,
     pub(crate) rejected: usize,
+    /// Poses that only anchored the odometry because they were taken at rest.
+    pub(crate) at_rest: usize,
     pub(crate) nis_sum: f64,
     pub(crate) nis_dof: usize,
 }
@@ -45,6 +47,7 @@ impl Run {
             skipped: Vec::new(),
             accepted: 0,
             rejected: 0,
+            at_rest: 0,
             nis_sum: 0.0,
             nis_dof: 0,
         }
@@ -69,6 +72,12 @@ impl Run {
     pub(crate) fn skip_measurement(&mut self, sensor: &str, stamp_ns: u64, why: &str) {
         self.skipped
             .push(format!("{sensor} stamp {stamp_ns}: {why}"));
+    }
+
+    /// Anchors the odometry at `pose`, taken at rest, instead of fusing its increment.
+    pub(crate) fn anchor_at_rest<T: Scalar>(&mut self, ekf: &mut PoseImuEkf<T>, pose: &PoseRecord) {
+        self.at_rest += 1;
+        self.anchor(ekf, pose);
     }
 
     /// Starts a new odometry segment at `pose`, fusing nothing.
@@ -283,6 +292,7 @@ pub(crate) fn finish<T: Scalar, const S: usize, const C: usize, const N: usize, 
         hand_eye_rotation_vector: [rv.x, rv.y, rv.z],
         updates_accepted: run.accepted,
         updates_rejected: run.rejected,
+        poses_at_rest: run.at_rest,
         poses_skipped: run.skipped,
         mean_nis_per_dof: mean_nis,
         excitation,

@@ -4,7 +4,9 @@
 //!
 //! A wheeled base moves along its own forward axis only (no sideways or vertical
 //! velocity), so the IMU's velocity, in the IMU frame, is `v_I = u s`: the wheel speed `s`
-//! along `u = R_I_S e_x` (the lever arm's `w x p` neglected). Over an interval `[a, b]` the
+//! along `u = R_I_S e_x` (the lever arm's `w x p` neglected). `e_x` is the base's forward
+//! axis in the odometry's body frame; any other known direction of travel can take its
+//! place (the `forward` argument; `planar::travel` passes the one the odometry moves along). Over an interval `[a, b]` the
 //! IMU's specific force, rotated into the IMU frame at `a` with the gyro alone and
 //! integrated (`dv_ab`), is then
 //!
@@ -49,7 +51,8 @@ const MIN_WINDOWS: usize = 4;
 /// The yaw of `R_I_S` from the non-holonomic fit.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct HeadingFit {
-    /// Rotation about the vertical (the sensor's `z`): `R_I_S = R_tilt Rz(yaw)`, rad.
+    /// Angle of `u` about `tilt`'s `z` from its `x`, rad. With `forward = x` (a wheel
+    /// odometry) it is the yaw of `R_I_S = R_tilt Rz(yaw)`.
     pub yaw_rad: f64,
     /// 1-sigma of the yaw (jackknife over the windows), rad.
     pub sigma_rad: f64,
@@ -62,7 +65,8 @@ pub struct HeadingFit {
 }
 
 impl HeadingFit {
-    /// `R_I_S = R_tilt Rz(yaw)`.
+    /// `R_I_S = R_tilt Rz(yaw)`, for a fit with `forward = x` (otherwise the rotation that
+    /// takes `x`, not the direction of travel, onto `u`).
     pub fn rotation(&self, tilt: &UnitQuaternion<f64>) -> UnitQuaternion<f64> {
         tilt * UnitQuaternion::from_euler_angles(0.0, 0.0, self.yaw_rad)
     }
@@ -287,7 +291,7 @@ fn strapdowns<'a>(imu: &'a [ImuRecord], bias: &Vector3<f64>) -> [Strapdown<'a>; 
 /// Rotation about the vertical of `R_I_S = R_tilt Rz(yaw)` whose forward axis is `u`:
 /// `R_tilt` (roll and pitch at zero yaw, from gravity) keeps the sensor's `z` where gravity
 /// puts it, and the yaw turns about that `z`, so `R_tilt^T u` is `(cos, sin, 0) yaw`.
-fn yaw_of(u: &Vector3<f64>, tilt: &UnitQuaternion<f64>) -> f64 {
+pub(crate) fn yaw_of(u: &Vector3<f64>, tilt: &UnitQuaternion<f64>) -> f64 {
     let level = tilt.inverse() * u;
     level.y.atan2(level.x)
 }

@@ -21,11 +21,11 @@
 //! sideways share of the increments, [`MAX_SIDE_RATIO`]), and the two clocks agree to a few
 //! tens of ms (an offset lags the speed behind the IMU's accelerations).
 
-use nalgebra::{Matrix3, SymmetricEigen, UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 use super::heading::{self, HeadingFit};
-use super::PlanarMotion;
-use crate::dataset::PoseRecord;
+use super::{main_axis, rotation_between, PlanarMotion};
+use crate::dataset::{ImuRecord, PoseRecord};
 
 /// Largest rms sideways over rms forward displacement of the increments for a vehicle that
 /// moves along its forward axis. A car's lever arm gives `w |p| / speed`, about 1-2 % on the
@@ -35,41 +35,59 @@ pub const MAX_SIDE_RATIO: f64 = 0.1;
 /// Fewest increments that moved for a direction of travel.
 const MIN_MOVING_INCREMENTS: usize = 50;
 
-/// Increments shorter than this are not used for the direction (at rest, or creeping), m.
-const MIN_INCREMENT_M: f64 = 0.02;
+/// Increments slower than this are not used for the direction (at rest, or creeping), m/s.
+const MIN_SPEED_M_S: f64 = 0.3;
+
+/// An increment longer than this many times the median pose interval spans a gap (its
+/// chord cuts across the turns) and is not used.
+const MAX_INTERVAL_RATIO: f64 = 1.5;
+
+/// The span of the recording both fits use, from its first pose, s: the 120 s drives they
+/// were checked on (23 windows of the IMU-side fit); it also bounds their memory.
+const TRAVEL_SPAN_S: f64 = 120.0;
 
 /// The direction a vehicle moves in, in the pose sensor's frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Travel {
     /// Unit direction of travel `d_S` (forward: the way most increments go).
     pub forward_sensor: Vector3<f64>,
-    /// Rms sideways over rms forward displacement of the increments.
+    /// Rms sideways over rms forward displacement of the increments (vertical motion
+    /// counts as sideways).
     pub side_ratio: f64,
     /// Increments used.
     pub increments: usize,
 }
 
 /// The direction of travel from the odometry's increments: the main axis of their
-/// translations, each in the sensor's frame at the increment's start. `None` with fewer than
-/// [`MIN_MOVING_INCREMENTS`] moving increments.
+/// translations, each in the sensor's frame at the increment's start. Increments across a
+/// gap ([`MAX_INTERVAL_RATIO`]) or slower than [`MIN_SPEED_M_S`] are left out; `None` with
+/// fewer than [`MIN_MOVING_INCREMENTS`] left.
 pub fn direction_of_travel(poses: &[PoseRecord]) -> Option<Travel> {
+    let mut intervals: Vec<u64> = poses
+        .windows(2)
+        .map(|w| w[1].stamp_ns.saturating_sub(w[0].stamp_ns))
+        .collect();
+    intervals.sort_unstable();
+    let median_ns = *intervals.get(intervals.len() / 2)? as f64;
     let steps: Vec<Vector3<f64>> = poses
         .windows(2)
-        .map(|w| w[0].rotation.inverse() * (w[1].position - w[0].position))
-        .filter(|t| t.norm() >= MIN_INCREMENT_M)
+        .filter_map(|w| {
+            let dt_ns = w[1].stamp_ns.saturating_sub(w[0].stamp_ns) as f64;
+            let t = w[0].rotation.inverse() * (w[1].position - w[0].position);
+            let moving = t.norm() >= MIN_SPEED_M_S * dt_ns * 1e-9;
+            (dt_ns > 0.0 && dt_ns <= MAX_INTERVAL_RATIO * median_ns && moving).then_some(t)
+        })
         .collect();
     if steps.len() < MIN_MOVING_INCREMENTS {
         return None;
     }
     let scatter: Matrix3<f64> = steps.iter().map(|t| t * t.transpose()).sum();
-    let eigen = SymmetricEigen::new(scatter);
-    let main = eigen.eigenvalues.imax();
-    let mut forward: Vector3<f64> = eigen.eigenvectors.column(main).into();
+    let (_, mut forward) = main_axis(&scatter)?;
     if steps.iter().map(|t| t.dot(&forward)).sum::<f64>() < 0.0 {
         forward = -forward;
     }
     let along: f64 = steps.iter().map(|t| t.dot(&forward).powi(2)).sum();
-    let side = (eigen.eigenvalues.sum() - along).max(0.0);
+    let side = (scatter.trace() - along).max(0.0);
     Some(Travel {
         forward_sensor: forward,
         side_ratio: (side / along).sqrt(),
@@ -97,24 +115,21 @@ pub struct TravelYaw {
 /// odometry does not move along one direction ([`MAX_SIDE_RATIO`]) or the IMU-side fit finds
 /// no answer.
 pub fn travel_yaw(
-    imu: &[crate::dataset::ImuRecord],
+    imu: &[ImuRecord],
     poses: &[PoseRecord],
     gyro_bias: &Vector3<f64>,
     motion: &PlanarMotion,
 ) -> Option<TravelYaw> {
+    let (imu, poses) = first_span(imu, poses)?;
     let travel = direction_of_travel(poses)?;
     if travel.side_ratio > MAX_SIDE_RATIO {
         return None;
     }
-    let vertical = vertical_frame(&motion.axis_imu);
+    // A frame whose `z` is the axis: both angles are measured in its x-y plane.
+    let vertical = rotation_between(&Vector3::z(), &motion.axis_imu);
     let fit = heading::nonholonomic_yaw(imu, poses, &travel.forward_sensor, gyro_bias, &vertical)?;
-    // Both angles in the plane across the axis, measured in `vertical`'s x-y.
-    let planar_angle = |v: &Vector3<f64>| {
-        let level = vertical.inverse() * v;
-        level.y.atan2(level.x)
-    };
     let mapped = motion.alignment * travel.forward_sensor;
-    let angle = heading::wrap(fit.yaw_rad - planar_angle(&mapped));
+    let angle = heading::wrap(fit.yaw_rad - heading::yaw_of(&mapped, &vertical));
     Some(TravelYaw {
         rotation: UnitQuaternion::from_scaled_axis(motion.axis_imu * angle) * motion.alignment,
         angle_rad: angle,
@@ -124,12 +139,15 @@ pub fn travel_yaw(
     })
 }
 
-/// A rotation whose `z` column is `axis` (its `x` and `y` span the plane across it).
-fn vertical_frame(axis: &Vector3<f64>) -> UnitQuaternion<f64> {
-    UnitQuaternion::rotation_between(&Vector3::z(), axis).unwrap_or_else(|| {
-        // `axis` is -z: a half turn about x.
-        UnitQuaternion::from_scaled_axis(Vector3::x() * std::f64::consts::PI)
-    })
+/// The IMU samples and poses of the first [`TRAVEL_SPAN_S`] from the first pose.
+fn first_span<'a>(
+    imu: &'a [ImuRecord],
+    poses: &'a [PoseRecord],
+) -> Option<(&'a [ImuRecord], &'a [PoseRecord])> {
+    let end = poses.first()?.stamp_ns + (TRAVEL_SPAN_S * 1e9) as u64;
+    let poses = &poses[..poses.partition_point(|p| p.stamp_ns <= end)];
+    let imu = &imu[..imu.partition_point(|r| r.stamp_ns <= end + 1_000_000_000)];
+    Some((imu, poses))
 }
 
 #[cfg(test)]

@@ -40,8 +40,10 @@ fn fit(seed: u64) -> (f64, f64, f64, f64) {
 /// Seeds 41-50 (the constants were fixed before any drive was run; seeds 1-40 were measured
 /// while building it: worst 1.94 deg in all, 1.93 deg about the axis at 3.2 sigma, sideways
 /// share 0.011-0.022). Each error about the axis inside the 99.73 % bound of Student's t with
-/// 22 dof (the jackknife's 23 windows), the whole rotation within 3x the worst of seeds 1-40,
-/// the pooled NEES below the 95 % band's top. The scan this replaces started 4 deg off at the
+/// 22 dof (the jackknife's 23 windows), the whole rotation within 3x the worst of seeds 1-40
+/// (what matters of a start: the filter's 10 deg prior), the pooled NEES below the 95 % band's
+/// top. (Seeds 41-50 measured 0.58 deg at worst, and a pooled NEES of 2.8, under the band's
+/// bottom 3.2: the jackknife's sigma, from 23 windows, errs wide here; a wide start is safe.) The scan this replaces started 4 deg off at the
 /// median of seeds 1-40 and 21 deg at worst.
 #[test]
 fn the_direction_of_travel_gives_the_rotation_about_the_axis() {
@@ -51,7 +53,7 @@ fn the_direction_of_travel_gives_the_rotation_about_the_axis() {
     for (seed, (error, about, sigma, side)) in seeds.iter().zip(&fits) {
         assert!(*error < 5.8, "seed {seed}: {error} deg");
         assert!(
-            about.abs() < 3.45 * sigma,
+            about.abs() < 3.38 * sigma,
             "seed {seed}: {about} vs sigma {sigma}"
         );
         assert!(*side < 0.066, "seed {seed}: sideways share {side}");
