@@ -56,8 +56,7 @@ pub fn calibrate<T: Scalar>(
         });
     }
     let started = Instant::now();
-    let standstill = init::detect_standstill(imu, options.min_standstill_s)
-        .filter(|s| s.odometry_agrees(poses, input.pose_noise.translation_noise_m));
+    let standstill = confirmed_standstill(input, options);
     let period_ns = nominal_period_ns(poses);
     let max_interval_ns = period_ns.saturating_mul(3) / 2;
     let increments = init::pose_increments(poses, max_interval_ns);
@@ -95,9 +94,7 @@ pub fn calibrate<T: Scalar>(
         run: Run::new(first_imu.stamp_ns, period_ns),
         poses,
         next_pose: 0,
-        rest_until_ns: standstill
-            .as_ref()
-            .map(|s| s.surely_at_rest_until_ns(time_offset_sigma_s(options))),
+        rest_until_ns: rest_until_ns(standstill.as_ref(), options),
         sigma_r: input.pose_noise.rotation_noise_rad,
         sigma_t: input.pose_noise.translation_noise_m,
     };
@@ -144,6 +141,26 @@ pub fn calibrate<T: Scalar>(
     calibration.report.moving_start = describe_moving_start(&moving_start);
     calibration.report.gyro_bias_init = gyro_bias_init;
     Ok(calibration)
+}
+
+/// The standstill at the start of the recording that the odometry confirms: an IMU moving
+/// at constant velocity without turning reads as at rest ([`init::Standstill::odometry_agrees`]).
+pub(crate) fn confirmed_standstill(
+    input: &PoseImuInput<'_>,
+    options: &PoseImuOptions,
+) -> Option<init::Standstill> {
+    init::detect_standstill(input.imu, options.min_standstill_s)
+        .filter(|s| s.odometry_agrees(input.poses, input.pose_noise.translation_noise_m))
+}
+
+/// Poses stamped up to this time were taken at rest whatever the time offset (within 3
+/// sigma of its prior): they anchor the odometry instead of being fused (see
+/// `PoseFeed::fuse_due`). The firmware's replay stream follows the same rule.
+pub(crate) fn rest_until_ns(
+    standstill: Option<&init::Standstill>,
+    options: &PoseImuOptions,
+) -> Option<u64> {
+    standstill.map(|s| s.surely_at_rest_until_ns(time_offset_sigma_s(options)))
 }
 
 /// The pose-IMU pipeline's measurement feed: fuses every pose whose IMU time has come.

@@ -6,8 +6,8 @@
 //! corner sets interleaved.
 //!
 //! Pose sequencing mirrors the host pipeline: the first pose due at or before the first IMU
-//! sample is skipped; a pose after a gap longer than ten nominal periods (or the first one)
-//! becomes an [`Anchor`]; every other pose becomes the increment from the previous one, with
+//! sample is skipped; a pose after a gap longer than ten nominal periods (or the first one),
+//! and a pose surely taken at rest (`pose_imu::rest_until_ns`), becomes an [`Anchor`]; every other pose becomes the increment from the previous one, with
 //! sigmas scaled by the square root of the periods it spans. A pose message is sent
 //! [`StreamOptions::pose_lead_ns`] ahead of the IMU samples around its stamp; the firmware
 //! holds it until the IMU stream reaches `stamp + t_d`.
@@ -33,7 +33,7 @@ use crate::calibrate::camera_imu::{
 };
 use crate::calibrate::driver::report::PoseImuOptions;
 use crate::calibrate::driver::{nominal_period_ns, time_offset_sigma_s, ImuStartPrior};
-use crate::calibrate::pose_imu::PoseImuInput;
+use crate::calibrate::pose_imu::{confirmed_standstill, rest_until_ns, PoseImuInput};
 use crate::calibrate::{init, InputError};
 use crate::dataset::{ImuNoiseYaml, ImuRecord};
 
@@ -209,10 +209,17 @@ pub fn build_stream(
         .iter()
         .position(|p| p.stamp_ns > start_ns)
         .unwrap_or(input.poses.len());
+    // Poses surely taken at rest anchor the odometry, as in the pipeline.
+    let rest_until = rest_until_ns(
+        confirmed_standstill(input, &options.pipeline).as_ref(),
+        &options.pipeline,
+    );
     let mut previous: Option<&crate::dataset::PoseRecord> = None;
     let mut measurements = Vec::with_capacity(input.poses.len());
     for pose in &input.poses[first..] {
-        let msg = match previous.filter(|p| pose.stamp_ns - p.stamp_ns <= max_interval_ns) {
+        let at_rest = rest_until.is_some_and(|t| pose.stamp_ns <= t);
+        let moving_from = previous.filter(|p| pose.stamp_ns - p.stamp_ns <= max_interval_ns);
+        let msg = match moving_from.filter(|_| !at_rest) {
             None => HostMsg::Anchor(Anchor {
                 stamp_ns: pose.stamp_ns,
                 sensor: 0,
