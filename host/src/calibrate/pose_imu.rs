@@ -122,14 +122,9 @@ pub fn calibrate<T: Scalar>(
         calibration.report.reasons.insert(0, problem);
         calibration.report.converged = false;
     }
-    calibration.report.planar = planar.as_ref().map_or_else(String::new, |p| {
-        let constrained = options.constrain_yaw.unwrap_or(true);
-        let how = if constrained { "kept" } else { "not kept" };
-        format!(
-            "{}; the rotation about gravity {how} unobservable (`constrain_yaw`)",
-            p.describe()
-        )
-    });
+    calibration.report.planar = planar
+        .as_ref()
+        .map_or_else(String::new, |p| describe_planar(p, options));
     if let Some(problem) = scale_problem {
         trust::refuse_rotation(
             &mut calibration,
@@ -141,6 +136,20 @@ pub fn calibrate<T: Scalar>(
     calibration.report.moving_start = describe_moving_start(&moving_start);
     calibration.report.gyro_bias_init = gyro_bias_init;
     Ok(calibration)
+}
+
+/// The report's words for a planar start, and whether the filter kept the rotation about
+/// gravity unobservable (on by default under planar motion).
+fn describe_planar(start: &planar::PlanarStart, options: &PoseImuOptions) -> String {
+    let how = if options.constrain_yaw.unwrap_or(true) {
+        "kept"
+    } else {
+        "not kept"
+    };
+    format!(
+        "{}; the rotation about gravity {how} unobservable (`constrain_yaw`)",
+        start.describe()
+    )
 }
 
 /// The standstill at the start of the recording that the odometry confirms: an IMU moving
