@@ -188,16 +188,16 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         }
         let innovation = sensor.zip(extrinsic_jacobian).map(|(s, h_e)| {
             let b = Layout::<S, C>::extrinsic_rotation(s);
-            ExtrinsicInnovation {
-                rotation_covariance: self.cov.fixed_view::<3, 3>(b.idx, b.idx).clone_owned(),
-                ..extrinsic_innovation(
+            extrinsic_innovation(
+                (
                     &h_e.fixed_columns::<3>(0).clone_owned(),
                     &h_e.fixed_columns::<3>(3).clone_owned(),
                     end_rotation,
-                    &gain.innovation_inverse,
-                    &gain.weighted_residual,
-                )
-            }
+                ),
+                &gain.innovation_inverse,
+                &gain.weighted_residual,
+                self.cov.fixed_view::<3, 3>(b.idx, b.idx).clone_owned(),
+            )
         });
         self.correct(&gain)?;
         Ok(self.record_update(
@@ -408,13 +408,17 @@ struct Corrected<T: Scalar, const S: usize, const C: usize, const F: usize> {
 /// `H_e^T S^-1 H_e` and `H_e^T S^-1 r` for the rotation and the translation block of
 /// `H_e = [h_rotation h_translation]` (the off-diagonal blocks are not needed), and the same
 /// for `E = end_rotation`, the Jacobian w.r.t. a rotation of the mounting at an increment's
-/// end stamp only (zero where the measurement is not an increment).
+/// end stamp only (zero where the measurement is not an increment); `rotation_covariance`
+/// is the extrinsic rotation's covariance the knock test's variance includes.
 pub(super) fn extrinsic_innovation<T: Scalar, const M: usize>(
-    h_rotation: &SMatrix<T, M, 3>,
-    h_translation: &SMatrix<T, M, 3>,
-    end_rotation: Option<&SMatrix<T, M, 3>>,
+    (h_rotation, h_translation, end_rotation): (
+        &SMatrix<T, M, 3>,
+        &SMatrix<T, M, 3>,
+        Option<&SMatrix<T, M, 3>>,
+    ),
     innovation_inverse: &SMatrix<T, M, M>,
     weighted_residual: &SVector<T, M>,
+    rotation_covariance: Matrix3<T>,
 ) -> ExtrinsicInnovation<T> {
     let project = |h: &SMatrix<T, M, 3>| {
         let ht = h.transpose();
@@ -431,6 +435,6 @@ pub(super) fn extrinsic_innovation<T: Scalar, const M: usize>(
         translation_score,
         jump_info,
         jump_score,
-        rotation_covariance: Matrix3::zeros(),
+        rotation_covariance,
     }
 }

@@ -338,12 +338,17 @@ impl<T: Scalar> Image<T> {
     /// (`Q2^T H = 0`), so this equals the stacked image's.
     fn innovation<const N: usize>(&self, gain: &Gain<T, ACTIVE, N>) -> ExtrinsicInnovation<T> {
         let u = self.rows.upper();
+        // No end rotation: an image is no increment, so no knock candidate rests on it and
+        // the candidate test's covariance is not needed.
         extrinsic_innovation(
-            &u.fixed_columns::<3>(EXTRINSIC_ROTATION_AT).clone_owned(),
-            &u.fixed_columns::<3>(EXTRINSIC_TRANSLATION_AT).clone_owned(),
-            None,
+            (
+                &u.fixed_columns::<3>(EXTRINSIC_ROTATION_AT).clone_owned(),
+                &u.fixed_columns::<3>(EXTRINSIC_TRANSLATION_AT).clone_owned(),
+                None,
+            ),
             &gain.innovation_inverse,
             &gain.weighted_residual,
+            Matrix3::zeros(),
         )
     }
 }

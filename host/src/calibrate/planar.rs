@@ -170,7 +170,7 @@ impl From<travel::TravelYaw> for YawFit {
         Self {
             rotation: t.rotation,
             angle_rad: t.angle_rad,
-            sigma_rad: t.sigma_rad,
+            sigma_rad: t.heading.sigma_rad,
             method: YawMethod::Travel {
                 side_ratio: t.travel.side_ratio,
                 windows: t.heading.windows,

@@ -102,11 +102,9 @@ pub struct TravelYaw {
     pub rotation: UnitQuaternion<f64>,
     /// The angle about `axis_imu` added to the alignment, rad.
     pub angle_rad: f64,
-    /// 1-sigma of the angle (the heading fit's jackknife over its windows), rad.
-    pub sigma_rad: f64,
     /// The direction of travel it used.
     pub travel: Travel,
-    /// The IMU-side fit.
+    /// The IMU-side fit (its `sigma_rad`, the jackknife over its windows, is the angle's).
     pub heading: HeadingFit,
 }
 
@@ -133,7 +131,6 @@ pub fn travel_yaw(
     Some(TravelYaw {
         rotation: UnitQuaternion::from_scaled_axis(motion.axis_imu * angle) * motion.alignment,
         angle_rad: angle,
-        sigma_rad: fit.sigma_rad,
         travel,
         heading: fit,
     })

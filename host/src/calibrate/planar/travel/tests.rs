@@ -30,11 +30,16 @@ fn fit(seed: u64) -> (f64, f64, f64, f64) {
     let about = rest.scaled_axis().dot(&motion.axis_imu).to_degrees();
     println!(
         "seed {seed}: error {error:.3} deg, about the axis {about:+.3} deg, sigma {:.3} deg, side {:.4}, windows {}",
-        t.sigma_rad.to_degrees(),
+        t.heading.sigma_rad.to_degrees(),
         t.travel.side_ratio,
         t.heading.windows
     );
-    (error, about, t.sigma_rad.to_degrees(), t.travel.side_ratio)
+    (
+        error,
+        about,
+        t.heading.sigma_rad.to_degrees(),
+        t.travel.side_ratio,
+    )
 }
 
 /// Seeds 41-50 (the constants were fixed before any drive was run; seeds 1-40 were measured
