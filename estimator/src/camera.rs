@@ -1,10 +1,15 @@
 //! Camera models in Kalibr's terms: `pinhole` with `radtan`, `equidistant` (Kannala-Brandt)
 //! or no distortion, and `omni` (Mei's unified model) with `radtan` or none. Projection
 //! returns the pixel and its Jacobian w.r.t. the point (for reprojection updates, eq. 4.15,
-//! A.31-A.36); unprojection returns the unit bearing. Pixels: centre of the top-left pixel
+//! A.31-A.36); unprojection returns the unit bearing. [`model`] carries every Kalibr model
+//! (also double sphere, [`ds`], and the extended unified model, [`eucm`]) with flat
+//! parameters and the Jacobian w.r.t. them, for intrinsic calibration. Pixels: centre of the top-left pixel
 //! is (0, 0).
 
+pub mod ds;
 pub mod equidistant;
+pub mod eucm;
+pub mod model;
 pub mod omni;
 pub mod radtan;
 

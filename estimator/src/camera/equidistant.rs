@@ -3,7 +3,7 @@
 //! `theta_d = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8)`.
 
 use crate::scalar::Scalar;
-use nalgebra::{Matrix2x3, RowVector3, Vector2, Vector3};
+use nalgebra::{Matrix2x3, Matrix2x4, RowVector3, Vector2, Vector3};
 
 /// The four coefficients.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -66,6 +66,24 @@ impl<T: Scalar> Equidistant<T> {
         j.set_row(0, &(ds * p.x + RowVector3::new(s, T::zero(), T::zero())));
         j.set_row(1, &(ds * p.y + RowVector3::new(T::zero(), s, T::zero())));
         Some((Vector2::new(s * p.x, s * p.y), j))
+    }
+
+    /// `d m / d [k1, k2, k3, k4]` of [`Equidistant::project`] at `p` (zero on the axis).
+    pub fn coefficient_jacobian(&self, p: &Vector3<T>) -> Matrix2x4<T> {
+        let rho = (p.x * p.x + p.y * p.y).sqrt();
+        if rho < T::lit(1e-9) * p.z.abs().max(T::lit(1e-12)) {
+            return Matrix2x4::zeros();
+        }
+        let theta = rho.atan2(p.z);
+        let t2 = theta * theta;
+        let mut j = Matrix2x4::zeros();
+        let mut power = theta * t2;
+        for k in 0..4 {
+            j[(0, k)] = power * p.x / rho;
+            j[(1, k)] = power * p.y / rho;
+            power *= t2;
+        }
+        j
     }
 
     /// Unit-free bearing of a distorted normalised point (Newton on `theta`).

@@ -1,7 +1,7 @@
 //! Radial-tangential distortion on the normalised plane (Kalibr `radtan`, OpenCV).
 
 use crate::scalar::Scalar;
-use nalgebra::{Matrix2, Vector2};
+use nalgebra::{Matrix2, Matrix2x4, Vector2};
 
 /// Coefficients `k1, k2, p1, p2` (Kalibr order) and OpenCV's optional `k3`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -46,6 +46,25 @@ impl<T: Scalar> RadTan<T> {
         (Vector2::new(xd, yd), j)
     }
 
+    /// `d distorted / d [k1, k2, p1, p2]` at the undistorted point `m` (Kalibr's four
+    /// coefficients; `k3` is not a calibrated parameter).
+    pub fn coefficient_jacobian(&self, m: &Vector2<T>) -> Matrix2x4<T> {
+        let (x, y) = (m.x, m.y);
+        let two = T::lit(2.0);
+        let r2 = x * x + y * y;
+        let r4 = r2 * r2;
+        Matrix2x4::new(
+            x * r2,
+            x * r4,
+            two * x * y,
+            r2 + two * x * x,
+            y * r2,
+            y * r4,
+            r2 + two * y * y,
+            two * x * y,
+        )
+    }
+
     /// Inverts [`RadTan::distort`] by Gauss-Newton from the distorted point; `None` when
     /// it does not converge (far outside the lens's field of view).
     pub fn undistort(&self, m_d: &Vector2<T>) -> Option<Vector2<T>> {
@@ -80,5 +99,28 @@ mod tests {
         let m = Vector2::new(0.3, -0.2);
         let numeric = central_diff::<2, 2>(|e| d.distort(&(m + e)).0);
         assert_mat_close(&d.distort(&m).1, &numeric, 1e-8);
+    }
+
+    #[test]
+    fn coefficient_jacobian_matches_central_differences() {
+        let d = RadTan {
+            k1: -0.27,
+            k2: 0.1,
+            p1: 0.002,
+            p2: -0.001,
+            k3: 0.0,
+        };
+        let m = Vector2::new(0.3, -0.2);
+        let numeric = central_diff::<2, 4>(|e| {
+            let c = RadTan {
+                k1: d.k1 + e[0],
+                k2: d.k2 + e[1],
+                p1: d.p1 + e[2],
+                p2: d.p2 + e[3],
+                k3: 0.0,
+            };
+            c.distort(&m).0
+        });
+        assert_mat_close(&d.coefficient_jacobian(&m), &numeric, 1e-8);
     }
 }
