@@ -100,6 +100,9 @@ pub fn factory_response(code: u8) -> f32 {
     (1..code).fold(2620.0f32, |v, _| v * 1.01)
 }
 
+/// Factory self-test codes: gyro X/Y/Z, accel X/Y/Z.
+type OtpCodes = ([u8; 3], [u8; 3]);
+
 /// Mean accel and gyro outputs, LSB.
 #[derive(Clone, Copy, Debug, Default)]
 struct Means {
@@ -181,7 +184,7 @@ impl<SPI: SpiDevice> Icm42688<SPI> {
     }
 
     /// OTP codes: gyro X/Y/Z (bank 1), accel X/Y/Z (bank 2); back to bank 0.
-    fn self_test_codes(&mut self) -> Result<([u8; 3], [u8; 3]), Error<SPI::Error>> {
+    fn self_test_codes(&mut self) -> Result<OtpCodes, Error<SPI::Error>> {
         let (mut g, mut a) = ([0u8; 3], [0u8; 3]);
         self.select_bank(1)?;
         self.read_registers(bank1::XG_ST_DATA, &mut g)?;

@@ -80,12 +80,14 @@ fn a_reset_that_does_not_complete_is_an_error() {
 
 #[test]
 fn an_anti_alias_setting_beyond_its_bits_is_refused_before_the_bus_is_touched() {
-    let mut config = Config::default();
-    config.anti_alias = Some(msreg_icm42688::AntiAlias {
-        delt: 64,
-        deltsqr: 1,
-        bitshift: 1,
-    });
+    let config = Config {
+        anti_alias: Some(msreg_icm42688::AntiAlias {
+            delt: 64,
+            deltsqr: 1,
+            bitshift: 1,
+        }),
+        ..Config::default()
+    };
     let mut imu = Icm42688::new(Mock::new(&[]));
     assert_eq!(
         imu.init(&mut NoopDelay::new(), config),
@@ -291,8 +293,8 @@ fn scaling_follows_every_full_scale_setting() {
         let read = imu.read_fifo(DataReady::default, &mut out).expect("read");
         assert_eq!(read.samples, 1);
         let s = &out[0];
-        for j in 0..3 {
-            let v = f64::from(raw[j]);
+        for (j, &lsb) in raw.iter().enumerate() {
+            let v = f64::from(lsb);
             let exact_g =
                 v * gyro_range.full_scale_dps() as f64 / 32768.0 * std::f64::consts::PI / 180.0;
             let exact_a = v * accel_range.full_scale_g() as f64 / 32768.0 * G;
@@ -507,7 +509,7 @@ fn self_test_fails_a_weak_or_uncoded_axis_and_restores_the_configuration() {
         .collect();
     // Gyro X at 45 %, gyro Z without a factory code, accel Y at 155 %.
     assert_eq!(pass, [false, true, false, true, false, true]);
-    assert_eq!(report.gyro[2].factory_lsb, 0.0);
+    assert!(report.gyro[2].factory_lsb.abs() < f32::EPSILON);
     assert_eq!(imu.config(), Some(&Config::default()));
     finish(imu);
 }
