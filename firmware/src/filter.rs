@@ -9,6 +9,7 @@ use msreg_estimator::chi2::Confidence;
 use msreg_estimator::filter::MonitorEkf;
 use msreg_estimator::health::NisStatus;
 use msreg_estimator::na::{Quaternion, UnitQuaternion, Vector3};
+use msreg_estimator::propagate::Rotations;
 use msreg_estimator::{
     CameraImuEkf, Ekf, Error as FilterError, FilterConfig, ImuNoise, ImuSample, ImuState,
     InitialState, Pose, PoseImuEkf, RelativePose, SensorId, UpdateReport,
@@ -325,15 +326,24 @@ fn with_sensor<const S: usize>(
         .with_time_offset(s, p.time_offset_s, p.sigma_time_offset_s))
 }
 
+/// The propagation the device runs (docs/estimator.md, "Propagation on the device"): the
+/// rotation functions of each IMU step by their power series instead of libm's
+/// trigonometry, which evaluates in software `f64` on this FPU. Every filter the firmware
+/// builds (the link's and the self-test's) goes through here.
+pub fn device_config(mut fc: FilterConfig<f32>) -> FilterConfig<f32> {
+    fc.rotations = Rotations::Series;
+    fc
+}
+
 /// The filter tuning of a configuration (the health tuning of the monitor layout on top).
 fn filter_config(c: &Config) -> Result<FilterConfig<f32>, FilterError> {
     let n = &c.imu_noise;
-    let mut fc = FilterConfig::new(ImuNoise {
+    let mut fc = device_config(FilterConfig::new(ImuNoise {
         gyro_noise_density: n.gyro_noise_density,
         accel_noise_density: n.accel_noise_density,
         gyro_random_walk: n.gyro_random_walk,
         accel_random_walk: n.accel_random_walk,
-    });
+    }));
     fc.gate = confidence(c.gate);
     if c.max_imu_gap_ns > 0 {
         fc.max_imu_gap_ns = u64::from(c.max_imu_gap_ns);

@@ -101,7 +101,8 @@ fn bench_reprojection(clock: &InstructionClock) -> Option<Tally> {
     let init = InitialState::<f32, 1>::at_rest(gravity)?
         .with_extrinsic(SOLE_SENSOR, Pose::identity(), 0.01, 0.01)
         .with_time_offset(SOLE_SENSOR, 0.0, 0.005);
-    let mut ekf = CameraImuEkf::<f32>::new(&FilterConfig::new(noise), &init).ok()?;
+    let config = msreg_firmware::filter::device_config(FilterConfig::new(noise));
+    let mut ekf = CameraImuEkf::<f32>::new(&config, &init).ok()?;
     let stamp_ns = 1_000_000_000;
     ekf.propagate(&ImuSample {
         stamp_ns,
