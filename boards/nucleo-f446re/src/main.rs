@@ -195,9 +195,12 @@ fn pump_link(session: &mut Session, deframer: &mut Deframer<HOST_FRAME_MAX>, vcp
             Pushed::Pending => {}
             Pushed::Oversize => session.frame_error(vcp, msreg_protocol::FrameError::Oversize),
             Pushed::Frame(f) => match frame::decode::<HostMsg>(f) {
-                // The frame ends now (the loop drains the ring as bytes arrive); the
-                // session's clock is the device clock of the IMU stamps.
-                Ok(packet) => session.handle(vcp, packet, clock::now_ns(), clock::now_ns),
+                // Received when its delimiter arrived (stamped by the USART2 handler);
+                // the session's clock is the device clock of the IMU stamps.
+                Ok(packet) => {
+                    let rx_ns = vcp.frame_end_ns().unwrap_or_else(clock::now_ns);
+                    session.handle(vcp, packet, rx_ns, clock::now_ns);
+                }
                 Err(e) => session.frame_error(vcp, e),
             },
         }

@@ -3,6 +3,13 @@
 //! writes to; stm32f4xx-hal 0.23 implements embedded-io 0.6 only). Receive is interrupt
 //! driven (USART2 RXNE) into the firmware's bounded [`Ring`], as QEMU's UART0 driver does;
 //! transmit blocks on the HAL's `Tx`.
+//!
+//! Receive stamps: the handler stamps each frame delimiter (`0x00`) on the device clock as it
+//! arrives, numbered; the main loop counts the delimiters it takes out of the ring and
+//! [`Vcp::frame_end_ns`] returns the stamp of the last one (the session's `rx_ns`, for the
+//! clock sync), unaffected by how long the loop was busy. The last [`STAMPS`] stamps are
+//! kept; when the ring runs empty the loop's count is re-aligned with the handler's (a byte
+//! dropped in a full ring may have been a delimiter).
 
 use core::cell::RefCell;
 use core::convert::Infallible;
@@ -23,6 +30,20 @@ pub const BAUD: u32 = 115_200;
 static RX: Ring<RX_RING> = Ring::new();
 static RX_HALF: Mutex<RefCell<Option<Rx<USART2>>>> = Mutex::new(RefCell::new(None));
 
+/// Delimiter stamps kept (frames that may wait in the ring with their receive time).
+pub const STAMPS: usize = 16;
+
+/// The handler's delimiters: how many arrived, and `(number, ns)` of the last [`STAMPS`].
+struct Delimiters {
+    count: u32,
+    stamps: [(u32, u64); STAMPS],
+}
+
+static DELIMITERS: Mutex<RefCell<Delimiters>> = Mutex::new(RefCell::new(Delimiters {
+    count: 0,
+    stamps: [(0, 0); STAMPS],
+}));
+
 /// USART2 RXNE: moves every received byte into the ring. A receive error (overrun,
 /// framing, noise) is cleared by the read and the byte lost; the session sees the gap as a
 /// frame error.
@@ -32,7 +53,15 @@ fn USART2() {
         if let Some(rx) = RX_HALF.borrow(cs).borrow_mut().as_mut() {
             loop {
                 match rx.read() {
-                    Ok(b) => RX.push(b),
+                    Ok(b) => {
+                        if b == 0 {
+                            let mut d = DELIMITERS.borrow(cs).borrow_mut();
+                            d.count = d.count.wrapping_add(1);
+                            let n = d.count;
+                            d.stamps[n as usize % STAMPS] = (n, crate::clock::now_ns());
+                        }
+                        RX.push(b);
+                    }
                     Err(nb::Error::WouldBlock) => break,
                     Err(nb::Error::Other(_)) => {}
                 }
@@ -44,6 +73,10 @@ fn USART2() {
 /// The link's UART.
 pub struct Vcp {
     tx: Tx<USART2>,
+    /// Delimiters taken out of the ring.
+    taken: u32,
+    /// Receive stamp of the last delimiter taken, until asked for.
+    frame_end: Option<u64>,
 }
 
 impl Vcp {
@@ -54,7 +87,11 @@ impl Vcp {
         free(|cs| RX_HALF.borrow(cs).replace(Some(rx)));
         // SAFETY: the handler only touches RX_HALF and RX, both ready now.
         unsafe { cortex_m::peripheral::NVIC::unmask(pac::Interrupt::USART2) };
-        Self { tx }
+        Self {
+            tx,
+            taken: 0,
+            frame_end: None,
+        }
     }
 
     /// Bytes dropped because the receive ring was full, since the last call.
@@ -64,7 +101,25 @@ impl Vcp {
 
     /// Next received byte, if any (non-blocking).
     pub fn try_read_byte(&mut self) -> Option<u8> {
-        RX.pop()
+        let b = RX.pop()?;
+        free(|cs| {
+            let d = DELIMITERS.borrow(cs).borrow();
+            if b == 0 {
+                self.taken = self.taken.wrapping_add(1);
+                let (n, ns) = d.stamps[self.taken as usize % STAMPS];
+                self.frame_end = (n == self.taken).then_some(ns);
+            }
+            if RX.is_empty() {
+                self.taken = d.count;
+            }
+        });
+        Some(b)
+    }
+
+    /// Device-clock time at which the last frame delimiter taken arrived, if its stamp was
+    /// kept (`None` after more than [`STAMPS`] frames queued behind it).
+    pub fn frame_end_ns(&mut self) -> Option<u64> {
+        self.frame_end.take()
     }
 
     /// True when a received byte waits.
