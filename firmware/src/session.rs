@@ -12,6 +12,11 @@
 //! Every refusal is counted by [`ErrorKind`] and reported; nothing resets the device.
 //! Log lines (`defmt`, typed primitive arguments only: see `msreg link log`) mark the
 //! configuration, each fault, each alarm and the progress every [`PROGRESS_PERIOD_NS`].
+//!
+//! Clock sync: a `TimeSync` request is answered with the device clock when its frame ended
+//! (the caller's receive stamp) and just before the reply is written, ahead of its ack. This
+//! firmware's IMU arrives over the link, so its filter runs on the host's stamps
+//! ([`TIME_BASE`]).
 
 use heapless::Deque;
 use msreg_estimator::health::{HealthEvent, NisStatus};
@@ -23,8 +28,9 @@ use msreg_estimator::{
 use msreg_protocol::{
     self as protocol, frame, Ack, AckStatus, AlarmKind, Anchor, Config, CornerSet, DeviceMsg,
     ErrorKind, ErrorReport, Estimate, FrameError, HealthAlarm, HealthState, Hello, HostMsg,
-    ImuBatch, NisState, Packet, RelativePose, Status, TargetPose, UpdateDiagnostic, UpdateKind,
-    CORNER_SET_MAX, DEVICE_FRAME_MAX, HOST_FRAME_MAX,
+    ImuBatch, NisState, Packet, RelativePose, Status, TargetPose, TimeBase, TimeSyncReply,
+    TimeSyncRequest, UpdateDiagnostic, UpdateKind, CORNER_SET_MAX, DEVICE_FRAME_MAX,
+    HOST_FRAME_MAX,
 };
 
 pub use crate::filter::POSE_SENSORS;
@@ -37,6 +43,8 @@ pub const PENDING_MAX: usize = 16;
 /// is a full corner set in RAM (~1 KB); the host sends them 60 ms ahead of the IMU batch at
 /// their stamp, so at 20 Hz at most three images and the target pose wait (docs/protocol.md).
 pub const CAMERA_PENDING_MAX: usize = 4;
+/// The clock the filter runs on: the IMU comes over the link, stamped by the host.
+pub const TIME_BASE: TimeBase = TimeBase::HostStamps;
 /// Filter time between two progress log lines.
 pub const PROGRESS_PERIOD_NS: u64 = 5_000_000_000;
 
@@ -279,9 +287,16 @@ impl Session {
         }
     }
 
-    /// Applies one decoded packet and acknowledges it.
+    /// Applies one decoded packet and acknowledges it. `rx_ns`: the device clock when the
+    /// frame ended; `clock`: the device clock now (ns, the same clock).
     #[inline(never)]
-    pub fn handle<W: embedded_io::Write>(&mut self, w: &mut W, packet: Packet<HostMsg>) {
+    pub fn handle<W: embedded_io::Write>(
+        &mut self,
+        w: &mut W,
+        packet: Packet<HostMsg>,
+        rx_ns: u64,
+        clock: fn() -> u64,
+    ) {
         let seq = packet.seq;
         let is_hello = matches!(packet.msg, HostMsg::Hello(_));
         if !is_hello {
@@ -315,8 +330,28 @@ impl Session {
                 Self::tx(&mut self.tx_seq, w).send(&status);
                 AckStatus::Ok
             }
+            HostMsg::TimeSync(r) => self.on_time_sync(w, r, rx_ns, clock),
         };
         self.ack(w, seq, status);
+    }
+
+    /// The reply of a clock-sync exchange: `t3` is read last, just before the encoding (a
+    /// few microseconds) and the write.
+    fn on_time_sync<W: embedded_io::Write>(
+        &mut self,
+        w: &mut W,
+        r: &TimeSyncRequest,
+        rx_ns: u64,
+        clock: fn() -> u64,
+    ) -> AckStatus {
+        let reply = TimeSyncReply {
+            t1_ns: r.t1_ns,
+            t2_ns: rx_ns,
+            t3_ns: clock(),
+            time_base: TIME_BASE,
+        };
+        Self::tx(&mut self.tx_seq, w).send(&DeviceMsg::TimeSync(reply));
+        AckStatus::Ok
     }
 
     fn ack<W: embedded_io::Write>(&mut self, w: &mut W, seq: u32, status: AckStatus) {

@@ -60,3 +60,57 @@ pub fn nop_4000() {
     // SAFETY: nops have no effect.
     unsafe { core::arch::asm!(".rept 4000", "nop", ".endr", options(nomem, nostack)) };
 }
+
+/// SysTick (and core) clock of mps2-an386, Hz: 40 ns per tick.
+pub const CORE_HZ: u64 = 25_000_000;
+const NS_PER_TICK: u64 = 1_000_000_000 / CORE_HZ;
+
+/// SysTick wraps (2^24 ticks each) since [`DeviceClock::start`]; incremented only by
+/// [`DeviceClock::on_wrap`] (the SysTick exception).
+static WRAPS: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
+
+/// The device clock: SysTick from the core clock with its wrap interrupt, extended to 64 bits
+/// (2^32 wraps of 0.67 s: 91 years). Monotonic ns since `start`, 40 ns resolution. The link
+/// binary's SysTick exception must call [`DeviceClock::on_wrap`]. Under QEMU without
+/// `-icount` the core clock follows the host's monotonic clock (QEMU's virtual clock).
+pub struct DeviceClock {
+    _syst: SYST,
+}
+
+impl DeviceClock {
+    /// Starts SysTick: full 24-bit reload, core clock, wrap interrupt on.
+    pub fn start(mut syst: SYST) -> Self {
+        syst.disable_counter();
+        syst.set_clock_source(SystClkSource::Core);
+        syst.set_reload(MASK);
+        syst.clear_current();
+        syst.enable_interrupt();
+        syst.enable_counter();
+        Self { _syst: syst }
+    }
+
+    /// Counts one wrap; call from the SysTick exception only.
+    pub fn on_wrap() {
+        WRAPS.fetch_add(1, core::sync::atomic::Ordering::Relaxed);
+    }
+
+    /// ns since `start` (callable from interrupts too).
+    pub fn now_ns() -> u64 {
+        now_ticks().wrapping_mul(NS_PER_TICK)
+    }
+}
+
+/// Ticks since start: wraps * 2^24 + elapsed in the current period. A wrap whose exception
+/// has not run yet is seen as pending (or as the counter jumping up between two reads).
+fn now_ticks() -> u64 {
+    cortex_m::interrupt::free(|_| {
+        let first = SYST::get_current();
+        let pending = cortex_m::peripheral::SCB::is_pendst_pending();
+        let second = SYST::get_current();
+        let mut wraps = u64::from(WRAPS.load(core::sync::atomic::Ordering::Relaxed));
+        if pending || second > first {
+            wraps += 1;
+        }
+        (wraps << 24) + u64::from(MASK - (second & MASK))
+    })
+}

@@ -6,14 +6,24 @@
 //! Registers: `DATA` +0x00, `STATE` +0x04 (bit 0 TX full, bit 1 RX full, bits 2-3 overrun,
 //! write 1 to clear), `CTRL` +0x08 (bit 0 TX enable, bit 1 RX enable, bit 3 RX interrupt),
 //! `INTSTATUS/INTCLEAR` +0x0C (bit 1 RX), `BAUDDIV` +0x10.
+//!
+//! Receive time stamps (clock sync, docs/protocol.md): the interrupt handler stamps every
+//! frame delimiter (`0x00`) it stores with the device clock ([`DeviceClock::now_ns`]), tagged
+//! with the byte's index in the stream; when the main loop takes that byte out of the ring,
+//! [`Uart::frame_end_ns`] returns its stamp. The handler stores a byte only when its own count
+//! says the ring has room (a byte it cannot store is dropped and counted, as the ring would),
+//! so the indices of both sides never drift apart.
 
 use core::convert::Infallible;
+use core::cell::UnsafeCell;
 use core::ptr::{read_volatile, write_volatile};
+use core::sync::atomic::{AtomicU32, Ordering};
 
 use cortex_m::interrupt::InterruptNumber;
 use cortex_m::peripheral::NVIC;
 
 use crate::ring::Ring;
+use crate::ticks::DeviceClock;
 
 const UART0: usize = 0x4000_4000;
 const DATA: usize = 0x00;
@@ -34,6 +44,69 @@ pub const RX_RING: usize = 4096;
 
 /// Bytes received by the interrupt handler, not yet read.
 static RX: Ring<RX_RING> = Ring::new();
+/// Bytes the handler stored in [`RX`] (the index of the next one).
+static STORED: AtomicU32 = AtomicU32::new(0);
+/// Bytes the main loop took out of [`RX`] (counted after the pop).
+static TAKEN: AtomicU32 = AtomicU32::new(0);
+/// Bytes the handler dropped because [`RX`] was full by its count.
+static DROPPED: AtomicU32 = AtomicU32::new(0);
+/// Receive stamps of the delimiters waiting in [`RX`].
+static STAMPS: StampQueue = StampQueue::new();
+
+/// Delimiter stamps that may wait (more, e.g. in a burst of tiny frames, are dropped: those
+/// frames have no receive stamp).
+const STAMPS_MAX: usize = 16;
+
+/// Single-producer (interrupt) single-consumer (main loop) queue of `(byte index, ns)`.
+struct StampQueue {
+    slots: UnsafeCell<[(u32, u64); STAMPS_MAX]>,
+    head: AtomicU32,
+    tail: AtomicU32,
+}
+
+// SAFETY: the producer writes `slots[head]` then publishes `head`; the consumer reads
+// `slots[tail]` then publishes `tail`; no slot is accessed by both at once.
+unsafe impl Sync for StampQueue {}
+
+impl StampQueue {
+    const fn new() -> Self {
+        Self {
+            slots: UnsafeCell::new([(0, 0); STAMPS_MAX]),
+            head: AtomicU32::new(0),
+            tail: AtomicU32::new(0),
+        }
+    }
+
+    fn push(&self, entry: (u32, u64)) {
+        let head = self.head.load(Ordering::Relaxed);
+        if head.wrapping_sub(self.tail.load(Ordering::Acquire)) as usize >= STAMPS_MAX {
+            return;
+        }
+        // SAFETY: the slot at `head` is not visible to the consumer until `head` advances.
+        unsafe { (*self.slots.get())[head as usize % STAMPS_MAX] = entry };
+        self.head.store(head.wrapping_add(1), Ordering::Release);
+    }
+
+    /// The stamp of byte `index`, dropping older entries (their bytes are gone).
+    fn take(&self, index: u32) -> Option<u64> {
+        loop {
+            let tail = self.tail.load(Ordering::Relaxed);
+            if tail == self.head.load(Ordering::Acquire) {
+                return None;
+            }
+            // SAFETY: the producer does not write this slot until `tail` advances past it.
+            let (at, ns) = unsafe { (*self.slots.get())[tail as usize % STAMPS_MAX] };
+            let behind = index.wrapping_sub(at);
+            if behind > u32::MAX / 2 {
+                return None; // a later byte's stamp: keep it
+            }
+            self.tail.store(tail.wrapping_add(1), Ordering::Release);
+            if behind == 0 {
+                return Some(ns);
+            }
+        }
+    }
+}
 
 /// External interrupts of mps2-an386 used here.
 #[derive(Clone, Copy)]
@@ -73,11 +146,34 @@ extern "C" fn uart0_rx_isr() {
 
 fn drain_rx_register() {
     while read_reg(STATE) & STATE_RX_FULL != 0 {
-        RX.push(read_reg(DATA) as u8);
+        store(read_reg(DATA) as u8);
     }
     if read_reg(STATE) & STATE_OVERRUN != 0 {
         write_reg(STATE, STATE_OVERRUN);
     }
+}
+
+/// Interrupt side: stores `byte` if the ring has room by our count, stamping delimiters.
+fn store(byte: u8) {
+    let index = STORED.load(Ordering::Relaxed);
+    if index.wrapping_sub(TAKEN.load(Ordering::Acquire)) as usize >= RX_RING {
+        DROPPED.fetch_add(1, Ordering::Relaxed);
+        return;
+    }
+    if byte == 0 {
+        STAMPS.push((index, DeviceClock::now_ns()));
+    }
+    // Cannot drop: the ring's tail is at or past TAKEN, so it holds no more than we count.
+    RX.push(byte);
+    STORED.store(index.wrapping_add(1), Ordering::Release);
+}
+
+/// Main-loop side: the next byte and its index in the stream.
+fn take() -> Option<(u8, u32)> {
+    let byte = RX.pop()?;
+    let index = TAKEN.load(Ordering::Relaxed);
+    TAKEN.store(index.wrapping_add(1), Ordering::Release);
+    Some((byte, index))
 }
 
 /// Vector table in RAM: the core's 16 entries, then the device interrupts. 256-byte
@@ -89,7 +185,8 @@ static mut RAM_VECTORS: Vectors = Vectors([0; 48]);
 
 /// UART0 with interrupt-driven receive.
 pub struct Uart {
-    _private: (),
+    /// Receive stamp of the last delimiter taken, if it had one.
+    frame_end_ns: Option<u64>,
 }
 
 impl Uart {
@@ -115,17 +212,28 @@ impl Uart {
             write_reg(CTRL, CTRL_TX_EN | CTRL_RX_EN | CTRL_RX_IRQ);
             NVIC::unmask(Irq::Uart0Rx);
         }
-        Self { _private: () }
+        Self { frame_end_ns: None }
     }
 
     /// Bytes dropped because the receive ring was full, since the last call.
     pub fn take_dropped(&self) -> u32 {
         RX.take_dropped()
+            .saturating_add(DROPPED.swap(0, Ordering::Relaxed))
     }
 
-    /// Next received byte, if any (non-blocking).
+    /// Next received byte, if any (non-blocking). A delimiter sets [`Self::frame_end_ns`].
     pub fn try_read_byte(&mut self) -> Option<u8> {
-        RX.pop()
+        let (byte, index) = take()?;
+        if byte == 0 {
+            self.frame_end_ns = STAMPS.take(index);
+        }
+        Some(byte)
+    }
+
+    /// Device clock when the last delimiter taken by [`Self::try_read_byte`] was received
+    /// (the end of the frame it closed), ns; `None` when its stamp was not kept.
+    pub fn frame_end_ns(&self) -> Option<u64> {
+        self.frame_end_ns
     }
 
     /// Sleeps until an interrupt unless a byte is already waiting.
@@ -160,8 +268,8 @@ impl embedded_io::Read for Uart {
         let mut n = 0;
         while n == 0 {
             while let Some(slot) = buf.get_mut(n) {
-                match RX.pop() {
-                    Some(b) => {
+                match take() {
+                    Some((b, _)) => {
                         *slot = b;
                         n += 1;
                     }

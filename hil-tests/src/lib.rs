@@ -4,6 +4,8 @@
 //! is dropped.
 #![warn(missing_docs)]
 
+pub mod jitter;
+
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};

@@ -5,6 +5,7 @@
 //! Run: `cargo test -p msreg-hil-tests --release --test hil` (tools/test.sh does, after
 //! `tools/firmware.sh build`).
 
+mod clock_sync;
 mod common;
 mod monitor;
 

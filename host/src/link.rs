@@ -5,6 +5,7 @@
 //! - [`monitor_stream`] does it for a drive and the device's monitoring layout (the prior
 //!   and pose sequencing of `msreg monitor`);
 //! - [`port`] opens the serial device and decodes what arrives on a reader thread;
+//! - [`clock_sync`] estimates the device clock from two-way exchanges (offset, skew);
 //! - [`client`] sends with flow control (a window of unacknowledged bytes), collects the
 //!   device's messages and records the session;
 //! - [`record`] writes and re-reads session files (JSON lines);
@@ -13,16 +14,20 @@
 //! - [`cli`] is what `msreg link replay | monitor | show | log` run.
 
 pub mod client;
+pub mod clock_sync;
 pub mod defmt;
 pub mod monitor_stream;
 pub mod port;
 pub mod record;
 mod session;
+pub mod stamp_map;
 pub mod stream;
 pub mod view;
 
 pub use client::{Client, ClientOptions, Collected};
-pub use session::{dataset_stream, replay, replay_stream, show, ReplayOptions, ReplayOutcome};
+pub use session::{
+    dataset_stream, replay, replay_stream, show, ReplayOptions, ReplayOutcome, SyncOptions,
+};
 pub use stream::{build_stream, ReplayStream, StreamOptions};
 pub use view::{final_estimates, live_view, summary};
 

@@ -32,7 +32,7 @@ pub use message::*;
 use postcard::experimental::max_size::MaxSize;
 
 /// Protocol version carried by [`Hello`]; bumped on any change of the wire format.
-pub const VERSION: u16 = 4;
+pub const VERSION: u16 = 5;
 
 /// Largest encoded frame from the host, delimiter included.
 pub const HOST_FRAME_MAX: usize = frame::frame_max(Packet::<HostMsg>::POSTCARD_MAX_SIZE);

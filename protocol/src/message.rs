@@ -38,6 +38,9 @@ pub enum HostMsg {
     TargetPose(TargetPose),
     /// Target corners seen in one image (camera-IMU).
     CornerSet(CornerSet),
+    /// Clock-sync request (v5): the device answers with a [`TimeSyncReply`] stamped on its
+    /// own clock.
+    TimeSync(TimeSyncRequest),
 }
 
 /// Device to host.
@@ -57,6 +60,41 @@ pub enum DeviceMsg {
     ErrorReport(ErrorReport),
     /// Counters and state, on [`HostMsg::GetStatus`].
     Status(Status),
+    /// Answer to [`HostMsg::TimeSync`] (v5), sent before its [`Ack`].
+    TimeSync(TimeSyncReply),
+}
+
+/// Host half of a two-way clock-sync exchange (NTP-style): `t1` on the host clock.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TimeSyncRequest {
+    /// Host clock just before the request is written, ns (echoed: it names the exchange).
+    pub t1_ns: u64,
+}
+
+/// Which clock the device's filter runs on: the clock every measurement stamp must be on.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TimeBase {
+    /// The IMU arrives over the link with the host's stamps (the QEMU link firmware): the
+    /// filter runs on the host's data clock and the host sends stamps unmapped.
+    HostStamps,
+    /// The device stamps its own IMU (a board with the IMU driver): the host maps every
+    /// measurement stamp onto the device clock with its clock-sync estimate.
+    DeviceClock,
+}
+
+/// Device half of a clock-sync exchange: its clock when the request arrived and when this
+/// reply left.
+#[derive(Serialize, Deserialize, MaxSize, Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TimeSyncReply {
+    /// The request's `t1_ns`, echoed.
+    pub t1_ns: u64,
+    /// Device clock when the request's closing delimiter was received (UART RX interrupt),
+    /// ns since boot.
+    pub t2_ns: u64,
+    /// Device clock just before this reply's first byte is written, ns since boot.
+    pub t3_ns: u64,
+    /// The clock the filter runs on.
+    pub time_base: TimeBase,
 }
 
 /// Handshake: protocol version and frame limits of the sender.

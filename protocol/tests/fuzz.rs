@@ -124,6 +124,7 @@ fn host_msg() -> impl Strategy<Value = HostMsg> {
         (any::<u64>(), any::<u8>())
             .prop_map(|(stamp_ns, sensor)| HostMsg::Anchor(Anchor { stamp_ns, sensor })),
         Just(HostMsg::GetStatus),
+        any::<u64>().prop_map(|t1_ns| HostMsg::TimeSync(msreg_protocol::TimeSyncRequest { t1_ns })),
     ]
 }
 

@@ -6,8 +6,8 @@ use msreg_protocol::{
     CameraSetup, Config, Corner, CornerSet, Deframer, DeviceMsg, ErrorKind, ErrorReport,
     FrameError, Gate, Hello, HostMsg, ImuBatch, ImuNoise, ImuPrior, ImuSample, ImuStart,
     MonitorSetup, Packet, Pose, Pushed, RelativePose, RestPrior, SensorPrior, SensorSet,
-    TargetPose, UpdateDiagnostic, UpdateKind, CORNER_SET_MAX, DEVICE_FRAME_MAX, HOST_FRAME_MAX,
-    IMU_BATCH_MAX,
+    TargetPose, TimeBase, TimeSyncReply, TimeSyncRequest, UpdateDiagnostic, UpdateKind,
+    CORNER_SET_MAX, DEVICE_FRAME_MAX, HOST_FRAME_MAX, IMU_BATCH_MAX,
 };
 
 fn host_frame(seq: u32, msg: &HostMsg) -> Vec<u8> {
@@ -509,4 +509,49 @@ fn odometry_and_alarms_carry_their_sensor() {
         body_of(&device_frame(4, &zupt)),
         [0x04, 0x03, 0x01, 0x01, 0x03, 0, 0, 0, 0, 0, 0, 0, 0, 0x01, 0x00]
     );
+}
+
+#[test]
+fn time_sync_frames_have_exact_bytes() {
+    // v5 appended one variant to each direction; every earlier index is unchanged (pinned
+    // by the tests above), so a v4 frame decodes the same under v5.
+    let request = HostMsg::TimeSync(TimeSyncRequest { t1_ns: 1_000 });
+    // seq 5, variant 8 (TimeSync), t1 1000 = e8 07, CRC 0x78d8.
+    let bytes = host_frame(5, &request);
+    assert_eq!(bytes, [0x07, 0x05, 0x08, 0xe8, 0x07, 0xd8, 0x78, 0x00]);
+    assert_eq!(decode_host(&bytes).expect("decodes").msg, request);
+    let reply = DeviceMsg::TimeSync(TimeSyncReply {
+        t1_ns: 1_000,
+        t2_ns: 300,
+        t3_ns: 301,
+        time_base: TimeBase::DeviceClock,
+    });
+    // seq 6, variant 7 (TimeSync), t1 e8 07, t2 300 = ac 02, t3 301 = ad 02, DeviceClock 1,
+    // CRC 0x0344.
+    let bytes = device_frame(6, &reply);
+    assert_eq!(
+        bytes,
+        [0x0c, 0x06, 0x07, 0xe8, 0x07, 0xac, 0x02, 0xad, 0x02, 0x01, 0x44, 0x03, 0x00]
+    );
+    let mut buf = bytes[..bytes.len() - 1].to_vec();
+    assert_eq!(
+        frame::decode::<DeviceMsg>(&mut buf).expect("decodes").msg,
+        reply
+    );
+    // HostStamps is variant 0: zeros become COBS codes.
+    let link = DeviceMsg::TimeSync(TimeSyncReply {
+        t1_ns: 1,
+        t2_ns: 0,
+        t3_ns: 0,
+        time_base: TimeBase::HostStamps,
+    });
+    assert_eq!(
+        device_frame(6, &link),
+        [0x04, 0x06, 0x07, 0x01, 0x01, 0x01, 0x03, 0x91, 0x92, 0x00]
+    );
+}
+
+#[test]
+fn protocol_version_is_five_since_time_sync() {
+    assert_eq!(msreg_protocol::VERSION, 5);
 }

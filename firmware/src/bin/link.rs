@@ -8,12 +8,13 @@
 
 use core::ptr::addr_of_mut;
 
-use cortex_m_rt::entry;
+use cortex_m_rt::{entry, exception};
 use defmt_semihosting as _;
 use panic_halt as _;
 
 use msreg_firmware::session::Session;
 use msreg_firmware::stack;
+use msreg_firmware::ticks::DeviceClock;
 use msreg_firmware::uart::Uart;
 use msreg_protocol::{frame, Deframer, HostMsg, Pushed, HOST_FRAME_MAX};
 
@@ -41,6 +42,12 @@ fn log_ram(logged_peak: &mut u32) {
     );
 }
 
+/// SysTick wrapped (every 2^24 core ticks, 0.67 s): extends the device clock.
+#[exception]
+fn SysTick() {
+    DeviceClock::on_wrap();
+}
+
 #[entry]
 fn main() -> ! {
     let Some(mut core) = cortex_m::Peripherals::take() else {
@@ -51,6 +58,9 @@ fn main() -> ! {
     stack::paint();
     // SAFETY: called once, before any interrupt is enabled.
     let mut uart = unsafe { Uart::init(&mut core.SCB) };
+    // The device clock (clock sync): SysTick with its wrap interrupt, after the vector table
+    // moved to RAM (its SysTick entry is this binary's handler below).
+    let _clock = DeviceClock::start(core.SYST);
     // SAFETY: `main` runs once and is the only user of both statics (the UART interrupt
     // touches neither), so these are the only references ever made.
     let (session, deframer) =
@@ -79,7 +89,8 @@ fn main() -> ! {
             Pushed::Frame(f) => match frame::decode::<HostMsg>(f) {
                 Ok(packet) => {
                     let status_request = matches!(packet.msg, HostMsg::GetStatus);
-                    session.handle(&mut uart, packet);
+                    let rx_ns = uart.frame_end_ns().unwrap_or_else(DeviceClock::now_ns);
+                    session.handle(&mut uart, packet, rx_ns, DeviceClock::now_ns);
                     if status_request {
                         log_ram(&mut logged_peak);
                     }

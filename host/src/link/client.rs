@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 
 use msreg_protocol::{
     frame, AckStatus, DeviceMsg, ErrorKind, ErrorReport, Estimate, HealthAlarm, Hello, HostMsg,
-    Status, UpdateDiagnostic, HOST_FRAME_MAX, VERSION,
+    Status, TimeSyncReply, TimeSyncRequest, UpdateDiagnostic, HOST_FRAME_MAX, VERSION,
 };
 
 use super::port::{Incoming, Port};
@@ -62,6 +62,8 @@ pub struct Collected {
     pub estimate_latency_s: Vec<f64>,
     /// Round trip from sending a frame to its ack, s.
     pub ack_latency_s: Vec<f64>,
+    /// Clock-sync replies.
+    pub time_syncs: Vec<(f64, TimeSyncReply)>,
 }
 
 impl Collected {
@@ -69,6 +71,17 @@ impl Collected {
     pub fn errors_of(&self, kind: ErrorKind) -> usize {
         self.errors.iter().filter(|(_, e)| e.kind == kind).count()
     }
+}
+
+/// One clock-sync exchange as the client saw it: its own instants around the device's stamps.
+#[derive(Debug, Clone, Copy)]
+pub struct TimedExchange {
+    /// Just before the request was written.
+    pub sent: Instant,
+    /// When the reader thread read the reply's last byte.
+    pub received: Instant,
+    /// The device's reply.
+    pub reply: TimeSyncReply,
 }
 
 struct InFlight {
@@ -91,6 +104,9 @@ pub struct Client {
     /// Frames and bytes sent.
     pub sent: (u64, u64),
     closed: Option<super::port::CloseReason>,
+    /// Clock-sync requests awaiting their reply (by `t1_ns`), and the last reply matched.
+    sync_sent: HashMap<u64, Instant>,
+    sync_done: Option<TimedExchange>,
 }
 
 impl Client {
@@ -126,6 +142,8 @@ impl Client {
             collected: Collected::default(),
             sent: (0, 0),
             closed: None,
+            sync_sent: HashMap::new(),
+            sync_done: None,
         })
     }
 
@@ -293,6 +311,45 @@ impl Client {
         Ok(())
     }
 
+    /// One clock-sync exchange: waits for room in the window, writes a `TimeSync` request
+    /// (its `t1_ns`: ns since the session started) and waits up to `timeout` for the reply;
+    /// `None` when it did not come (lost; the exchange is simply skipped).
+    pub fn time_sync(&mut self, timeout: Duration) -> Result<Option<TimedExchange>, LinkError> {
+        self.wait_for_room(HOST_FRAME_MAX.min(16))?;
+        let t1_ns = self.start.elapsed().as_nanos() as u64;
+        let (seq, bytes) = self.encode(&HostMsg::TimeSync(TimeSyncRequest { t1_ns }));
+        let sent = Instant::now();
+        self.port.write(&bytes)?;
+        self.sent.0 += 1;
+        self.sent.1 += bytes.len() as u64;
+        self.sent_at.insert(seq, sent);
+        self.in_flight.push_back(InFlight {
+            seq,
+            len: bytes.len(),
+            sent,
+        });
+        self.sync_sent.insert(t1_ns, sent);
+        let t = self.now_s();
+        self.record(Line::Tx {
+            t,
+            tx: Seq {
+                seq,
+                msg: HostMsg::TimeSync(TimeSyncRequest { t1_ns }),
+            },
+        })?;
+        let deadline = sent + timeout;
+        while Instant::now() < deadline {
+            self.pump(Duration::from_millis(1))?;
+            if let Some(done) = self.sync_done.take() {
+                if done.reply.t1_ns == t1_ns {
+                    return Ok(Some(done));
+                }
+            }
+        }
+        self.sync_sent.remove(&t1_ns);
+        Ok(None)
+    }
+
     /// Asks for the device's counters.
     pub fn status(&mut self, timeout: Duration) -> Result<Status, LinkError> {
         self.collected.status = None;
@@ -389,6 +446,16 @@ impl Client {
             DeviceMsg::HealthAlarm(a) => c.alarms.push((t, a)),
             DeviceMsg::ErrorReport(e) => c.errors.push((t, e)),
             DeviceMsg::Status(s) => c.status = Some(s),
+            DeviceMsg::TimeSync(r) => {
+                c.time_syncs.push((t, r));
+                if let Some(sent) = self.sync_sent.remove(&r.t1_ns) {
+                    self.sync_done = Some(TimedExchange {
+                        sent,
+                        received: at,
+                        reply: r,
+                    });
+                }
+            }
         }
     }
 
