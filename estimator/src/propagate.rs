@@ -568,6 +568,22 @@ mod tests {
     }
 
     #[test]
+    fn all_finite_answers_as_is_finite_on_each_value() {
+        let big = [f64::MAX, -f64::MAX, f64::MAX, 1e308, -0.0, 0.0];
+        assert!(all_finite(&big), "finite values whose sum overflows");
+        for bad in [f64::INFINITY, f64::NEG_INFINITY, f64::NAN] {
+            for at in 0..big.len() {
+                let mut v = big;
+                v[at] = bad;
+                assert!(!all_finite(&v), "{bad} at {at}");
+            }
+        }
+        assert!(all_finite::<f32>(&[]));
+        assert!(!all_finite(&[1.0f32, f32::NAN]));
+        assert!(all_finite(&[f32::MAX, f32::MAX]));
+    }
+
+    #[test]
     fn noise_is_symmetric_and_positive() {
         let x = moving_state();
         let s = step(
