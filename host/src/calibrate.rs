@@ -2,6 +2,7 @@
 //! The CLI is a thin layer over them.
 
 pub mod camera_imu;
+pub mod cameras;
 pub mod convergence;
 pub mod convert;
 pub mod driver;

@@ -5,6 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
+use msreg_estimator::camera::model::{CameraModel, ModelKind};
 use msreg_estimator::camera::{
     equidistant::Equidistant, radtan::RadTan, Camera, Distortion, Intrinsics, Projection,
 };
@@ -308,7 +309,10 @@ fn camera_from_doc(doc: &Doc) -> Result<Camera<f64>, YamlError> {
         "ds" | "eucm" => {
             return Err(doc.invalid(
                 "camera_model",
-                format!("camera_model `{model}` is unsupported (supported: pinhole, omni)"),
+                format!(
+                    "camera_model `{model}` is calibrated by `msreg calibrate cameras` but not \
+                     yet supported by this pipeline (supported: pinhole, omni)"
+                ),
             ))
         }
         other => {
@@ -538,6 +542,107 @@ pub fn camera_yaml_string(camera: &Camera<f64>) -> String {
         camera.resolution.0,
         camera.resolution.1
     )
+}
+
+/// A `camera.yaml` for intrinsic calibration: the model and resolution, and the intrinsics
+/// when the file has them (CONVENTIONS.md, "Any number of sensors").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CameraSpec {
+    /// The model of `camera_model` / `distortion_model` (distortion absent: `none`).
+    pub kind: ModelKind,
+    /// `resolution`.
+    pub resolution: (u32, u32),
+    /// The full model when `intrinsics` (and the coefficients) are given.
+    pub model: Option<CameraModel<f64>>,
+}
+
+/// Reads a `camera.yaml` of any Kalibr model (`pinhole`, `omni`, `ds`, `eucm`), where
+/// `intrinsics` and `distortion_coeffs` are optional.
+pub fn read_camera_spec(path: &Path) -> Result<CameraSpec, YamlError> {
+    let doc = Doc::read(path)?;
+    let map = match doc.root.get("camera_model") {
+        Some(_) => &doc.root,
+        None => match (doc.root.len(), doc.root.iter().next()) {
+            (1, Some((_, Value::Mapping(inner)))) => inner,
+            _ => return Err(doc.invalid("camera_model", "missing key `camera_model`".into())),
+        },
+    };
+    let model = doc.string(map, "camera_model")?;
+    let distortion = match map.get("distortion_model") {
+        None => "none".to_string(),
+        Some(_) => doc.string(map, "distortion_model")?,
+    };
+    let kind = ModelKind::from_kalibr(&model, &distortion).ok_or_else(|| {
+        doc.invalid(
+            "camera_model",
+            format!(
+                "unsupported model `{model}` with distortion `{distortion}` (expected pinhole \
+                 with radtan or equidistant, omni with radtan, ds or eucm with none)"
+            ),
+        )
+    })?;
+    let res = doc.numbers(map, "resolution")?;
+    let res = expect_len(&doc, "resolution", &res, 2)?;
+    if res
+        .iter()
+        .any(|&x| x < 1.0 || x.fract() != 0.0 || x > f64::from(u32::MAX))
+    {
+        return Err(doc.invalid(
+            "resolution",
+            "`resolution` must be two positive integers".into(),
+        ));
+    }
+    let resolution = (res[0] as u32, res[1] as u32);
+    let model =
+        match map.get("intrinsics") {
+            None | Some(Value::Null) => None,
+            Some(_) => {
+                let mut values = doc.numbers(map, "intrinsics")?;
+                expect_len(&doc, "intrinsics", &values, kind.intrinsic_count())?;
+                let coeffs = match map.get("distortion_coeffs") {
+                    None | Some(Value::Null) => Vec::new(),
+                    Some(_) => doc.numbers(map, "distortion_coeffs")?,
+                };
+                let n = kind.param_count() - kind.intrinsic_count();
+                // A pinhole `none` is radtan with zero coefficients.
+                let coeffs = if coeffs.is_empty() {
+                    vec![0.0; n]
+                } else {
+                    coeffs
+                };
+                values.extend(expect_len(&doc, "distortion_coeffs", &coeffs, n)?);
+                Some(CameraModel::new(kind, &values, resolution).map_err(|e| {
+                    doc.invalid("intrinsics", format!("invalid intrinsics ({e:?})"))
+                })?)
+            }
+        };
+    Ok(CameraSpec {
+        kind,
+        resolution,
+        model,
+    })
+}
+
+/// Kalibr `camera.yaml` text of a model of any kind, as [`read_camera_spec`] (and, for
+/// pinhole and omni, [`read_camera_yaml`]) reads it back.
+pub fn camera_model_yaml_string(model: &CameraModel<f64>) -> String {
+    let v = model.values();
+    let k = model.kind.intrinsic_count();
+    format!(
+        "# Kalibr camchain entry\ncamera_model: {}\nintrinsics: {}\n\
+         distortion_model: {}\ndistortion_coeffs: {}\nresolution: [{}, {}]\n",
+        model.kind.camera_model(),
+        yaml_list(&v[..k]),
+        model.kind.distortion_model(),
+        yaml_list(&v[k..]),
+        model.resolution.0,
+        model.resolution.1
+    )
+}
+
+/// [`yaml_float`] for other writers of Kalibr-compatible YAML.
+pub fn yaml_number(x: f64) -> String {
+    yaml_float(x)
 }
 
 /// Kalibr `target.yaml` text of a checkerboard, as [`read_target_yaml`] reads it back.
