@@ -514,6 +514,29 @@ mod tests {
     }
 
     #[test]
+    fn transition_with_series_rotations_matches_central_differences() {
+        // A 400 Hz step of a fast turn: every angle inside the series' range.
+        let x = moving_state();
+        let signal = ImuInterval {
+            dt: 0.0025,
+            gyro_mean: Vector3::new(6.5, -9.0, 4.7),
+            accel_mean: Vector3::new(1.0, 3.0, 9.0),
+            start: (Vector3::new(6.0, -9.5, 5.0), Vector3::new(-1.0, 4.0, 8.0)),
+            end: (Vector3::new(7.0, -8.5, 4.3), Vector3::new(3.0, 2.0, 10.0)),
+        };
+        let noise = ImuNoise::vn300();
+        let run = |x: &ImuState<f64>| step_with(x, &signal, &noise, Rotations::Series);
+        let nominal = run(&x).state;
+        let numeric = central_diff::<15, 15>(|d: SVector<f64, 15>| {
+            boxminus(&run(&boxplus(&x, &d)).state, &nominal)
+        });
+        assert_mat_close(&run(&x).transition, &numeric, 1e-6);
+        let reference = step(&x, &signal, &noise);
+        assert_mat_close(&run(&x).transition, &reference.transition, 1e-15);
+        assert!(boxminus(&nominal, &reference.state).amax() < 1e-15);
+    }
+
+    #[test]
     fn covariance_step_equals_the_dense_product() {
         let noise = ImuNoise::<f64>::vn300();
         let x = moving_state();
