@@ -8,9 +8,10 @@
 //!
 //! Truth, by causality alone and without the injected delays: the proxy decodes the frames
 //! it forwards. The device stamps a clock-sync request `t2` in its receive interrupt, after
-//! the request's last byte reached it, so after the proxy began writing that chunk to QEMU
-//! (`before_write`): `device(before_write) <= t2`. It stamps its reply `t3` before writing
-//! the reply's first byte, so before the proxy's read of it returned (`after_read`):
+//! the request's closing delimiter reached it, so after the proxy began writing that
+//! delimiter to QEMU (`before_write`; written on its own, after a pause):
+//! `device(before_write) <= t2`. It stamps its reply `t3` before writing the reply's first
+//! byte, so before the proxy's read of that byte returned (`after_read`):
 //! `device(after_read) >= t3`. Under QEMU without `-icount` the guest's SysTick runs on
 //! QEMU's virtual clock, which is the host's `CLOCK_MONOTONIC` (Rust's `Instant`) plus a
 //! constant: `device(i) = (i - epoch) + C`, and every exchange brackets `C`.
@@ -26,6 +27,9 @@ use msreg_protocol::{
     frame, Deframer, DeviceMsg, HostMsg, Pushed, DEVICE_FRAME_MAX, HOST_FRAME_MAX,
 };
 use serialport::{SerialPort, TTYPort};
+
+/// Pause before a clock-sync request's delimiter is written (see `Ctx::write`).
+const DELIMITER_PAUSE: Duration = Duration::from_micros(500);
 
 /// Delay of one direction: `floor + U(0, jitter)`, plus a spike of `U(1, 10) x jitter`
 /// with probability `spike_p`.
@@ -217,6 +221,7 @@ impl Ctx {
     /// release time (never before the previous chunk's).
     fn read(&self, mut src: TTYPort, tx: &mpsc::Sender<(Instant, Vec<u8>)>, mut rng: u64) {
         let mut deframer = Deframer::<DEVICE_FRAME_MAX>::new();
+        let mut started = None;
         let mut buf = [0u8; 4096];
         let mut last_release = Instant::now();
         while !self.stop.load(Ordering::Relaxed) {
@@ -226,7 +231,7 @@ impl Ctx {
             };
             let after_read = Instant::now();
             if !self.forward {
-                self.note_replies(&mut deframer, &buf[..n], after_read);
+                self.note_replies((&mut deframer, &mut started), &buf[..n], after_read);
             }
             let shape = self.shape.lock().map(|s| *s).ok();
             let delay = shape.map_or(Duration::ZERO, |s| {
@@ -243,21 +248,36 @@ impl Ctx {
         }
     }
 
-    fn note_replies(&self, deframer: &mut Deframer<DEVICE_FRAME_MAX>, bytes: &[u8], at: Instant) {
+    /// Notes each clock-sync reply with the read that returned its first byte.
+    fn note_replies(
+        &self,
+        (deframer, started): (&mut Deframer<DEVICE_FRAME_MAX>, &mut Option<Instant>),
+        bytes: &[u8],
+        at: Instant,
+    ) {
         for &b in bytes {
-            if let Pushed::Frame(f) = deframer.push(b) {
-                if let Ok(p) = frame::decode::<DeviceMsg>(f) {
-                    if let DeviceMsg::TimeSync(r) = p.msg {
-                        if let Ok(mut s) = self.seen.lock() {
-                            s.replies.push((r.t1_ns, r.t2_ns, r.t3_ns, self.ns(at)));
-                        }
-                    }
+            if b != 0 && started.is_none() {
+                *started = Some(at);
+            }
+            let Pushed::Frame(f) = deframer.push(b) else {
+                if b == 0 {
+                    *started = None;
+                }
+                continue;
+            };
+            let first = started.take().unwrap_or(at);
+            if let Ok(DeviceMsg::TimeSync(r)) = frame::decode::<DeviceMsg>(f).map(|p| p.msg) {
+                if let Ok(mut s) = self.seen.lock() {
+                    s.replies.push((r.t1_ns, r.t2_ns, r.t3_ns, self.ns(first)));
                 }
             }
         }
     }
 
-    /// Writes each chunk at its release time; host requests are noted just before.
+    /// Writes each chunk at its release time. A clock-sync request's closing delimiter is
+    /// written on its own, [`DELIMITER_PAUSE`] after the bytes before it (by then QEMU has
+    /// taken them in), with `before_write` noted just before: the device's `t2` follows it by
+    /// one byte's way through QEMU, not the whole frame's.
     fn write(&self, mut dst: TTYPort, rx: &mpsc::Receiver<(Instant, Vec<u8>)>) {
         let mut deframer = Deframer::<HOST_FRAME_MAX>::new();
         while !self.stop.load(Ordering::Relaxed) {
@@ -268,21 +288,27 @@ impl Ctx {
             if release > now {
                 std::thread::sleep(release - now);
             }
-            let before_write = Instant::now();
-            if self.forward {
-                for &b in &bytes {
-                    if let Pushed::Frame(f) = deframer.push(b) {
-                        if let Ok(p) = frame::decode::<HostMsg>(f) {
-                            if let HostMsg::TimeSync(r) = p.msg {
-                                if let Ok(mut s) = self.seen.lock() {
-                                    s.written.insert(r.t1_ns, self.ns(before_write));
-                                }
-                            }
-                        }
-                    }
+            let mut from = 0;
+            for (i, &b) in bytes.iter().enumerate() {
+                if !self.forward {
+                    break;
                 }
+                let Pushed::Frame(f) = deframer.push(b) else {
+                    continue;
+                };
+                let Ok(HostMsg::TimeSync(r)) = frame::decode::<HostMsg>(f).map(|p| p.msg) else {
+                    continue;
+                };
+                let _ = dst.write_all(&bytes[from..i]);
+                std::thread::sleep(DELIMITER_PAUSE);
+                let before_write = Instant::now();
+                if let Ok(mut s) = self.seen.lock() {
+                    s.written.insert(r.t1_ns, self.ns(before_write));
+                }
+                let _ = dst.write_all(&bytes[i..=i]);
+                from = i + 1;
             }
-            let _ = dst.write_all(&bytes);
+            let _ = dst.write_all(&bytes[from..]);
         }
     }
 }
