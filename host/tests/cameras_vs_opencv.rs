@@ -4,7 +4,8 @@
 //! `checkerboard-opencv`, `cv2.fisheye.calibrate` against `pinhole-equidistant` on
 //! `checkerboard-fisheye`. With every corner kept (plain least squares, as OpenCV) the RMS
 //! reprojection error agrees within 0.01 px and the focal lengths within 0.2 %; the default
-//! (robust, with rejection) solve is printed beside it.
+//! (robust, with rejection) solve is printed beside it (it keeps fewer corners, so it is not
+//! the same problem).
 //!
 //! OpenCV runs in a throwaway venv through `tools/calibrate_vs_opencv.py`. The test skips
 //! with a visible `SKIP:` when the data is absent or the venv cannot be made offline.
@@ -127,6 +128,18 @@ fn compare(set: &str, rows: usize, cols: usize, kind: ModelKind, cv_model: &str)
     let Some(cv) = opencv(&images, cv_model, size) else {
         return;
     };
+    // Images OpenCV could not start with (tools/calibrate_vs_opencv.py): left out of both.
+    let excluded: Vec<String> = cv["excluded"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap().to_string())
+        .collect();
+    println!("{set}: OpenCV excluded {excluded:?}");
+    let images: Vec<ImageCorners> = images
+        .into_iter()
+        .filter(|im| !excluded.contains(&im.name))
+        .collect();
     let f = |k: &str| cv[k].as_f64().unwrap();
     let same = CamerasOptions {
         huber: None,
@@ -180,7 +193,9 @@ fn compare(set: &str, rows: usize, cols: usize, kind: ModelKind, cv_model: &str)
     assert_eq!(cam.corners, (cv["corners"].as_u64().unwrap() as usize, 0));
     assert!(d_rms < 0.01, "rms {} vs OpenCV {}", cam.rms_px, f("rms_px"));
     assert!(d_fu < 0.2 && d_fv < 0.2, "focal {d_fu} % / {d_fv} %");
-    assert!(rel(rk.fu, f("fu")) < 0.2 && rel(rk.fv, f("fv")) < 0.2);
+    // The default solve drops the outlying corners OpenCV keeps: not the same corners, so
+    // only its own consistency is checked (a lower RMS over the corners it kept).
+    assert!(rc.rms_px <= cam.rms_px && rc.corners.0 + rc.corners.1 == cam.corners.0);
 }
 
 #[test]

@@ -480,7 +480,7 @@ fn reject(
 ) -> usize {
     let mut changed = 0;
     for (k, n) in norms.iter().enumerate() {
-        if corners.active[k] && !(n / sigma <= options.corner_gate) {
+        if corners.active[k] && (n.is_nan() || n / sigma > options.corner_gate) {
             corners.active[k] = false;
             changed += 1;
         }
