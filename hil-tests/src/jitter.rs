@@ -241,6 +241,13 @@ impl Ctx {
                     s.backward.draw(&mut rng)
                 }
             });
+            // Forward: the request's delimiter goes DELIMITER_PAUSE after its release (see
+            // `write`), so the release is that much earlier: the delimiter keeps the delay.
+            let delay = if self.forward {
+                delay.saturating_sub(DELIMITER_PAUSE)
+            } else {
+                delay
+            };
             last_release = last_release.max(after_read + delay);
             if tx.send((last_release, buf[..n].to_vec())).is_err() {
                 return;
@@ -300,7 +307,12 @@ impl Ctx {
                     continue;
                 };
                 let _ = dst.write_all(&bytes[from..i]);
-                std::thread::sleep(DELIMITER_PAUSE);
+                // Spin, not sleep: a sleep overshoots by tens of microseconds, a floor the
+                // backward direction would not have.
+                let resume = Instant::now() + DELIMITER_PAUSE;
+                while Instant::now() < resume {
+                    std::hint::spin_loop();
+                }
                 let before_write = Instant::now();
                 if let Ok(mut s) = self.seen.lock() {
                     s.written.insert(r.t1_ns, self.ns(before_write));

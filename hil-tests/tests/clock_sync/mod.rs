@@ -192,7 +192,8 @@ fn clock_sync_error_under_injected_delay_and_jitter_is_below_a_tenth_of_a_millis
     // Then too
     check("3 ms / 1 ms floors, asymmetry known", &b);
     println!(
-        "clock sync HIL: {:.1} s of exchanges",
-        started.elapsed().as_secs_f64()
+        "clock sync HIL: {:.1} s of exchanges; device errors reported: {:?}",
+        started.elapsed().as_secs_f64(),
+        client.collected.errors
     );
 }
