@@ -165,7 +165,7 @@ EOF
 
 cmd_test() {
   cmd_build
-  local scratch
+  # Global: the EXIT trap runs after this function has returned.
   scratch=$(mktemp -d)
   trap 'rm -rf "$scratch"' EXIT
   local start=$SECONDS
