@@ -5,7 +5,7 @@ Every real image set of ../shared/data, each image decoded once per side, then `
 rounds; in every round each image is detected once by OpenCV (`findChessboardCorners`,
 default flags, + `cornerSubPix` with winSize (11, 11), 30 iterations, eps 1e-4: how the
 reference corners were made) and once by msreg (`detect_checkerboard`, through
-`cargo run --release -p msreg --example detect_timing`), alternating which goes first, so
+`cargo run --release -p msreg-host --example detect_timing`), alternating which goes first, so
 the load of the shared machine falls on both. Per image: the minimum over the rounds of
 each side, whether each found the board, and how far msreg's corners lie from OpenCV's of
 this run (median / max over the corners, nearest-corner match). `uptime`'s load averages

@@ -1,14 +1,15 @@
 #!/usr/bin/env python3
 """Module-level import graph of the msreg host library, and its upward edges.
 
-Reads every `.rs` file of `host/src` that belongs to the library (`lib.rs` tree; the binary's
-`main.rs` and the modules it declares are the top layer and may import anything), collects the `crate::`
+Reads every `.rs` file of `host/src` (the library crate `msreg-host`; the `msreg` binary is
+its own crate, `cli/`, the top layer, which may import anything), collects the `crate::`
 paths each file names (in `use` lines and inline) and the `super::` paths that leave the
 file's top-level module, and prints one line per top-level module with the modules it
 imports. Each top-level module sits in a layer (below); an import of a module in a higher
 layer is an upward edge, printed with the files that make it. Exit status 1 when there is
 one, a cycle between two modules (or two submodules of one module), or a library file that
-names clap, anyhow or indicatif (command-line code belongs to the binary), so
+names clap, anyhow or indicatif, or a library manifest (`host/Cargo.toml`) that depends on
+them outside its dev-dependencies (command-line code belongs to the binary crate), so
 `tools/test.sh` can run it as a check.
 
     python3 tools/import_graph.py            # graph + upward edges
@@ -35,7 +36,7 @@ LAYERS = [
 ]
 LAYER_OF = {m: i for i, (_, mods) in enumerate(LAYERS) for m in mods}
 
-# Command-line crates: only the binary (main.rs and its modules) may name them.
+# Command-line crates: only the binary crate (cli/) may name them.
 BINARY_ONLY = re.compile(r"\b(clap|anyhow|indicatif)::")
 CRATE_PATH = re.compile(r"\bcrate::([a-z_][a-z0-9_]*)")
 SUPER_PATH = re.compile(r"\b((?:super::)+)([a-z_][a-z0-9_]*)")
@@ -79,13 +80,22 @@ def submodule_targets(text: str, module: list[str]) -> set[str]:
 
 
 def library_files(src: Path) -> list[Path]:
-    """The files of the `lib.rs` tree: everything but `main.rs` and the modules it declares."""
-    binary = set(re.findall(r"^mod\s+([a-z_][a-z0-9_]*)\s*;", (src / "main.rs").read_text(), re.M))
-    return sorted(
-        p
-        for p in src.rglob("*.rs")
-        if p != src / "main.rs" and module_of(p, src)[0] not in binary
-    )
+    """The files of the `lib.rs` tree (the library crate has no binary target)."""
+    return sorted(src.rglob("*.rs"))
+
+
+def manifest_cli_deps(manifest: Path) -> list[str]:
+    """Command-line crates in the library manifest's `[dependencies]` table."""
+    table, found = "", []
+    for line in manifest.read_text().splitlines():
+        header = re.match(r"^\[([^\]]+)\]", line)
+        if header:
+            table = header.group(1)
+        elif table == "dependencies":
+            name = re.match(r"^([a-z_-]+)\s*=", line)
+            if name and name.group(1) in ("clap", "anyhow", "indicatif"):
+                found.append(name.group(1))
+    return found
 
 
 def main() -> int:
@@ -115,7 +125,7 @@ def main() -> int:
                 if t != module[1]:
                     sub_edges.add((f"{top}::{module[1]}", f"{top}::{t}"))
     print("layers (low to high): " + " < ".join(
-        f"{name} ({', '.join(mods)})" for name, mods in LAYERS) + " < binary (main.rs, cli/)")
+        f"{name} ({', '.join(mods)})" for name, mods in LAYERS) + " < binary (crate cli/)")
     for name, mods in LAYERS:
         for m in mods:
             deps = sorted({t for (f, t) in edges if f == m}, key=lambda d: (LAYER_OF[d], d))
@@ -137,9 +147,12 @@ def main() -> int:
     print(f"library files naming clap, anyhow or indicatif: {sum(map(len, binary_code.values()))}")
     for crate, files in sorted(binary_code.items()):
         print(f"  {crate}: {', '.join(sorted(files))}")
+    manifest_deps = manifest_cli_deps(root / "host" / "Cargo.toml")
+    print(f"library [dependencies] on clap, anyhow or indicatif: {len(manifest_deps)}"
+          + (f" ({', '.join(manifest_deps)})" if manifest_deps else ""))
     for m in sorted(unlayered):
         print(f"module without a layer (add it to LAYERS): {m}")
-    return 1 if upward or cycles or unlayered or binary_code else 0
+    return 1 if upward or cycles or unlayered or binary_code or manifest_deps else 0
 
 
 if __name__ == "__main__":

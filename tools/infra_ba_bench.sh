@@ -17,7 +17,7 @@ WORK=${1:-/tmp/infra-ba-bench}
 SIZES=${2:-"full quarter"}
 mkdir -p "$WORK"
 export CARGO_TARGET_DIR=${CARGO_TARGET_DIR:-target}
-nice -n 10 cargo build --release -p msreg --example infra_ba_bench >&2
+nice -n 10 cargo build --release -p msreg-host --example infra_ba_bench >&2
 BENCH=$CARGO_TARGET_DIR/release/examples/infra_ba_bench
 CERES=$WORK/infra_ba_ceres
 if [[ ! -x $CERES || tools/infra_ba_ceres.cc -nt $CERES ]]; then

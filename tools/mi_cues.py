@@ -15,7 +15,7 @@ inflated by the Birge ratio when they scatter more than their sigmas.
 
 Usage (NumPy, SciPy, OpenCV in a throwaway venv):
   python3 tools/mi_cues.py [--data ../shared/data/real/calibanything-1]
-The lane-marking row is `cargo test --release -p msreg --test mi_reference_markings --
+The lane-marking row is `cargo test --release -p msreg-host --test mi_reference_markings --
 --nocapture` (defaults below: its fit, sigmas widened to half the spread over the
 detector thresholds, docs/prior_map.md).
 """

@@ -2,7 +2,7 @@
 """NumPy anchor for the prior-map MI benchmark of issue 15 (docs/benchmarks.md).
 
 Runs the grid of `msreg calibrate prior-map` on exactly the problem that
-`cargo run --release -p msreg --example prior_map_bench` writes to its directory (default
+`cargo run --release -p msreg-host --example prior_map_bench` writes to its directory (default
 /tmp/prior_map_bench): the same grid points with their rank-normalised reflectivity
 (points.bin), the same equalised and blurred fisheye image (image.f32), the same
 equidistant camera, start pose and lattice (problem.txt). A plain vectorised implementation

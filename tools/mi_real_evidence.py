@@ -12,7 +12,7 @@ Usage (NumPy, SciPy, OpenCV in a throwaway venv):
       [--out /tmp/mi_evidence] [--rot-deg RX RY RZ] [--tag NAME]
 `--rot-deg` moves the slice centre from the reference by R Exp(w) (LiDAR axes, deg):
 e.g. the marking-aligned rotation printed by
-`cargo test --release -p msreg --test mi_reference_markings -- --nocapture`.
+`cargo test --release -p msreg-host --test mi_reference_markings -- --nocapture`.
 """
 import argparse
 import os

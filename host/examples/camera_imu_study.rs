@@ -3,7 +3,7 @@
 //! uneven lighting), the checkerboard detected in every image, and both measurement models
 //! run on the same corners, exactly as `msreg calibrate camera-imu` does. Prints markdown.
 //!
-//! Run: `cargo run --release -p msreg --example camera_imu_study -- [seeds] [duration_s]`
+//! Run: `cargo run --release -p msreg-host --example camera_imu_study -- [seeds] [duration_s]`
 
 use msreg_host::calibrate::camera_imu::detect_corner_frames;
 use msreg_host::calibrate::camera_imu::{
@@ -47,7 +47,8 @@ fn run(seed: u64, duration_s: f64) -> anyhow::Result<Run> {
     let (frames, detection) =
         detect_corner_frames(&camera_data, &DetectorParams::default(), &|_| {})?;
     let truth = CalibrationResult::read(dir.path().join("groundtruth/extrinsics.yaml"))?
-        .cam0
+        .get("cam0")
+        .copied()
         .ok_or_else(|| anyhow::anyhow!("no cam0 truth"))?;
     let input = CameraImuInput {
         imu: dataset.require_imu()?,

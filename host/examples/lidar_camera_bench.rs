@@ -3,7 +3,7 @@
 //! start, PPC-Cal, edge association, PBPC-Cal, MLRE) is timed; median of 7 runs per
 //! dataset. Writes a Markdown table to stdout.
 //!
-//! Run: `cargo run --release -p msreg --example lidar_camera_bench`
+//! Run: `cargo run --release -p msreg-host --example lidar_camera_bench`
 
 use std::time::Instant;
 

@@ -5,7 +5,7 @@
 //!   axis, translation sigma 50 cm), spread of the solutions.
 //! - `timing`: simulator and feature-extraction time of one frame.
 //!
-//! Run: `cargo run --release -p msreg --example lidar_camera_study -- accuracy 5 30`
+//! Run: `cargo run --release -p msreg-host --example lidar_camera_study -- accuracy 5 30`
 
 use msreg_estimator::Pose;
 use msreg_host::lidar_camera::pipeline::{

@@ -1,7 +1,7 @@
 //! The dissertation's chapter-3 studies (Tables 3.1-3.4, Fig. 3.11) on the simulator, against
 //! ground truth; prints markdown tables (docs/lidar_imu_studies.md).
 //!
-//! `cargo run --release -p msreg --example lidar_imu_studies [rings|imu|relative|outdoor|deskew ...]`
+//! `cargo run --release -p msreg-host --example lidar_imu_studies [rings|imu|relative|outdoor|deskew ...]`
 //! (no argument: all five; `outdoor` runs the outdoor-like scene; `noise` and `ndt-noise` measure
 //! the NDT covariance against the true increment errors). Env: `MSREG_SEEDS` (default 5),
 //! `MSREG_DURATION` (s, default 60),

@@ -4,7 +4,7 @@
 //! problem to `<dir>` (default /tmp/mi_bench). The NumPy anchor `tools/mi_grid_numpy.py`
 //! now reads the prior-map problem of `--example prior_map_bench` instead.
 //!
-//! `cargo run --release -p msreg --example mi_bench [-- <dir>]`
+//! `cargo run --release -p msreg-host --example mi_bench [-- <dir>]`
 
 use std::io::Write;
 use std::time::Instant;

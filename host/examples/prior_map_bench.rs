@@ -7,7 +7,7 @@
 //! and lattice) to `<dir>` (default /tmp/prior_map_bench) for the NumPy anchor
 //! `tools/mi_grid_numpy.py`.
 //!
-//! `cargo run --release -p msreg --example prior_map_bench [-- <dir> [seed] [map points]]`
+//! `cargo run --release -p msreg-host --example prior_map_bench [-- <dir> [seed] [map points]]`
 
 use std::io::Write;
 use std::time::Instant;

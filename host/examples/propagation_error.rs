@@ -1,6 +1,6 @@
 //! Propagation error over one second against the simulator's exact motion
 //! (docs/estimator.md, "Propagation accuracy"):
-//! `cargo run --release -p msreg --example propagation_error`.
+//! `cargo run --release -p msreg-host --example propagation_error`.
 //!
 //! Noise-free instantaneous samples of the hand-held camera-IMU trajectory (seed 1000), from
 //! the true state, a window every 2 s from 6 s to 56 s: the two-sample mean held over each

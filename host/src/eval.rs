@@ -7,13 +7,16 @@
 use nalgebra::Vector3;
 use serde::Serialize;
 
+#[cfg(test)]
+use crate::dataset::SectionName;
 use crate::dataset::{CalibrationResult, ExtrinsicEstimate};
 
 /// Errors of one result section.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct SectionErrors {
-    /// Section name (`pose0`, `lidar0`, ...).
-    pub section: &'static str,
+    /// Section name (`pose0`, `lidar1`, `cam0_lidar0`, ...), with `.T_cn_cnm1` for a
+    /// camera chain.
+    pub section: String,
     /// Rotation error angle, deg.
     pub rotation_deg: f64,
     /// Per-axis rotation error, deg.
@@ -33,11 +36,7 @@ pub struct SectionErrors {
 }
 
 /// Compares one estimate with the truth.
-pub fn compare(
-    section: &'static str,
-    est: &ExtrinsicEstimate,
-    truth: &ExtrinsicEstimate,
-) -> SectionErrors {
+pub fn compare(section: &str, est: &ExtrinsicEstimate, truth: &ExtrinsicEstimate) -> SectionErrors {
     let d_rot = (est.transform.rotation.inverse() * truth.transform.rotation).scaled_axis();
     let d_trans = truth.transform.translation.vector - est.transform.translation.vector;
     let rot_deg: Vector3<f64> = d_rot.map(f64::to_degrees);
@@ -46,7 +45,7 @@ pub fn compare(
             && d_trans[i].abs() <= 3.0 * est.sigma_trans_m[i]
     });
     SectionErrors {
-        section,
+        section: section.to_string(),
         rotation_deg: d_rot.norm().to_degrees(),
         rotation_axes_deg: [rot_deg.x, rot_deg.y, rot_deg.z],
         translation_m: d_trans.norm(),
@@ -72,7 +71,7 @@ pub fn compare(
 pub fn convention_hints(result: &CalibrationResult, truth: &CalibrationResult) -> Vec<String> {
     let mut hints = Vec::new();
     for (name, est, truth) in common_sections(result, truth) {
-        if let Some(h) = inverted_hint(name, est, truth) {
+        if let Some(h) = inverted_hint(&name, est, truth) {
             hints.push(h);
         }
         if est.timeshift_s.abs() > MAX_PLAUSIBLE_TIMESHIFT_S {
@@ -86,19 +85,27 @@ pub fn convention_hints(result: &CalibrationResult, truth: &CalibrationResult) -
     hints
 }
 
-/// The sections present in both files: (name, estimate, truth).
+/// The transforms present in both files, in file order: (name, estimate, truth). Each
+/// section's extrinsic is named as the section (`lidar1`); a camera chain `T_cn_cnm1` as
+/// `cam1.T_cn_cnm1`.
 fn common_sections<'a>(
     result: &'a CalibrationResult,
     truth: &'a CalibrationResult,
-) -> impl Iterator<Item = (&'static str, &'a ExtrinsicEstimate, &'a ExtrinsicEstimate)> {
-    [
-        ("cam0", &result.cam0, &truth.cam0),
-        ("lidar0", &result.lidar0, &truth.lidar0),
-        ("pose0", &result.pose0, &truth.pose0),
-        ("cam0_lidar0", &result.cam0_lidar0, &truth.cam0_lidar0),
-    ]
-    .into_iter()
-    .filter_map(|(name, e, t)| Some((name, e.as_ref()?, t.as_ref()?)))
+) -> impl Iterator<Item = (String, &'a ExtrinsicEstimate, &'a ExtrinsicEstimate)> {
+    result.sections().flat_map(move |(name, section)| {
+        let other = truth.section(name);
+        let extrinsic = section
+            .extrinsic
+            .as_ref()
+            .zip(other.and_then(|t| t.extrinsic.as_ref()))
+            .map(|(e, t)| (name.to_string(), e, t));
+        let chain = section
+            .camera_chain
+            .as_ref()
+            .zip(other.and_then(|t| t.camera_chain.as_ref()))
+            .map(|(e, t)| (format!("{name}.T_cn_cnm1"), e, t));
+        extrinsic.into_iter().chain(chain)
+    })
 }
 
 /// Largest time shift (s) taken as a time shift in seconds rather than a unit mistake.
@@ -123,7 +130,7 @@ fn inverted_hint(name: &str, est: &ExtrinsicEstimate, truth: &ExtrinsicEstimate)
 /// Errors of every section present in both files.
 pub fn evaluate(result: &CalibrationResult, truth: &CalibrationResult) -> Vec<SectionErrors> {
     common_sections(result, truth)
-        .map(|(name, e, t)| compare(name, e, t))
+        .map(|(name, e, t)| compare(&name, e, t))
         .collect()
 }
 
@@ -167,18 +174,44 @@ mod tests {
             Translation3::new(0.1, -0.05, 0.02),
             UnitQuaternion::from_euler_angles(1.5, 0.2, -0.3),
         );
-        let truth = CalibrationResult {
-            cam0: Some(ExtrinsicEstimate::exact(t, 0.005)),
-            ..CalibrationResult::default()
-        };
+        let truth = CalibrationResult::new()
+            .with_extrinsic(SectionName::CAM0, ExtrinsicEstimate::exact(t, 0.005));
         let good = truth.clone();
         assert!(convention_hints(&good, &truth).is_empty());
-        let swapped = CalibrationResult {
-            cam0: Some(ExtrinsicEstimate::exact(t.inverse(), 5e6)),
-            ..CalibrationResult::default()
-        };
+        let swapped = CalibrationResult::new().with_extrinsic(
+            SectionName::CAM0,
+            ExtrinsicEstimate::exact(t.inverse(), 5e6),
+        );
         let hints = convention_hints(&swapped, &truth);
         assert_eq!(hints.len(), 2, "{hints:?}");
         assert!(hints[0].contains("other way round") && hints[1].contains("ms or ns"));
+    }
+
+    #[test]
+    fn every_section_present_in_both_files_is_scored_chains_included() {
+        let t = |x: f64| {
+            Isometry3::from_parts(
+                Translation3::new(x, 0.0, 0.0),
+                UnitQuaternion::from_euler_angles(0.0, 0.0, x),
+            )
+        };
+        let mut truth = CalibrationResult::new();
+        let mut estimate = CalibrationResult::new();
+        for (name, x) in [("cam0", 0.1), ("cam1", 0.2), ("lidar2", 0.3), ("imu1", 0.4)] {
+            let name: SectionName = name.parse().expect("name");
+            truth.set_extrinsic(name, ExtrinsicEstimate::exact(t(x), 0.0));
+            estimate.set_extrinsic(name, ExtrinsicEstimate::exact(t(x + 0.001), 1e-4));
+        }
+        truth.section_mut(SectionName::cam(1)).camera_chain =
+            Some(ExtrinsicEstimate::exact(t(0.05), 0.0));
+        estimate.section_mut(SectionName::cam(1)).camera_chain =
+            Some(ExtrinsicEstimate::exact(t(0.05), 0.0));
+        estimate.set_extrinsic(SectionName::pose(3), ExtrinsicEstimate::exact(t(0.0), 0.0));
+        let errors = evaluate(&estimate, &truth);
+        let names: Vec<&str> = errors.iter().map(|e| e.section.as_str()).collect();
+        assert_eq!(names, ["cam0", "cam1", "cam1.T_cn_cnm1", "lidar2", "imu1"]);
+        assert!((errors[0].translation_m - 0.001).abs() < 1e-12);
+        assert!((errors[0].time_offset_s - 1e-4).abs() < 1e-15);
+        assert!(errors[2].translation_m < 1e-15);
     }
 }

@@ -13,7 +13,7 @@
 //! samples of one another; the rates are (different samples). docs/camera_imu.md has the
 //! numbers.
 //!
-//! `cargo test --release -p msreg --test camera_imu_nees_factors -- --ignored --nocapture`
+//! `cargo test --release -p msreg-host --test camera_imu_nees_factors -- --ignored --nocapture`
 //! (`MSREG_RATES=400` picks rates).
 
 #[path = "support/common.rs"]

@@ -160,7 +160,11 @@ fn the_written_dataset_reads_back_and_detects_like_the_truth() {
     let sim = write_small(dir.path());
     let ds = Dataset::open(dir.path()).unwrap();
     assert_eq!(ds.require_imu().unwrap().len(), sim.imu.len());
-    let truth = ds.require_groundtruth_extrinsics().unwrap().cam0.unwrap();
+    let truth = *ds
+        .require_groundtruth_extrinsics()
+        .unwrap()
+        .get("cam0")
+        .unwrap();
     assert!((truth.transform.inverse() * sim.t_cam_imu).rotation.angle() < 1e-12);
     let cam = CameraDataset::open(dir.path()).unwrap();
     assert_eq!(cam.camera, sim.config.camera);

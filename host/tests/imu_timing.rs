@@ -6,7 +6,7 @@
 //! with offsets drawn in +-20 ms.
 //!
 //! CI runs one seed per pipeline and rate on short recordings; the acceptance run (10 seeds,
-//! 60 s) is `cargo test --release -p msreg --test imu_timing -- --ignored --nocapture`.
+//! 60 s) is `cargo test --release -p msreg-host --test imu_timing -- --ignored --nocapture`.
 
 #[path = "support/common.rs"]
 mod common;
@@ -432,7 +432,7 @@ fn acceptance(pipeline: Pipeline, seeds: std::ops::Range<u64>, start: Start) {
 }
 
 /// The acceptance run, one test per pipeline so that one failing pipeline hides no other:
-/// `cargo test --release -p msreg --test imu_timing -- --ignored --nocapture ten_seeds`.
+/// `cargo test --release -p msreg-host --test imu_timing -- --ignored --nocapture ten_seeds`.
 #[test]
 #[ignore = "acceptance run, ~15 s on 2 cores"]
 fn ten_seeds_pose_imu() {

@@ -1,7 +1,7 @@
 //! `msreg calibrate infra` on simulated buildings, judged frame-free against the truth.
 //!
 //! Default: 2 seeds at the settings (40 cameras). Full run (5 seeds plus a
-//! repeatability pair): `cargo test --release -p msreg --test infra_calibrate -- --ignored
+//! repeatability pair): `cargo test --release -p msreg-host --test infra_calibrate -- --ignored
 //! --nocapture`; numbers in docs/infra.md.
 
 use msreg_host::infra::align::rigid;

@@ -4,7 +4,7 @@
 //! `T_cam_lidar`, and against chaining the two pairwise pipelines on the same data.
 //!
 //! CI runs one seed on 30 s; the acceptance run (10 seeds, 60 s, with the pairwise runs) is
-//! `cargo test --release -p msreg --test joint_calibration -- --ignored --nocapture`
+//! `cargo test --release -p msreg-host --test joint_calibration -- --ignored --nocapture`
 //! (`MSREG_SEEDS`, `MSREG_DURATION` shorten it; `MSREG_NO_PLANES=1` runs the joint filter
 //! without the board-plane update, for comparison).
 //!

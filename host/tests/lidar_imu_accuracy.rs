@@ -5,7 +5,7 @@
 //! The CI tests run 25 s recordings of a 32 x 512 LiDAR on 5 seeds (accuracy, 3 sigma,
 //! NEES band, NIS), with the default local map and scan-to-scan; the 60 s
 //! Ouster-128 acceptance run over 5 seeds is `#[ignore]`d (minutes of CPU):
-//! `cargo test --release -p msreg --test lidar_imu_accuracy -- --ignored --nocapture`.
+//! `cargo test --release -p msreg-host --test lidar_imu_accuracy -- --ignored --nocapture`.
 
 #[path = "support/common.rs"]
 mod common;

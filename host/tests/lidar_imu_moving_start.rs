@@ -2,7 +2,7 @@
 //! sample of the fastest rotation in its first 20 s, after the first second), so there is no
 //! standstill to initialise from. The scans before the cut are dropped with the IMU samples.
 //!
-//! `cargo test --release -p msreg --test lidar_imu_moving_start -- --ignored --nocapture`
+//! `cargo test --release -p msreg-host --test lidar_imu_moving_start -- --ignored --nocapture`
 //! runs the acceptance (10 seeds, 60 s, 400 and 200 Hz).
 
 #[path = "support/common.rs"]

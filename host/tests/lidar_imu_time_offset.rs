@@ -1,7 +1,7 @@
 //! LiDAR-IMU time offset: diagnostics of its bias (issue 11; docs/lidar_imu.md, "The time
 //! offset's systematic error").
 //!
-//! `cargo test --release -p msreg --test lidar_imu_time_offset diagnose -- --ignored --nocapture`
+//! `cargo test --release -p msreg-host --test lidar_imu_time_offset diagnose -- --ignored --nocapture`
 //! prints per seed the time-offset error, its sigma (and the filter's own, before the front
 //! end's systematic shift is added), z, the extrinsic errors, NEES, NIS/dof, and the
 //! **increment time shift**: the `eps` that best explains the fused NDT increments' errors

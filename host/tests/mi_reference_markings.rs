@@ -3,7 +3,7 @@
 //! centres, projected with the reference, should fall on the image markings
 //! (`msreg_host::mi::markings`; discussion and numbers in docs/prior_map.md).
 //!
-//! `cargo test --release -p msreg --test mi_reference_markings -- --nocapture`
+//! `cargo test --release -p msreg-host --test mi_reference_markings -- --nocapture`
 
 use msreg_host::camera_yaml::read_camera_yaml;
 use msreg_host::dataset::CalibrationResult;
@@ -38,7 +38,6 @@ fn report(label: &str, fit: &MarkingFit) {
 #[test]
 fn the_reference_puts_the_lidar_lane_markings_about_10_px_below_the_image_ones() {
     let Some(dir) = dir_or_skip("real/calibanything-1") else {
-        eprintln!("SKIP: ../shared/data/real/calibanything-1 absent");
         return;
     };
     let camera = read_camera_yaml(&dir.join("cam0/camera.yaml")).expect("camera.yaml");
@@ -47,7 +46,8 @@ fn the_reference_puts_the_lidar_lane_markings_about_10_px_below_the_image_ones()
     let reference: Isometry3<f64> =
         CalibrationResult::read(dir.join("groundtruth/extrinsics.yaml"))
             .expect("extrinsics.yaml")
-            .cam0_lidar0
+            .get("cam0_lidar0")
+            .copied()
             .expect("cam0_lidar0")
             .transform;
     let options = MarkingOptions::default();

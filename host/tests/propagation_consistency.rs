@@ -8,7 +8,7 @@
 //! - noisy samples (the simulator's noise and bias walk): the mean 9-dof NEES of orientation,
 //!   position and velocity over all windows, which is 9 for a consistent propagation.
 //!
-//! `cargo test --release -p msreg --test propagation_consistency -- --nocapture`.
+//! `cargo test --release -p msreg-host --test propagation_consistency -- --nocapture`.
 
 use msreg_estimator::propagate::boxminus;
 use msreg_estimator::{FilterConfig, ImuState, InitialState, PoseImuEkf, SensorPrior};

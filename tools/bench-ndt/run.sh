@@ -38,7 +38,7 @@ if [[ ! -x "$work/pcl_ndt" || "$here/pcl_ndt.cpp" -nt "$work/pcl_ndt" ]]; then
     -lboost_system >&2
 fi
 
-(cd "$root" && cargo build -q --release -p msreg --example ndt_bench >&2)
+(cd "$root" && cargo build -q --release -p msreg-host --example ndt_bench >&2)
 bench="$root/target/release/examples/ndt_bench"
 "$bench" prepare "$work" "$data"
 

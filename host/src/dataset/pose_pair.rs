@@ -4,14 +4,13 @@
 //! vehicle carries for the monitor (`msreg monitor --initial`), and the drive simulator's
 //! ground truth.
 //!
-//! The `pose0` section is read and written by [`CalibrationResult`]; `pose1` by the same code,
-//! on the text with the two top-level keys swapped line for line (so errors keep their line).
+//! Both sections are read and written by [`CalibrationResult`].
 
 use std::path::Path;
 
 use super::csv::read_text;
 use super::error::DatasetError;
-use super::result::{CalibrationResult, ExtrinsicEstimate};
+use super::result::{CalibrationResult, ExtrinsicEstimate, SectionName};
 use super::yaml::write_text;
 
 /// The calibration of record a vehicle dataset carries for `msreg monitor` (a result file
@@ -27,23 +26,6 @@ pub struct PosePairCalibration {
     pub pose1: Option<ExtrinsicEstimate>,
 }
 
-/// The text with the top-level keys `from:` and `to:` exchanged (other lines untouched).
-fn swap_top_level_keys(text: &str, a: &str, b: &str) -> String {
-    let (ka, kb) = (format!("{a}:"), format!("{b}:"));
-    text.lines()
-        .map(|line| {
-            if let Some(rest) = line.strip_prefix(&ka) {
-                format!("{kb}{rest}")
-            } else if let Some(rest) = line.strip_prefix(&kb) {
-                format!("{ka}{rest}")
-            } else {
-                line.to_string()
-            }
-        })
-        .collect::<Vec<_>>()
-        .join("\n")
-}
-
 impl PosePairCalibration {
     /// Reads `path` (a result file; other sections are ignored).
     pub fn read(path: impl AsRef<Path>) -> Result<Self, DatasetError> {
@@ -54,42 +36,27 @@ impl PosePairCalibration {
 
     /// Parses result-file text; `path` names it in errors.
     pub fn parse(path: &Path, text: &str) -> Result<Self, DatasetError> {
-        let pose0 = CalibrationResult::parse(path, text)?.pose0;
-        let swapped = swap_top_level_keys(text, "pose0", "pose1");
-        let pose1 = CalibrationResult::parse(path, &swapped)
-            .map_err(|e| match e {
-                DatasetError::InvalidValue { path, message } => DatasetError::InvalidValue {
-                    path,
-                    message: message.replacen("pose0", "pose1", 1),
-                },
-                other => other,
-            })?
-            .pose0;
-        Ok(Self { pose0, pose1 })
+        let result = CalibrationResult::parse(path, text)?;
+        Ok(Self {
+            pose0: result.extrinsic(&SectionName::pose(0)).copied(),
+            pose1: result.extrinsic(&SectionName::pose(1)).copied(),
+        })
     }
 
-    /// The YAML text: `pose0`, then `pose1`, each as the result file writes `pose0`.
-    pub fn to_yaml_string(&self) -> String {
-        let section = |e: &Option<ExtrinsicEstimate>| {
-            e.map(|e| {
-                CalibrationResult {
-                    pose0: Some(e),
-                    ..CalibrationResult::default()
-                }
-                .to_yaml_string()
-            })
-            .unwrap_or_default()
-        };
-        let pose1 = swap_top_level_keys(&section(&self.pose1), "pose0", "pose1");
-        let mut text = section(&self.pose0);
-        if !pose1.is_empty() {
-            if !text.is_empty() && !text.ends_with('\n') {
-                text.push('\n');
+    /// The result file with the sections present.
+    pub fn to_result(&self) -> CalibrationResult {
+        let mut result = CalibrationResult::new();
+        for (i, e) in [(0, self.pose0), (1, self.pose1)] {
+            if let Some(e) = e {
+                result.set_extrinsic(SectionName::pose(i), e);
             }
-            text.push_str(&pose1);
-            text.push('\n');
         }
-        text
+        result
+    }
+
+    /// The YAML text: `pose0`, then `pose1`.
+    pub fn to_yaml_string(&self) -> String {
+        self.to_result().to_yaml_string()
     }
 
     /// Writes the file.

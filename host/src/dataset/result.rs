@@ -1,20 +1,37 @@
-//! The calibration result file (CONVENTIONS.md "Calibration result"), also
-//! used for `groundtruth/extrinsics.yaml` with zero sigmas.
+//! The calibration result file (docs/formats.md "Result file"), also used for
+//! `groundtruth/extrinsics.yaml` with zero sigmas: one section per sensor or sensor pair
+//! of any rig, read and written by one type.
 //!
-//! Keys follow Kalibr's camchain-imucam where they overlap, so a Kalibr
-//! `cam0` section (with intrinsics and other unknown keys) reads too. Only
-//! sections present are written. Matrices are written as flow rows and
-//! floats in their shortest exact form, readable by serde_yaml and PyYAML.
+//! A section is named by [`SectionName`]: `camN`, `lidarN`, `poseN`, `imuN` (sensors) or
+//! `camN_lidarM` (pairs). Each holds, as present:
+//! - its extrinsic under the key of its kind ([`SectionName::keys`]): `camN.T_cam_imu`
+//!   (against the reference IMU `imu0`), `lidarN.T_imu_lidar`, `poseN.T_imu_pose`,
+//!   `imuN.T_imu0_imu` (N >= 1), `camN_lidarM.T_cam_lidar`, with its time shift and
+//!   `sigma_rot_deg` / `sigma_trans_m`;
+//! - for `camN` with N >= 1, Kalibr's camera chain `T_cn_cnm1` (p_camN = T_cn_cnm1 *
+//!   p_cam(N-1)) with `sigma_rot_deg_cn_cnm1` / `sigma_trans_m_cn_cnm1`;
+//! - for cameras, the intrinsics in Kalibr's camchain keys ([`CameraIntrinsics`]);
+//! - `held: [...]`, the degrees of freedom held at their prior ([`Dof`]).
+//!
+//! Keys follow Kalibr's camchain-imucam where they overlap, so a Kalibr camchain (with
+//! `rostopic`, `cam_overlaps`) reads too. Keys neither this type nor Kalibr knows are kept
+//! by name in [`CalibrationResult::unknown_keys`] for the caller to warn about. Only
+//! sections present are written. Matrices are written as flow rows and floats in their
+//! shortest exact form, readable by serde_yaml and PyYAML.
 
+mod names;
+mod raw;
+
+pub use names::{BadName, Dof, ExtrinsicKeys, SectionName, SensorId, SensorKind};
+
+use std::collections::BTreeMap;
 use std::path::Path;
 
+use super::error::DatasetError;
+use super::yaml::{write_text, yaml_float, yaml_float_list, yaml_string};
 use nalgebra::{
     Isometry3, Matrix3, Matrix4, Matrix6, Rotation3, Translation3, UnitQuaternion, Vector3,
 };
-use serde::Deserialize;
-
-use super::error::DatasetError;
-use super::yaml::{parse_yaml, write_text, yaml_float, yaml_float_list};
 
 /// Largest deviation of a stored rotation block from orthonormality.
 const ORTHONORMAL_TOLERANCE: f64 = 1e-3;
@@ -142,56 +159,123 @@ pub fn isometry_from_matrix(m: &Matrix4<f64>) -> Result<Isometry3<f64>, NotRigid
     ))
 }
 
-/// The whole result file; `None` sections are neither written nor required.
+/// A camera's intrinsics in Kalibr's camchain keys.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CameraIntrinsics {
+    /// `camera_model`: `pinhole`, `omni`, `ds`, `eucm`.
+    pub camera_model: String,
+    /// `intrinsics`: the projection parameters of the model (`[fu, fv, pu, pv]` for
+    /// pinhole; `[xi, fu, fv, pu, pv]` for omni; `[xi, alpha, fu, fv, pu, pv]` for ds;
+    /// `[alpha, beta, fu, fv, pu, pv]` for eucm).
+    pub intrinsics: Vec<f64>,
+    /// `distortion_model`: `radtan`, `equidistant` or `none`.
+    pub distortion_model: String,
+    /// `distortion_coeffs`.
+    pub distortion_coeffs: Vec<f64>,
+    /// `resolution`: `[width, height]` in pixels.
+    pub resolution: [u32; 2],
+    /// `sigma_intrinsics`: 1-sigma of `intrinsics` then `distortion_coeffs`, in that order;
+    /// empty where no uncertainty is known.
+    pub sigma_intrinsics: Vec<f64>,
+}
+
+/// One section of the result file; every part is optional.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ResultSection {
+    /// The section's extrinsic (the key of its kind, [`SectionName::keys`]).
+    pub extrinsic: Option<ExtrinsicEstimate>,
+    /// `T_cn_cnm1` of a camera N >= 1 (its `timeshift_s` is unused and 0).
+    pub camera_chain: Option<ExtrinsicEstimate>,
+    /// A camera's intrinsics.
+    pub intrinsics: Option<CameraIntrinsics>,
+    /// `held`: the degrees of freedom held at their prior, in [`Dof`] order.
+    pub held: Vec<Dof>,
+}
+
+impl ResultSection {
+    /// True when the section holds nothing to write.
+    pub fn is_empty(&self) -> bool {
+        self.extrinsic.is_none()
+            && self.camera_chain.is_none()
+            && self.intrinsics.is_none()
+            && self.held.is_empty()
+    }
+
+    /// Marks `dof` as held (kept sorted and unique).
+    pub fn hold(&mut self, dof: Dof) {
+        if let Err(at) = self.held.binary_search(&dof) {
+            self.held.insert(at, dof);
+        }
+    }
+}
+
+/// The whole result file: any number of sections, in [`SectionName`] order.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct CalibrationResult {
-    /// `cam0`: `T_cam_imu`, `timeshift_cam_imu`.
-    pub cam0: Option<ExtrinsicEstimate>,
-    /// `lidar0`: `T_imu_lidar`, `timeshift_lidar_imu`.
-    pub lidar0: Option<ExtrinsicEstimate>,
-    /// `pose0`: `T_imu_pose`, `timeshift_pose_imu`.
-    pub pose0: Option<ExtrinsicEstimate>,
-    /// `cam0_lidar0`: `T_cam_lidar` (no time shift).
-    pub cam0_lidar0: Option<ExtrinsicEstimate>,
+    sections: BTreeMap<SectionName, ResultSection>,
+    unknown_keys: Vec<String>,
 }
-
-/// Key names of one section.
-struct Section {
-    name: &'static str,
-    transform_key: &'static str,
-    timeshift_key: Option<&'static str>,
-    meaning: &'static str,
-}
-
-const CAM0: Section = Section {
-    name: "cam0",
-    transform_key: "T_cam_imu",
-    timeshift_key: Some("timeshift_cam_imu"),
-    meaning: "p_cam = T_cam_imu * p_imu",
-};
-const LIDAR0: Section = Section {
-    name: "lidar0",
-    transform_key: "T_imu_lidar",
-    timeshift_key: Some("timeshift_lidar_imu"),
-    meaning: "p_imu = T_imu_lidar * p_lidar",
-};
-const POSE0: Section = Section {
-    name: "pose0",
-    transform_key: "T_imu_pose",
-    timeshift_key: Some("timeshift_pose_imu"),
-    meaning: "p_imu = T_imu_pose * p_pose",
-};
-const CAM0_LIDAR0: Section = Section {
-    name: "cam0_lidar0",
-    transform_key: "T_cam_lidar",
-    timeshift_key: None,
-    meaning: "p_cam = T_cam_lidar * p_lidar",
-};
 
 impl CalibrationResult {
-    /// True when no section is present.
+    /// An empty result.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// A result with one extrinsic section.
+    pub fn with_extrinsic(mut self, name: SectionName, estimate: ExtrinsicEstimate) -> Self {
+        self.set_extrinsic(name, estimate);
+        self
+    }
+
+    /// True when no section holds anything.
     pub fn is_empty(&self) -> bool {
-        self.sections().iter().all(|(_, s)| s.is_none())
+        self.sections.values().all(ResultSection::is_empty)
+    }
+
+    /// The extrinsic of section `name`, if present.
+    pub fn extrinsic(&self, name: &SectionName) -> Option<&ExtrinsicEstimate> {
+        self.sections.get(name)?.extrinsic.as_ref()
+    }
+
+    /// The extrinsic of the section named `name` (`"pose1"`); `None` for an absent section
+    /// or a string that is no section name.
+    pub fn get(&self, name: &str) -> Option<&ExtrinsicEstimate> {
+        self.extrinsic(&name.parse().ok()?)
+    }
+
+    /// Sets (replaces) the extrinsic of section `name`.
+    pub fn set_extrinsic(&mut self, name: SectionName, estimate: ExtrinsicEstimate) {
+        self.section_mut(name).extrinsic = Some(estimate);
+    }
+
+    /// Section `name`, if present.
+    pub fn section(&self, name: &SectionName) -> Option<&ResultSection> {
+        self.sections.get(name)
+    }
+
+    /// Section `name`, created empty if absent.
+    pub fn section_mut(&mut self, name: SectionName) -> &mut ResultSection {
+        self.sections.entry(name).or_default()
+    }
+
+    /// Every section, in file order.
+    pub fn sections(&self) -> impl Iterator<Item = (&SectionName, &ResultSection)> {
+        self.sections.iter()
+    }
+
+    /// The names of the sections that hold an extrinsic, in file order.
+    pub fn extrinsic_names(&self) -> impl Iterator<Item = SectionName> + '_ {
+        self.sections
+            .iter()
+            .filter(|(_, s)| s.extrinsic.is_some())
+            .map(|(n, _)| *n)
+    }
+
+    /// Keys of the file read that no msreg or Kalibr section knows (`cam0.distortion_coefs`,
+    /// or a top-level `camera0`), for the caller to warn about by name.
+    pub fn unknown_keys(&self) -> &[String] {
+        &self.unknown_keys
     }
 
     /// Reads a result file (or `groundtruth/extrinsics.yaml`).
@@ -203,20 +287,7 @@ impl CalibrationResult {
 
     /// Parses result YAML `text`; `path` is only used in error messages.
     pub fn parse(path: impl AsRef<Path>, text: &str) -> Result<Self, DatasetError> {
-        let path = path.as_ref();
-        if text.trim().is_empty() {
-            return Ok(Self::default());
-        }
-        let raw: RawFile = parse_yaml(path, text)?;
-        let convert = |section: &Section, raw: Option<RawSection>| {
-            raw.map(|r| r.into_estimate(path, section)).transpose()
-        };
-        Ok(Self {
-            cam0: convert(&CAM0, raw.cam0.map(RawSection::from))?,
-            lidar0: convert(&LIDAR0, raw.lidar0.map(RawSection::from))?,
-            pose0: convert(&POSE0, raw.pose0.map(RawSection::from))?,
-            cam0_lidar0: convert(&CAM0_LIDAR0, raw.cam0_lidar0.map(RawSection::from))?,
-        })
+        raw::parse(path.as_ref(), text)
     }
 
     /// Writes the sections present.
@@ -230,152 +301,71 @@ impl CalibrationResult {
             "# msreg calibration result; T_a_b is the pose of b in a (p_a = T_a_b * p_b),\n\
              # timeshift_s_imu: a measurement stamped t_s was taken at IMU time t_s + timeshift\n",
         );
-        for (section, estimate) in self.sections() {
-            if let Some(estimate) = estimate {
-                text.push_str(&section_text(section, estimate));
-            }
+        for (name, section) in self.sections.iter().filter(|(_, s)| !s.is_empty()) {
+            text.push_str(&section_text(name, section));
         }
         text
     }
-
-    fn sections(&self) -> [(&'static Section, &Option<ExtrinsicEstimate>); 4] {
-        [
-            (&CAM0, &self.cam0),
-            (&LIDAR0, &self.lidar0),
-            (&POSE0, &self.pose0),
-            (&CAM0_LIDAR0, &self.cam0_lidar0),
-        ]
-    }
 }
 
-fn section_text(section: &Section, estimate: &ExtrinsicEstimate) -> String {
+fn section_text(name: &SectionName, section: &ResultSection) -> String {
+    let mut text = format!("{name}:\n");
+    if let (Some(estimate), Some(keys)) = (&section.extrinsic, name.keys()) {
+        push_transform(&mut text, keys.transform, keys.meaning, estimate);
+        if let Some(key) = keys.timeshift {
+            text.push_str(&format!(
+                "  {key}: {}  # seconds\n",
+                yaml_float(estimate.timeshift_s)
+            ));
+        }
+        push_sigmas(&mut text, estimate, "");
+    }
+    if let Some(chain) = &section.camera_chain {
+        let meaning = "p_camN = T_cn_cnm1 * p_cam(N-1)";
+        push_transform(&mut text, "T_cn_cnm1", meaning, chain);
+        push_sigmas(&mut text, chain, "_cn_cnm1");
+    }
+    if let Some(k) = &section.intrinsics {
+        text.push_str(&format!(
+            "  camera_model: {}\n  intrinsics: {}\n  distortion_model: {}\n  \
+             distortion_coeffs: {}\n  resolution: [{}, {}]\n",
+            yaml_string(&k.camera_model),
+            yaml_float_list(&k.intrinsics),
+            yaml_string(&k.distortion_model),
+            yaml_float_list(&k.distortion_coeffs),
+            k.resolution[0],
+            k.resolution[1]
+        ));
+        if !k.sigma_intrinsics.is_empty() {
+            let list = yaml_float_list(&k.sigma_intrinsics);
+            text.push_str(&format!("  sigma_intrinsics: {list}\n"));
+        }
+    }
+    if !section.held.is_empty() {
+        let held: Vec<&str> = section.held.iter().map(|d| d.as_str()).collect();
+        text.push_str(&format!(
+            "  held: [{}]  # at their prior: not determined by the data\n",
+            held.join(", ")
+        ));
+    }
+    text
+}
+
+fn push_transform(text: &mut String, key: &str, meaning: &str, estimate: &ExtrinsicEstimate) {
     let m = estimate.matrix();
-    let mut text = format!(
-        "{}:\n  {}:  # {}\n",
-        section.name, section.transform_key, section.meaning
-    );
+    text.push_str(&format!("  {key}:  # {meaning}\n"));
     for row in 0..4 {
         let values: Vec<f64> = (0..4).map(|col| m[(row, col)]).collect();
         text.push_str(&format!("    - {}\n", yaml_float_list(&values)));
     }
-    if let Some(key) = section.timeshift_key {
-        text.push_str(&format!(
-            "  {key}: {}  # seconds\n",
-            yaml_float(estimate.timeshift_s)
-        ));
-    }
+}
+
+fn push_sigmas(text: &mut String, estimate: &ExtrinsicEstimate, suffix: &str) {
     text.push_str(&format!(
-        "  sigma_rot_deg: {}\n  sigma_trans_m: {}\n",
+        "  sigma_rot_deg{suffix}: {}\n  sigma_trans_m{suffix}: {}\n",
         yaml_float_list(estimate.sigma_rot_deg.as_slice()),
         yaml_float_list(estimate.sigma_trans_m.as_slice())
     ));
-    text
-}
-
-/// A section as stored, before validation.
-struct RawSection {
-    matrix: [[f64; 4]; 4],
-    timeshift_s: f64,
-    sigma_rot_deg: [f64; 3],
-    sigma_trans_m: [f64; 3],
-}
-
-impl RawSection {
-    fn into_estimate(
-        self,
-        path: &Path,
-        section: &Section,
-    ) -> Result<ExtrinsicEstimate, DatasetError> {
-        let invalid = |e: NotRigid| DatasetError::InvalidValue {
-            path: path.to_path_buf(),
-            message: format!("{}.{}: {e}", section.name, section.transform_key),
-        };
-        let m = Matrix4::from_fn(|r, c| self.matrix[r][c]);
-        let transform = isometry_from_matrix(&m).map_err(invalid)?;
-        let scalars = self
-            .sigma_rot_deg
-            .iter()
-            .chain(&self.sigma_trans_m)
-            .chain(std::iter::once(&self.timeshift_s));
-        if scalars.into_iter().any(|v| !v.is_finite()) {
-            return Err(DatasetError::InvalidValue {
-                path: path.to_path_buf(),
-                message: format!("{}: timeshift or sigma is not finite", section.name),
-            });
-        }
-        Ok(ExtrinsicEstimate {
-            transform,
-            timeshift_s: self.timeshift_s,
-            sigma_rot_deg: Vector3::from(self.sigma_rot_deg),
-            sigma_trans_m: Vector3::from(self.sigma_trans_m),
-        })
-    }
-}
-
-#[derive(Deserialize)]
-struct RawFile {
-    #[serde(default)]
-    cam0: Option<RawCam0>,
-    #[serde(default)]
-    lidar0: Option<RawLidar0>,
-    #[serde(default)]
-    pose0: Option<RawPose0>,
-    #[serde(default)]
-    cam0_lidar0: Option<RawCam0Lidar0>,
-}
-
-/// Declares the serde shape of one section and its conversion to [`RawSection`].
-macro_rules! raw_section {
-    ($name:ident, $transform:literal, $timeshift:literal) => {
-        #[derive(Deserialize)]
-        struct $name {
-            #[serde(rename = $transform)]
-            matrix: [[f64; 4]; 4],
-            #[serde(rename = $timeshift, default)]
-            timeshift_s: f64,
-            #[serde(default)]
-            sigma_rot_deg: [f64; 3],
-            #[serde(default)]
-            sigma_trans_m: [f64; 3],
-        }
-
-        impl From<$name> for RawSection {
-            fn from(raw: $name) -> Self {
-                RawSection {
-                    matrix: raw.matrix,
-                    timeshift_s: raw.timeshift_s,
-                    sigma_rot_deg: raw.sigma_rot_deg,
-                    sigma_trans_m: raw.sigma_trans_m,
-                }
-            }
-        }
-    };
-}
-
-raw_section!(RawCam0, "T_cam_imu", "timeshift_cam_imu");
-raw_section!(RawLidar0, "T_imu_lidar", "timeshift_lidar_imu");
-raw_section!(RawPose0, "T_imu_pose", "timeshift_pose_imu");
-
-/// `cam0_lidar0` has no time shift.
-#[derive(Deserialize)]
-struct RawCam0Lidar0 {
-    #[serde(rename = "T_cam_lidar")]
-    matrix: [[f64; 4]; 4],
-    #[serde(default)]
-    sigma_rot_deg: [f64; 3],
-    #[serde(default)]
-    sigma_trans_m: [f64; 3],
-}
-
-impl From<RawCam0Lidar0> for RawSection {
-    fn from(raw: RawCam0Lidar0) -> Self {
-        RawSection {
-            matrix: raw.matrix,
-            timeshift_s: 0.0,
-            sigma_rot_deg: raw.sigma_rot_deg,
-            sigma_trans_m: raw.sigma_trans_m,
-        }
-    }
 }
 
 #[cfg(test)]
@@ -400,16 +390,18 @@ mod tests {
     fn only_present_sections_are_written_and_read_back() -> TestResult {
         let dir = tempfile::tempdir()?;
         let path = dir.path().join("result.yaml");
-        let result = CalibrationResult {
-            pose0: Some(ExtrinsicEstimate {
-                transform: pose(3.1, 0.25),
-                timeshift_s: -0.0125,
-                sigma_rot_deg: Vector3::new(0.1, 0.2, 0.3),
-                sigma_trans_m: Vector3::new(1e-3, 2e-3, 3e-3),
-            }),
-            cam0_lidar0: Some(ExtrinsicEstimate::exact(pose(0.2, -0.1), 0.0)),
-            ..CalibrationResult::default()
+        let pose0 = ExtrinsicEstimate {
+            transform: pose(3.1, 0.25),
+            timeshift_s: -0.0125,
+            sigma_rot_deg: Vector3::new(0.1, 0.2, 0.3),
+            sigma_trans_m: Vector3::new(1e-3, 2e-3, 3e-3),
         };
+        let result = CalibrationResult::new()
+            .with_extrinsic(SectionName::POSE0, pose0)
+            .with_extrinsic(
+                SectionName::CAM0_LIDAR0,
+                ExtrinsicEstimate::exact(pose(0.2, -0.1), 0.0),
+            );
         result.write(&path)?;
         let text = std::fs::read_to_string(&path)?;
         assert!(text.contains("T_imu_pose"));
@@ -421,13 +413,13 @@ mod tests {
         assert!(!text.contains("timeshift_cam"));
 
         let read = CalibrationResult::read(&path)?;
-        assert!(read.cam0.is_none() && read.lidar0.is_none());
-        let (a, b) = (read.pose0.ok_or("pose0")?, result.pose0.ok_or("pose0")?);
+        assert!(read.get("cam0").is_none() && read.get("lidar0").is_none());
+        let (a, b) = (read.get("pose0").ok_or("pose0")?, &pose0);
         assert!(isometry_distance(&a.transform, &b.transform) < 1e-14);
         assert_eq!(a.timeshift_s.to_bits(), b.timeshift_s.to_bits());
         assert_eq!(a.sigma_rot_deg, b.sigma_rot_deg);
         assert_eq!(a.sigma_trans_m, b.sigma_trans_m);
-        let c = read.cam0_lidar0.ok_or("cam0_lidar0")?;
+        let c = read.get("cam0_lidar0").ok_or("cam0_lidar0")?;
         assert!(isometry_distance(&c.transform, &pose(0.2, -0.1)) < 1e-14);
         Ok(())
     }
@@ -437,13 +429,133 @@ mod tests {
         let text = "cam0:\n  T_cam_imu:\n  - [0.0148655429818, -0.999880929698, 0.00414029679422, -0.0216401454975]\n  \
                     - [0.999557249008, 0.0149672133247, 0.025715529948, -0.064676986768]\n  \
                     - [-0.0257744366974, 0.00375618835797, 0.999660727178, 0.00981073058949]\n  \
-                    - [0.0, 0.0, 0.0, 1.0]\n  camera_model: pinhole\n  intrinsics: [458.6, 457.3, 367.2, 248.3]\n  \
-                    timeshift_cam_imu: 5.0e-03\n";
+                    - [0.0, 0.0, 0.0, 1.0]\n  cam_overlaps: [1]\n  camera_model: pinhole\n  \
+                    distortion_coeffs: [-0.28, 0.07, 0.0002, 1.8e-05]\n  distortion_model: radtan\n  \
+                    intrinsics: [458.6, 457.3, 367.2, 248.3]\n  resolution: [752, 480]\n  \
+                    rostopic: /cam0/image_raw\n  timeshift_cam_imu: 5.0e-03\n";
         let read = CalibrationResult::parse("camchain.yaml", text)?;
-        let cam0 = read.cam0.ok_or("cam0 missing")?;
+        let cam0 = read.get("cam0").ok_or("cam0 missing")?;
+        assert!(read.unknown_keys().is_empty(), "{:?}", read.unknown_keys());
         assert!((cam0.timeshift_s - 0.005).abs() < 1e-18);
         assert!((cam0.transform.translation.vector.x + 0.0216401454975).abs() < 1e-15);
         assert!(cam0.sigma_rot_deg.iter().all(|&s| s.abs() < f64::EPSILON));
+        let k = read
+            .section(&SectionName::CAM0)
+            .and_then(|s| s.intrinsics.as_ref());
+        let k = k.ok_or("intrinsics")?;
+        assert_eq!(
+            (k.camera_model.as_str(), k.resolution),
+            ("pinhole", [752, 480])
+        );
+        assert_eq!(k.distortion_coeffs.len(), 4);
+        Ok(())
+    }
+
+    #[test]
+    fn any_number_of_sensors_round_trip_with_chain_intrinsics_and_held() -> TestResult {
+        let mut result = CalibrationResult::new();
+        for (i, name) in ["cam0", "cam1", "lidar2", "pose1", "imu1", "cam1_lidar2"]
+            .iter()
+            .enumerate()
+        {
+            let e = ExtrinsicEstimate {
+                transform: pose(0.1 * i as f64, 0.01 * i as f64),
+                // camN_lidarM has no time shift (written and read as 0).
+                timeshift_s: if name.contains('_') {
+                    0.0
+                } else {
+                    1e-3 * i as f64
+                },
+                sigma_rot_deg: Vector3::new(0.1, 0.2, 0.3),
+                sigma_trans_m: Vector3::new(1e-3, 2e-3, 3e-3),
+            };
+            result.set_extrinsic(name.parse()?, e);
+        }
+        let cam1 = result.section_mut(SectionName::cam(1));
+        cam1.camera_chain = Some(ExtrinsicEstimate::exact(pose(0.01, 0.11), 0.0));
+        cam1.intrinsics = Some(CameraIntrinsics {
+            camera_model: "ds".into(),
+            intrinsics: vec![-0.2, 0.6, 350.0, 351.0, 320.5, 240.25],
+            distortion_model: "none".into(),
+            distortion_coeffs: vec![],
+            resolution: [640, 480],
+            sigma_intrinsics: vec![0.01, 0.01, 0.5, 0.5, 0.3, 0.3],
+        });
+        result
+            .section_mut(SectionName::pose(1))
+            .hold(Dof::TranslationZ);
+        result
+            .section_mut(SectionName::pose(1))
+            .hold(Dof::Timeshift);
+        result
+            .section_mut(SectionName::imu(0))
+            .hold(Dof::Intrinsics);
+        let text = result.to_yaml_string();
+        let read = CalibrationResult::parse("r.yaml", &text)?;
+        let close = |a: &Option<ExtrinsicEstimate>, b: &Option<ExtrinsicEstimate>| match (a, b) {
+            (Some(a), Some(b)) => {
+                isometry_distance(&a.transform, &b.transform) < 1e-14
+                    && a.timeshift_s.to_bits() == b.timeshift_s.to_bits()
+                    && (a.sigma_rot_deg, a.sigma_trans_m) == (b.sigma_rot_deg, b.sigma_trans_m)
+            }
+            (a, b) => a.is_none() && b.is_none(),
+        };
+        assert_eq!(read.sections().count(), result.sections().count(), "{text}");
+        for ((na, a), (nb, b)) in read.sections().zip(result.sections()) {
+            assert_eq!(na, nb);
+            assert!(
+                close(&a.extrinsic, &b.extrinsic) && close(&a.camera_chain, &b.camera_chain),
+                "{na}"
+            );
+            assert_eq!((&a.intrinsics, &a.held), (&b.intrinsics, &b.held), "{na}");
+        }
+        assert!(
+            text.contains("  held: [translation_z, timeshift]"),
+            "{text}"
+        );
+        assert!(
+            text.contains("T_imu0_imu") && text.contains("timeshift_imu_imu0"),
+            "{text}"
+        );
+        let order: Vec<&str> = text
+            .lines()
+            .filter(|l| !l.starts_with([' ', '#']))
+            .collect();
+        assert_eq!(
+            order,
+            [
+                "cam0:",
+                "cam1:",
+                "lidar2:",
+                "pose1:",
+                "imu0:",
+                "imu1:",
+                "cam1_lidar2:"
+            ]
+        );
+        Ok(())
+    }
+
+    #[test]
+    fn unknown_and_misplaced_keys_are_named() -> TestResult {
+        let text = "cam0:\n  T_cam_imu: [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]\n  \
+                    distortion_coefs: [0.1]\ncamera1:\n  T_cam_imu: [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]\n";
+        let read = CalibrationResult::parse("r.yaml", text)?;
+        assert_eq!(read.unknown_keys(), ["cam0.distortion_coefs", "camera1"]);
+        let misplaced = "lidar1:\n  T_cam_imu: [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]\n";
+        let err = CalibrationResult::parse("r.yaml", misplaced)
+            .err()
+            .ok_or("expected an error")?;
+        assert!(err.to_string().contains("lidar1: key `T_cam_imu`"), "{err}");
+        let chain_on_cam0 = "cam0:\n  T_cn_cnm1: [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]\n";
+        assert!(CalibrationResult::parse("r.yaml", chain_on_cam0).is_err());
+        let bad_held = "pose0:\n  held: [rotation_w]\n";
+        let err = CalibrationResult::parse("r.yaml", bad_held)
+            .err()
+            .ok_or("expected an error")?;
+        assert!(err.to_string().contains("rotation_w"), "{err}");
+        let partial = "cam0:\n  camera_model: pinhole\n";
+        assert!(CalibrationResult::parse("r.yaml", partial).is_err());
         Ok(())
     }
 
@@ -480,7 +592,7 @@ mod tests {
     fn slightly_non_orthonormal_matrix_is_projected() -> TestResult {
         let rounded = "pose0:\n  T_imu_pose: [[0.7071, -0.7071, 0, 1], [0.7071, 0.7071, 0, 2], [0, 0, 1, 3], [0, 0, 0, 1]]\n";
         let read = CalibrationResult::parse("r.yaml", rounded)?;
-        let pose0 = read.pose0.ok_or("pose0")?;
+        let pose0 = read.get("pose0").ok_or("pose0")?;
         let angle = pose0.transform.rotation.angle();
         assert!(
             (angle - std::f64::consts::FRAC_PI_4).abs() < 1e-4,

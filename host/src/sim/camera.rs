@@ -46,9 +46,10 @@ use crate::camera_yaml::{
 use crate::dataset::{
     write_camera_csv, write_corners_csv, write_groundtruth_csv, write_imu_csv, write_pose_csv,
     CalibrationResult, CameraFrame, CornerTruth, DatasetError, DatasetYaml, ExtrinsicEstimate,
-    GroundTruthRecord, ImuNoiseYaml, ImuRecord, PoseRecord, CAMERA_CSV, CAMERA_DATA_DIR,
-    CAMERA_YAML, DATASET_YAML, GROUNDTRUTH_CORNERS_CSV, GROUNDTRUTH_EXTRINSICS_YAML,
-    GROUNDTRUTH_TARGET_POSES_CSV, GROUNDTRUTH_TRAJECTORY_CSV, IMU_CSV, IMU_YAML, TARGET_YAML,
+    GroundTruthRecord, ImuNoiseYaml, ImuRecord, PoseRecord, SectionName, CAMERA_CSV,
+    CAMERA_DATA_DIR, CAMERA_YAML, DATASET_YAML, GROUNDTRUTH_CORNERS_CSV,
+    GROUNDTRUTH_EXTRINSICS_YAML, GROUNDTRUTH_TARGET_POSES_CSV, GROUNDTRUTH_TRAJECTORY_CSV, IMU_CSV,
+    IMU_YAML, TARGET_YAML,
 };
 use crate::vision::aprilgrid::AprilGridPattern;
 use crate::vision::render::{
@@ -582,13 +583,10 @@ impl CameraImuSim {
 
     /// The true extrinsic in result-file form (sigmas zero).
     pub fn extrinsics(&self) -> CalibrationResult {
-        CalibrationResult {
-            cam0: Some(ExtrinsicEstimate::exact(
-                self.t_cam_imu,
-                self.config.time_offset_s,
-            )),
-            ..CalibrationResult::default()
-        }
+        CalibrationResult::new().with_extrinsic(
+            SectionName::CAM0,
+            ExtrinsicEstimate::exact(self.t_cam_imu, self.config.time_offset_s),
+        )
     }
 
     /// `dataset.yaml` contents.

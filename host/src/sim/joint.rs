@@ -31,7 +31,7 @@ use super::trajectory::LookAtConfig;
 use super::{rng_for, Stream};
 use crate::camera_yaml::{checkerboard_yaml_string, CheckerboardTarget};
 use crate::dataset::{
-    CalibrationResult, DatasetError, DatasetYaml, ExtrinsicEstimate, DATASET_YAML,
+    CalibrationResult, DatasetError, DatasetYaml, ExtrinsicEstimate, SectionName, DATASET_YAML,
     GROUNDTRUTH_EXTRINSICS_YAML, TARGET_YAML,
 };
 use crate::vision::render::BoardPattern;
@@ -176,13 +176,14 @@ impl JointSim {
     /// The true extrinsics in result-file form (sigmas zero): `cam0`, `lidar0`,
     /// `cam0_lidar0`.
     pub fn extrinsics(&self) -> CalibrationResult {
-        CalibrationResult {
-            cam0_lidar0: Some(ExtrinsicEstimate::exact(self.t_cam_lidar(), 0.0)),
-            ..CalibrationResult {
-                lidar0: self.lidar.extrinsics().lidar0,
-                ..self.camera.extrinsics()
-            }
+        let mut truth = self.camera.extrinsics();
+        if let Some(lidar0) = self.lidar.extrinsics().extrinsic(&SectionName::LIDAR0) {
+            truth.set_extrinsic(SectionName::LIDAR0, *lidar0);
         }
+        truth.with_extrinsic(
+            SectionName::CAM0_LIDAR0,
+            ExtrinsicEstimate::exact(self.t_cam_lidar(), 0.0),
+        )
     }
 
     /// `dataset.yaml` contents.

@@ -162,9 +162,9 @@ fn the_result_file_has_all_three_sections() -> Result<(), SimError> {
     let sim = simulate_joint(&short(1))?;
     let truth = sim.extrinsics();
     let (cam, lidar, cl) = (
-        truth.cam0.expect("cam0"),
-        truth.lidar0.expect("lidar0"),
-        truth.cam0_lidar0.expect("cam0_lidar0"),
+        *truth.get("cam0").expect("cam0"),
+        *truth.get("lidar0").expect("lidar0"),
+        *truth.get("cam0_lidar0").expect("cam0_lidar0"),
     );
     let chained = cam.transform * lidar.transform;
     assert!(

@@ -37,9 +37,9 @@ use super::write::{create_dirs, write_scan};
 use super::{frame_rng, rng_for, simulate_motion, Stream};
 use crate::dataset::{
     write_groundtruth_csv, write_imu_csv, CalibrationResult, DatasetError, DatasetYaml,
-    ExtrinsicEstimate, GroundTruthRecord, ImuNoiseYaml, ImuRecord, LidarYaml, DATASET_YAML,
-    GROUNDTRUTH_EXTRINSICS_YAML, GROUNDTRUTH_TRAJECTORY_CSV, IMU_CSV, IMU_YAML, LIDAR_DIR,
-    LIDAR_YAML,
+    ExtrinsicEstimate, GroundTruthRecord, ImuNoiseYaml, ImuRecord, LidarYaml, SectionName,
+    DATASET_YAML, GROUNDTRUTH_EXTRINSICS_YAML, GROUNDTRUTH_TRAJECTORY_CSV, IMU_CSV, IMU_YAML,
+    LIDAR_DIR, LIDAR_YAML,
 };
 use crate::lidar::ScanSource;
 use crate::pointcloud::{Point, PointCloud};
@@ -429,13 +429,10 @@ impl LidarImuSim {
 
     /// The true extrinsic in result-file form (sigmas zero).
     pub fn extrinsics(&self) -> CalibrationResult {
-        CalibrationResult {
-            lidar0: Some(ExtrinsicEstimate::exact(
-                self.t_imu_lidar,
-                self.config.lidar.time_offset_s,
-            )),
-            ..CalibrationResult::default()
-        }
+        CalibrationResult::new().with_extrinsic(
+            SectionName::LIDAR0,
+            ExtrinsicEstimate::exact(self.t_imu_lidar, self.config.lidar.time_offset_s),
+        )
     }
 
     /// `lidar0/lidar.yaml`.

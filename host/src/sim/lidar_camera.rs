@@ -36,9 +36,9 @@ use super::{frame_rng, seeded_rng, SimError, DEFAULT_START_STAMP_NS};
 use crate::camera_yaml::{board_yaml_string, camera_yaml_string, Board};
 use crate::dataset::{
     write_camera_csv, write_pose_csv, CalibrationResult, CameraFrame, DatasetError, DatasetYaml,
-    ExtrinsicEstimate, LidarYaml, PoseRecord, CAMERA_CSV, CAMERA_DATA_DIR, CAMERA_YAML,
-    DATASET_YAML, GROUNDTRUTH_EXTRINSICS_YAML, GROUNDTRUTH_TARGET_POSES_CSV, LIDAR_DIR, LIDAR_YAML,
-    TARGET_YAML,
+    ExtrinsicEstimate, LidarYaml, PoseRecord, SectionName, CAMERA_CSV, CAMERA_DATA_DIR,
+    CAMERA_YAML, DATASET_YAML, GROUNDTRUTH_EXTRINSICS_YAML, GROUNDTRUTH_TARGET_POSES_CSV,
+    LIDAR_DIR, LIDAR_YAML, TARGET_YAML,
 };
 use crate::pointcloud::{Point, PointCloud};
 use crate::vision::render::add_noise;
@@ -643,10 +643,10 @@ impl LidarCameraSim {
 
     /// The true extrinsic in result-file form (sigmas zero).
     pub fn extrinsics(&self) -> CalibrationResult {
-        CalibrationResult {
-            cam0_lidar0: Some(ExtrinsicEstimate::exact(self.t_cam_lidar, 0.0)),
-            ..CalibrationResult::default()
-        }
+        CalibrationResult::new().with_extrinsic(
+            SectionName::CAM0_LIDAR0,
+            ExtrinsicEstimate::exact(self.t_cam_lidar, 0.0),
+        )
     }
 
     /// Writes the dataset layout under `dir` (created if needed); `progress` gets the

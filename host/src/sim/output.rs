@@ -12,8 +12,8 @@ use super::trajectory::Trajectory;
 use crate::dataset::{
     write_groundtruth_csv, write_imu_csv, write_pose_csv, CalibrationResult, DatasetError,
     DatasetYaml, ExtrinsicEstimate, GroundTruthRecord, ImuNoiseYaml, ImuRecord, PoseRecord,
-    PoseSensorYaml, DATASET_YAML, GROUNDTRUTH_EXTRINSICS_YAML, GROUNDTRUTH_TRAJECTORY_CSV, IMU_CSV,
-    IMU_YAML, POSE_CSV, POSE_SENSOR_YAML,
+    PoseSensorYaml, SectionName, DATASET_YAML, GROUNDTRUTH_EXTRINSICS_YAML,
+    GROUNDTRUTH_TRAJECTORY_CSV, IMU_CSV, IMU_YAML, POSE_CSV, POSE_SENSOR_YAML,
 };
 
 /// A simulated pose-IMU dataset with its ground truth.
@@ -56,13 +56,10 @@ impl SimDataset {
     /// The true extrinsics at the end of the recording in result-file form (sigmas zero):
     /// after a knock, the knocked mounting.
     pub fn extrinsics(&self) -> CalibrationResult {
-        CalibrationResult {
-            pose0: Some(ExtrinsicEstimate::exact(
-                self.final_t_imu_pose(),
-                self.time_offset_s,
-            )),
-            ..CalibrationResult::default()
-        }
+        CalibrationResult::new().with_extrinsic(
+            SectionName::POSE0,
+            ExtrinsicEstimate::exact(self.final_t_imu_pose(), self.time_offset_s),
+        )
     }
 
     /// `dataset.yaml` contents.

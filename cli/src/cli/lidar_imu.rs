@@ -10,7 +10,7 @@ use indicatif::ProgressBar;
 use super::outcome::{progress_bar, Outcome};
 use msreg_host::calibrate::lidar_imu::{self, LidarImuInput, LidarImuOptions};
 use msreg_host::calibrate::InputError;
-use msreg_host::dataset::{CalibrationResult, Dataset};
+use msreg_host::dataset::{CalibrationResult, Dataset, SectionName};
 use msreg_host::lidar::FileScans;
 use msreg_host::sim::{simulate_lidar_imu, Environment, LidarImuSimConfig, LidarSimConfig};
 
@@ -131,11 +131,9 @@ pub fn calibrate(args: &CalibrateLidarImu) -> anyhow::Result<Outcome> {
     progress.finish_and_clear();
     let calibration =
         outcome.map_err(|e: InputError| anyhow!("{}: {e}", args.dataset.display()))?;
-    CalibrationResult {
-        lidar0: Some(calibration.imu_sensor_estimate()),
-        ..CalibrationResult::default()
-    }
-    .write(&args.output)?;
+    CalibrationResult::new()
+        .with_extrinsic(SectionName::LIDAR0, calibration.imu_sensor_estimate())
+        .write(&args.output)?;
     if let Some(path) = &args.report {
         msreg_host::report::write_report(path, &calibration.report)?;
     }

@@ -23,7 +23,9 @@ use msreg_host::calibrate::joint::{
 };
 use msreg_host::calibrate::InputError;
 use msreg_host::camera_yaml::{read_target_yaml, Target};
-use msreg_host::dataset::{CalibrationResult, Dataset, ExtrinsicEstimate, TARGET_YAML};
+use msreg_host::dataset::{
+    CalibrationResult, Dataset, ExtrinsicEstimate, SectionName, TARGET_YAML,
+};
 use msreg_host::lidar::FileScans;
 use msreg_host::vision::frames::CameraDataset;
 use msreg_host::vision::overlay::Canvas;
@@ -165,20 +167,13 @@ pub fn result(joint: &JointCalibration) -> CalibrationResult {
     let camera = &joint.camera;
     let (t_cam_imu, cam_covariance) =
         invert_with_covariance(&camera.t_imu_sensor, &camera.covariance);
-    CalibrationResult {
-        cam0: Some(ExtrinsicEstimate::from_covariance(
-            t_cam_imu,
-            camera.time_offset_s,
-            &cam_covariance,
-        )),
-        lidar0: Some(joint.lidar.imu_sensor_estimate()),
-        cam0_lidar0: Some(ExtrinsicEstimate::from_covariance(
-            joint.t_cam_lidar,
-            0.0,
-            &joint.cam_lidar_covariance,
-        )),
-        ..CalibrationResult::default()
-    }
+    let cam0 = ExtrinsicEstimate::from_covariance(t_cam_imu, camera.time_offset_s, &cam_covariance);
+    let cam0_lidar0 =
+        ExtrinsicEstimate::from_covariance(joint.t_cam_lidar, 0.0, &joint.cam_lidar_covariance);
+    CalibrationResult::new()
+        .with_extrinsic(SectionName::CAM0, cam0)
+        .with_extrinsic(SectionName::LIDAR0, joint.lidar.imu_sensor_estimate())
+        .with_extrinsic(SectionName::CAM0_LIDAR0, cam0_lidar0)
 }
 
 fn print_summary(args: &CalibrateJoint, joint: &JointCalibration) {

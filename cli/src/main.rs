@@ -13,7 +13,7 @@ use clap::{Args, Parser, Subcommand};
 use cli::outcome::Outcome;
 use msreg_host::calibrate::driver::report::PoseImuOptions;
 use msreg_host::calibrate::pose_imu::{self, PoseImuInput};
-use msreg_host::dataset::{CalibrationResult, Dataset};
+use msreg_host::dataset::{CalibrationResult, Dataset, SectionName};
 use msreg_host::eval;
 use msreg_host::sim::{self, SimConfig};
 
@@ -73,6 +73,11 @@ enum Command {
     },
     /// Replay the calibration health monitor over IMU + pose0 + pose1 (alarms, timeline).
     Monitor(cli::monitor::MonitorArgs),
+    /// A printable calibration target (SVG at exact physical size) and its target.yaml.
+    Target {
+        #[command(subcommand)]
+        kind: cli::target::TargetCommand,
+    },
 }
 
 #[derive(Subcommand)]
@@ -112,6 +117,9 @@ enum Scenario {
     /// A static downward fisheye at an intersection in a prior map (LiDAR map with
     /// reflectivity, satellite ortho image, GPS prior, survey points).
     PriorMap(cli::sim_prior_map::SimulatePriorMap),
+    /// N cameras on a rig waved in front of a checkerboard or AprilGrid (intrinsics: any
+    /// Kalibr model, true intrinsics, T_cn_cnm1 and corners in groundtruth/).
+    Cameras(cli::sim_cameras::SimulateCameras),
 }
 
 #[derive(Args)]
@@ -158,6 +166,10 @@ enum Task {
     /// Camera-IMU calibration from checkerboard or AprilGrid images: corner reprojection
     /// (RepErrCal) or PnP relative poses (MoCal) in the EKF.
     CameraImu(cli::camera_imu::CalibrateCameraImu),
+    /// Intrinsics of any number of cameras (Kalibr's pinhole-radtan, pinhole-equidistant,
+    /// omni-radtan, ds, eucm) and the camera chain `T_cn_cnm1`, from checkerboard or
+    /// AprilGrid images: one bundle adjustment.
+    Cameras(cli::cameras::CalibrateCameras),
     /// Static infrastructure cameras registered from a robot's VO (COLMAP model), marker
     /// detections and blobs (chapter 6).
     Infra(cli::infra::CalibrateInfra),
@@ -269,6 +281,10 @@ fn run(command: Command) -> Result<(), Failure> {
         Command::Simulate {
             scenario: Scenario::PriorMap(args),
         } => Ok(cli::sim_prior_map::simulate(&args)?),
+        Command::Simulate {
+            scenario: Scenario::Cameras(args),
+        } => Ok(cli::sim_cameras::simulate(&args)?),
+        Command::Target { kind } => Ok(cli::target::run(&kind)?),
         Command::Monitor(args) => match cli::monitor::run(&args)? {
             cli::monitor::MonitorOutcome::Ran => Ok(()),
             cli::monitor::MonitorOutcome::Failed(why) => {
@@ -294,6 +310,7 @@ fn calibrate(bag: &cli::convert::BagFlags, mut task: Task) -> Result<(), Failure
         Task::LidarImu(args) => exit_code_of(cli::lidar_imu::calibrate(&args)?),
         Task::LidarCamera(args) => exit_code_of(cli::lidar_camera::calibrate(&args)?),
         Task::CameraImu(args) => exit_code_of(cli::camera_imu::run(&args)?),
+        Task::Cameras(args) => exit_code_of(cli::cameras::run(&args)?),
         Task::Joint(args) => exit_code_of(cli::joint::run(&args)?),
         Task::PriorMap(args) => exit_code_of(cli::prior_map::calibrate(&args)?),
         Task::Infra(args) => match cli::infra::calibrate(&args)? {
@@ -313,6 +330,7 @@ impl Task {
             Task::LidarImu(args) => &mut args.dataset,
             Task::LidarCamera(args) => &mut args.dataset,
             Task::CameraImu(args) => &mut args.dataset,
+            Task::Cameras(args) => &mut args.dataset,
             Task::Joint(args) => &mut args.dataset,
             Task::Infra(args) => &mut args.dataset,
             Task::PriorMap(args) => &mut args.dataset,
@@ -375,10 +393,8 @@ fn calibrate_pose_imu(args: &CalibratePoseImu) -> Result<(), Failure> {
     let calibration = outcome.map_err(|e: msreg_host::calibrate::InputError| {
         Failure::BadInput(anyhow!("{}: {e}", args.dataset.display()))
     })?;
-    let result = CalibrationResult {
-        pose0: Some(calibration.imu_sensor_estimate()),
-        ..CalibrationResult::default()
-    };
+    let result = CalibrationResult::new()
+        .with_extrinsic(SectionName::POSE0, calibration.imu_sensor_estimate());
     result.write(&args.output)?;
     if let Some(path) = &args.report {
         msreg_host::report::write_report(path, &calibration.report)?;

@@ -13,7 +13,7 @@ use nalgebra::{Isometry3, Translation3};
 use serde::Serialize;
 
 use super::outcome::{progress_bar, Outcome};
-use msreg_host::dataset::{CalibrationResult, ExtrinsicEstimate};
+use msreg_host::dataset::{CalibrationResult, ExtrinsicEstimate, SectionName};
 use msreg_host::lidar_camera::pipeline::{
     extract_dataset, solve, CalibrationOptions, FrameFeatures, FrameReport, Method, RejectedFrame,
     Solution, SolveError, SolverRun,
@@ -248,11 +248,9 @@ fn finish(
     report.ppc = Some(solution.ppc.clone());
     report.pbpc = solution.pbpc.clone();
     report.frames = solution.frames.clone();
-    CalibrationResult {
-        cam0_lidar0: Some(estimate),
-        ..CalibrationResult::default()
-    }
-    .write(&args.output)?;
+    CalibrationResult::new()
+        .with_extrinsic(SectionName::CAM0_LIDAR0, estimate)
+        .write(&args.output)?;
     eprintln!(
         "msreg: wrote {} (MLRE {:.3} px over {} frames; PPC-Cal alone {:.3} px)",
         args.output.display(),

@@ -127,7 +127,8 @@ fn run_around(draws: usize, seed: u64, centre: Centre) -> Option<Vec<Draw>> {
     let cloud = read_pcd(dir.join("lidar0/1700000000000000000.pcd")).expect("pcd");
     let reference = CalibrationResult::read(dir.join("groundtruth/extrinsics.yaml"))
         .expect("extrinsics.yaml")
-        .cam0_lidar0
+        .get("cam0_lidar0")
+        .copied()
         .expect("cam0_lidar0")
         .transform;
     let reference = match centre {
@@ -292,7 +293,6 @@ fn summary(draws: &[Draw]) -> usize {
 #[test]
 fn targetless_refinement_on_real_data_runs_and_reports_finite_errors() {
     let Some(draws) = run(3, 15) else {
-        eprintln!("SKIP: ../shared/data/real/calibanything-1 absent");
         return;
     };
     summary(&draws);
@@ -309,7 +309,6 @@ fn targetless_refinement_on_real_data_runs_and_reports_finite_errors() {
 #[ignore = "20-draw acceptance run (3-6 min on 2 loaded cores): cargo test --release -p msreg --test mi_targetless_real -- --ignored --nocapture"]
 fn targetless_refinement_returns_to_the_reference_on_18_of_20() {
     let Some(draws) = run(20, 20) else {
-        eprintln!("SKIP: ../shared/data/real/calibanything-1 absent");
         return;
     };
     let ok = summary(&draws);
@@ -322,7 +321,6 @@ fn targetless_refinement_returns_to_the_reference_on_18_of_20() {
 #[ignore = "evidence-pose draws (3-8 min): cargo test --release -p msreg --test mi_targetless_real around_the_evidence -- --ignored --nocapture"]
 fn targetless_refinement_around_the_evidence_pose() {
     let Some(draws) = run_around(20, 20, Centre::Evidence) else {
-        eprintln!("SKIP: ../shared/data/real/calibanything-1 absent");
         return;
     };
     summary(&draws);
@@ -362,7 +360,6 @@ fn tuning_draws() {
         _ => Centre::Evidence,
     };
     let Some(draws) = run_around(20, 7, centre) else {
-        eprintln!("SKIP: ../shared/data/real/calibanything-1 absent");
         return;
     };
     summary(&draws);
@@ -406,7 +403,6 @@ fn targetless_without_initial_or_with_a_bad_one_is_bad_input() {
 #[test]
 fn targetless_cli_reports_unconstrained_dofs_with_the_guess_sigma() {
     let Some(dir) = dir_or_skip("real/calibanything-1") else {
-        eprintln!("SKIP: ../shared/data/real/calibanything-1 absent");
         return;
     };
     let out = std::env::temp_dir().join(format!("msreg_mi_cli_{}", std::process::id()));
@@ -440,7 +436,8 @@ fn targetless_cli_reports_unconstrained_dofs_with_the_guess_sigma() {
     assert_eq!(run.status.code(), Some(1), "{stderr}");
     let estimate = CalibrationResult::read(&result)
         .expect("result reads back")
-        .cam0_lidar0
+        .get("cam0_lidar0")
+        .copied()
         .expect("cam0_lidar0");
     let sigma: Vec<f64> = estimate
         .sigma_rot_deg

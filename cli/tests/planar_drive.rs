@@ -15,7 +15,7 @@
 //! figure-eight (`DriveConfig::figure_eight`) meet the 0.2 deg and 1 cm on every
 //! seed, with the same odometry, and are consistent over 30 more seeds (the last two tests).
 
-#[path = "support/common.rs"]
+#[path = "../../host/tests/support/common.rs"]
 mod common;
 
 use std::process::Command;

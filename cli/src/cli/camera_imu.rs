@@ -23,8 +23,8 @@ use msreg_host::calibrate::camera_imu::{detect_corner_frames, DetectionSummary};
 use msreg_host::calibrate::InputError;
 use msreg_host::camera_yaml::{read_camera_yaml, read_target_yaml, Target};
 use msreg_host::dataset::{
-    read_observed_corners, CalibrationResult, Dataset, ObservedCorner, ObservedImage, CAMERA_YAML,
-    OBSERVED_CORNERS_CSV, TARGET_YAML,
+    read_observed_corners, CalibrationResult, Dataset, ObservedCorner, ObservedImage, SectionName,
+    CAMERA_YAML, OBSERVED_CORNERS_CSV, TARGET_YAML,
 };
 use msreg_host::vision::frames::CameraDataset;
 use msreg_host::vision::{DetectorParams, GrayImage};
@@ -136,11 +136,9 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
     filtering.finish_and_clear();
     let calibration =
         outcome.map_err(|e: InputError| anyhow!("{}: {e}", args.dataset.display()))?;
-    CalibrationResult {
-        cam0: Some(calibration.cam_imu_estimate()),
-        ..CalibrationResult::default()
-    }
-    .write(&args.output)?;
+    CalibrationResult::new()
+        .with_extrinsic(SectionName::CAM0, calibration.cam_imu_estimate())
+        .write(&args.output)?;
     let r = &calibration.report;
     eprintln!(
         "msreg: wrote {} ({:?}: {} images fused, mean NIS/dof {:.2}; mean reprojection error \
@@ -340,7 +338,7 @@ fn write_plot(path: &Path, dataset: &Dataset, calibration: &CameraImuCalibration
     let truth = dataset
         .groundtruth_extrinsics
         .as_ref()
-        .and_then(|g| g.cam0.as_ref())
+        .and_then(|g| g.extrinsic(&SectionName::CAM0))
         .map(|cam0| {
             let t_imu_cam = cam0.transform.inverse();
             (

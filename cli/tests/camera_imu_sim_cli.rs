@@ -45,7 +45,7 @@ fn simulated_camera_dataset_feeds_the_detector_cli() {
     );
     let data = dir.path().join("data");
     let truth = CalibrationResult::read(data.join("groundtruth/extrinsics.yaml")).unwrap();
-    let cam0 = truth.cam0.unwrap();
+    let cam0 = *truth.get("cam0").unwrap();
     assert!((cam0.timeshift_s + 0.003).abs() < 1e-15);
     assert!(std::fs::read_to_string(data.join("cam0/camera.yaml"))
         .unwrap()

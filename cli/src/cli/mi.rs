@@ -14,7 +14,8 @@ use serde::Serialize;
 use super::outcome::Outcome;
 use msreg_host::camera_yaml::read_camera_yaml;
 use msreg_host::dataset::{
-    list_scans, read_camera_csv, CalibrationResult, ExtrinsicEstimate, CAMERA_CSV, CAMERA_YAML,
+    list_scans, read_camera_csv, CalibrationResult, ExtrinsicEstimate, SectionName, CAMERA_CSV,
+    CAMERA_YAML,
 };
 use msreg_host::mi::scene::rank_normalize;
 use msreg_host::mi::search::{default_prior_sigma, Constraint, Observability, Refined};
@@ -196,8 +197,8 @@ fn read_initial(path: Option<&Path>) -> anyhow::Result<(Isometry3<f64>, Vector6<
         anyhow!("--targetless needs --initial guess.yaml (a result file with cam0_lidar0)")
     })?;
     let result = CalibrationResult::read(path)?;
-    let e = result
-        .cam0_lidar0
+    let e = *result
+        .extrinsic(&SectionName::CAM0_LIDAR0)
         .ok_or_else(|| anyhow!("{}: no cam0_lidar0.T_cam_lidar section", path.display()))?;
     let given = Vector6::new(
         e.sigma_rot_deg.x.to_radians(),
@@ -238,11 +239,9 @@ pub fn calibrate(args: &TargetlessArgs<'_>) -> anyhow::Result<Outcome> {
     let seconds = clock.elapsed().as_secs_f64();
     let refined = &result.refined;
     let estimate = ExtrinsicEstimate::from_covariance(refined.x, 0.0, &refined.covariance);
-    let mut text = CalibrationResult {
-        cam0_lidar0: Some(estimate),
-        ..CalibrationResult::default()
-    }
-    .to_yaml_string();
+    let mut text = CalibrationResult::new()
+        .with_extrinsic(SectionName::CAM0_LIDAR0, estimate)
+        .to_yaml_string();
     text.push_str(&mi_section("cam0_lidar0_mi", refined));
     std::fs::write(args.output, text)
         .with_context(|| format!("{}: cannot write", args.output.display()))?;

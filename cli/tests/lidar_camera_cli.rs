@@ -109,7 +109,7 @@ fn bad_frames_are_rejected_with_reasons_and_the_result_evaluates() {
         "overlay PNG written"
     );
     let estimate = CalibrationResult::read(&result).expect("result");
-    assert!(estimate.cam0_lidar0.is_some());
+    assert!(estimate.get("cam0_lidar0").is_some());
     let eval = msreg(&["eval", &result.to_string_lossy(), &ds_s]);
     assert!(eval.status.success(), "{}", stderr(&eval));
     assert!(String::from_utf8_lossy(&eval.stdout).contains("cam0_lidar0"));

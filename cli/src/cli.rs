@@ -4,6 +4,7 @@
 
 pub mod aruco;
 pub mod camera_imu;
+pub mod cameras;
 pub mod convert;
 pub mod demo;
 pub mod detect;
@@ -18,6 +19,8 @@ pub mod monitor;
 pub mod outcome;
 pub mod prior_map;
 pub mod sim_camera;
+pub mod sim_cameras;
 pub mod sim_drive;
 pub mod sim_joint;
 pub mod sim_prior_map;
+pub mod target;
