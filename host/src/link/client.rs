@@ -78,7 +78,7 @@ impl Collected {
 pub struct TimedExchange {
     /// Just before the request was written.
     pub sent: Instant,
-    /// When the reader thread read the reply's last byte.
+    /// When the reader thread read the reply's first byte.
     pub received: Instant,
     /// The device's reply.
     pub reply: TimeSyncReply,

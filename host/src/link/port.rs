@@ -15,7 +15,9 @@ use super::LinkError;
 /// What the reader thread saw.
 #[derive(Debug, Clone)]
 pub enum Incoming {
-    /// A decoded frame and when it completed.
+    /// A decoded frame and when its first byte was read (clock sync: the device stamps its
+    /// reply just before that byte, so a frame-start stamp leaves the reply's transfer time
+    /// out of the round trip's backward half).
     Packet(Instant, Packet<DeviceMsg>),
     /// A frame that failed to decode.
     Bad(Instant, FrameError),
@@ -134,6 +136,7 @@ impl Drop for Port {
 
 fn read_loop(mut port: serialport::TTYPort, tx: &Sender<Incoming>, stop: &AtomicBool) {
     let mut deframer = Deframer::<DEVICE_FRAME_MAX>::new();
+    let mut started: Option<Instant> = None;
     let mut buf = [0u8; 1024];
     while !stop.load(Ordering::Relaxed) {
         let n = match port.read(&mut buf) {
@@ -159,12 +162,21 @@ fn read_loop(mut port: serialport::TTYPort, tx: &Sender<Incoming>, stop: &Atomic
         };
         let now = Instant::now();
         for &b in &buf[..n] {
+            if b != 0 && started.is_none() {
+                started = Some(now);
+            }
             let item = match deframer.push(b) {
                 Pushed::Pending => continue,
-                Pushed::Oversize => Incoming::Bad(now, FrameError::Oversize),
+                Pushed::Oversize => {
+                    started = None;
+                    Incoming::Bad(now, FrameError::Oversize)
+                }
                 Pushed::Frame(f) => match frame::decode::<DeviceMsg>(f) {
-                    Ok(p) => Incoming::Packet(now, p),
-                    Err(e) => Incoming::Bad(now, e),
+                    Ok(p) => Incoming::Packet(started.take().unwrap_or(now), p),
+                    Err(e) => {
+                        started = None;
+                        Incoming::Bad(now, e)
+                    }
                 },
             };
             if tx.send(item).is_err() {
