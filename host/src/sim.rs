@@ -28,6 +28,7 @@
 
 mod box_world;
 pub mod camera;
+pub mod cameras;
 mod clock;
 mod config;
 pub mod drive;

@@ -17,6 +17,7 @@ pub mod pnp;
 pub mod render;
 pub mod saddle;
 pub mod subpix;
+pub mod target_svg;
 
 pub use checkerboard::{detect_checkerboard, CheckerboardDetection, DetectorParams, NoDetection};
 pub use frames::{detect_frames, CameraDataset, CameraInputError, FrameCorners, FrameResult};
