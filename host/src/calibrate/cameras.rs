@@ -231,13 +231,17 @@ fn build_corners(inputs: &[CameraInput], tolerance_ns: u64) -> Corners {
     corners
 }
 
+/// `T_c_target` of every image of a camera (`None`: no starting pose).
+type ImagePoses = Vec<Option<Pose<f64>>>;
+
+/// Final cost, intrinsics and per-image poses of a one-camera adjustment.
+type SoloFit = (f64, CameraModel<f64>, Vec<Pose<f64>>);
+
 /// Starting intrinsics and per-image poses `T_c_target` of one camera, refined by a bundle
 /// adjustment of that camera alone. Double sphere has a valley of nearly equivalent
 /// `(xi, alpha, f)`: its solo adjustment starts from five `xi` (same central focal length)
 /// and keeps the lowest cost.
-fn start_camera(
-    input: &CameraInput,
-) -> Result<(CameraModel<f64>, Vec<Option<Pose<f64>>>), CamerasError> {
+fn start_camera(input: &CameraInput) -> Result<(CameraModel<f64>, ImagePoses), CamerasError> {
     if input.images.len() < 3 {
         return Err(CamerasError::TooFewImages {
             camera: input.name.clone(),
@@ -295,7 +299,7 @@ fn start_camera(
     } else {
         vec![model]
     };
-    let mut best: Option<(f64, CameraModel<f64>, Vec<Pose<f64>>)> = None;
+    let mut best: Option<SoloFit> = None;
     for start in starts {
         let Ok(found) = solo_adjustment(&solo, start, poses.iter().flatten().copied()) else {
             continue;
@@ -319,7 +323,7 @@ fn solo_adjustment(
     solo: &CameraInput,
     model: CameraModel<f64>,
     poses: impl Iterator<Item = Pose<f64>>,
-) -> Result<(f64, CameraModel<f64>, Vec<Pose<f64>>), CamerasError> {
+) -> Result<SoloFit, CamerasError> {
     let corners = build_corners(std::slice::from_ref(solo), 0);
     let mut views = vec![Pose::identity(); corners.views];
     for (i, p) in poses.enumerate() {

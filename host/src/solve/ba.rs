@@ -178,9 +178,12 @@ fn linearise<P: SchurProblem>(
     Some(n)
 }
 
+/// `S`, the right-hand side and the damped local inverses.
+type Reduced = (DMatrix<f64>, DVector<f64>, Vec<Matrix6<f64>>);
+
 /// The reduced (Schur) system `S dx_g = rhs` with damping `lambda`, and the local
 /// inverses used to back-substitute.
-fn reduce(n: &Normal, lambda: f64) -> Option<(DMatrix<f64>, DVector<f64>, Vec<Matrix6<f64>>)> {
+fn reduce(n: &Normal, lambda: f64) -> Option<Reduced> {
     let g = n.bg.len();
     let mut s = n.hgg.clone();
     for k in 0..g {

@@ -77,6 +77,9 @@ pub enum CamerasInputError {
     },
 }
 
+/// The calibration input and, per camera, `(images, images with corners)`.
+pub type Detected = (Vec<CameraInput>, Vec<(usize, usize)>);
+
 /// One camera of the dataset.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DatasetCamera {
@@ -166,7 +169,7 @@ impl CamerasDataset {
         &self,
         params: &DetectorParams,
         progress: &(dyn Fn(f64) + Sync),
-    ) -> Result<(Vec<CameraInput>, Vec<(usize, usize)>), CamerasInputError> {
+    ) -> Result<Detected, CamerasInputError> {
         let mut inputs = Vec::new();
         let mut counts = Vec::new();
         for cam in &self.cameras {

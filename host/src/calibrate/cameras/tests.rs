@@ -98,6 +98,9 @@ fn random_view(rng: &mut ChaCha8Rng, cam: &CameraModel<f64>, max_angle: f64) -> 
     Pose::new(UnitQuaternion::from_rotation_matrix(&r), t)
 }
 
+/// Target points and their pixels.
+type Corners2d = (Vec<Vector3<f64>>, Vec<Vector2<f64>>);
+
 /// Noisy corners of camera `cam` (extrinsic `t_c_c0`) in a view, those inside the image.
 fn observe(
     rng: &mut ChaCha8Rng,
@@ -105,7 +108,7 @@ fn observe(
     t_c_c0: &Pose<f64>,
     view: &Pose<f64>,
     sigma: f64,
-) -> Option<(Vec<Vector3<f64>>, Vec<Vector2<f64>>)> {
+) -> Option<Corners2d> {
     let noise = Normal::new(0.0, sigma).unwrap();
     let (mut points, mut pixels) = (Vec::new(), Vec::new());
     for x in board() {
