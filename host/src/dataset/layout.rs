@@ -10,7 +10,7 @@ use super::imu::{check_imu_units, read_imu_csv, to_instantaneous, ImuNoiseYaml, 
 use super::lidar::{list_scans, LidarYaml, ScanFile, LIDAR_DIR, LIDAR_YAML};
 use super::meta::DatasetYaml;
 use super::pose::{read_pose_csv, PoseRecord, PoseSensorYaml};
-use super::result::CalibrationResult;
+use super::result::{CalibrationResult, SensorId, SensorKind};
 
 /// `dataset.yaml`, relative to the dataset root.
 pub const DATASET_YAML: &str = "dataset.yaml";
@@ -136,6 +136,56 @@ impl Dataset {
         optional(self.path(LIDAR_YAML), LidarYaml::read)
     }
 
+    /// The sensors whose folders are present (`imu0`, `cam1`, `lidar0`, ...), in result-file
+    /// section order (cameras, LiDARs, pose sensors, IMUs; by index within a kind). A folder
+    /// whose name is no sensor name (`groundtruth`, `camera0`) is not a sensor.
+    pub fn sensors(&self) -> Result<Vec<SensorId>, DatasetError> {
+        let entries = std::fs::read_dir(&self.root)
+            .map_err(|source| super::csv::io_error(&self.root, source))?;
+        let mut sensors: Vec<SensorId> = entries
+            .filter_map(Result::ok)
+            .filter(|e| e.path().is_dir())
+            .filter_map(|e| e.file_name().to_str()?.parse().ok())
+            .collect();
+        sensors.sort();
+        Ok(sensors)
+    }
+
+    /// The sensors of one kind present, by index.
+    pub fn sensors_of(&self, kind: SensorKind) -> Result<Vec<SensorId>, DatasetError> {
+        let mut all = self.sensors()?;
+        all.retain(|s| s.kind == kind);
+        Ok(all)
+    }
+
+    /// `<sensor>/<file>` under the dataset root (`cam1/data.csv`).
+    pub fn sensor_path(&self, sensor: SensorId, file: &str) -> PathBuf {
+        self.root.join(sensor.to_string()).join(file)
+    }
+
+    /// `imuN/data.csv` and `imuN/imu.yaml` of any IMU, read and converted as `imu0`'s are at
+    /// [`Dataset::open`] (units checked, sample timing applied); errors name the file.
+    pub fn read_imu(&self, index: u16) -> Result<(Vec<ImuRecord>, ImuNoiseYaml), DatasetError> {
+        let imu = SensorId::imu(index);
+        let noise = ImuNoiseYaml::read(self.sensor_path(imu, "imu.yaml"))?;
+        let csv = self.sensor_path(imu, "data.csv");
+        let mut records = read_imu_csv(&csv)?;
+        check_imu_units(&csv, &records)?;
+        to_instantaneous(&mut records, noise.sample_timing.unwrap_or_default());
+        Ok((records, noise))
+    }
+
+    /// `poseN/data.csv` and `poseN/sensor.yaml` of any pose sensor; errors name the file.
+    pub fn read_pose_sensor(
+        &self,
+        index: u16,
+    ) -> Result<(Vec<PoseRecord>, PoseSensorYaml), DatasetError> {
+        let pose = SensorId::pose(index);
+        let records = read_pose_csv(self.sensor_path(pose, "data.csv"))?;
+        let noise = PoseSensorYaml::read(self.sensor_path(pose, "sensor.yaml"))?;
+        Ok((records, noise))
+    }
+
     fn require<'a, T: ?Sized>(
         &self,
         part: Option<&'a T>,
@@ -192,6 +242,31 @@ mod tests {
             matches!(&err, DatasetError::MissingFile { path } if path.ends_with(POSE_CSV)),
             "{err}"
         );
+        Ok(())
+    }
+
+    #[test]
+    fn sensors_are_discovered_from_the_folders_present() -> TestResult {
+        let dir = tempfile::tempdir()?;
+        for folder in [
+            "imu1",
+            "imu0",
+            "cam1",
+            "cam0",
+            "lidar0",
+            "pose2",
+            "groundtruth",
+            "cam01",
+        ] {
+            std::fs::create_dir(dir.path().join(folder))?;
+        }
+        std::fs::write(dir.path().join("pose0"), "a file, not a folder")?;
+        let dataset = Dataset::open(dir.path())?;
+        let names: Vec<String> = dataset.sensors()?.iter().map(ToString::to_string).collect();
+        assert_eq!(names, ["cam0", "cam1", "lidar0", "pose2", "imu0", "imu1"]);
+        assert_eq!(dataset.sensors_of(SensorKind::Imu)?.len(), 2);
+        let err = dataset.read_imu(1).err().ok_or("expected an error")?;
+        assert!(err.to_string().contains("imu1/imu.yaml"), "{err}");
         Ok(())
     }
 
