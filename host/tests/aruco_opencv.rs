@@ -4,10 +4,11 @@
 //!     cd /tmp && apt-get download opencv-doc && dpkg-deb -x opencv-doc*.deb /tmp/opencv-doc
 //!     python3 -m venv /tmp/venv-aruco && /tmp/venv-aruco/bin/pip install opencv-python-headless
 //!     /tmp/venv-aruco/bin/python tools/aruco_opencv_reference.py
-//!     cargo test --release -p msreg --test aruco_opencv -- --nocapture
+//!     cargo test --release -p msreg-host --test aruco_opencv -- --nocapture
 //!
-//! Prints a skip notice when they are absent. Paths can be overridden with
-//! `MSREG_OPENCV_DOC_HTML` and `MSREG_ARUCO_REFERENCE`.
+//! tools/test.sh makes both (step "OpenCV ArUco reference") and points the paths at them
+//! with `MSREG_OPENCV_DOC_HTML` and `MSREG_ARUCO_REFERENCE`. Absent, the test skips with a
+//! `SKIP:` notice, and fails under CI (`msreg_host::shared_data`).
 
 // A test crate: its helpers may panic on bad fixtures.
 #![allow(clippy::unwrap_used)]
@@ -66,12 +67,10 @@ fn every_marker_opencv_decodes_is_found_with_its_corners() {
         std::env::var("MSREG_ARUCO_REFERENCE")
             .unwrap_or_else(|_| "/tmp/aruco_reference.csv".into()),
     );
-    if !html.is_dir() || !reference.is_file() {
-        eprintln!(
-            "SKIP aruco_opencv: {} or {} absent (setup in tests/aruco_opencv.rs, docs/aruco.md)",
-            html.display(),
-            reference.display()
-        );
+    if !msreg_host::shared_data::present_or_skip(
+        &[&html, &reference],
+        "tools/test.sh makes both; by hand: host/tests/aruco_opencv.rs, docs/aruco.md",
+    ) {
         return;
     }
     let refs = read_reference(&reference);

@@ -20,16 +20,10 @@ use msreg_host::sim::{simulate_pose_imu, SimConfig};
 
 type TestResult = Result<(), Box<dyn std::error::Error>>;
 
-const REAL_BAG: &str = "../../shared/data/real/robot_localization-test2.bag";
-
+/// The real Jackal bag, or `None` with a `SKIP:` notice (a failure under CI) where the
+/// shared data is absent (`msreg_host::shared_data`).
 fn real_bag() -> Option<std::path::PathBuf> {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(REAL_BAG);
-    if path.is_file() {
-        Some(path)
-    } else {
-        eprintln!("SKIP: {} is absent (needs ../shared/data)", path.display());
-        None
-    }
+    msreg_host::shared_data::file_or_skip("real/robot_localization-test2.bag")
 }
 
 #[test]
