@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Builds, runs, sizes and benchmarks the Cortex-M4F firmware (firmware/) with Debian's Rust
-# toolchain and build-std, on QEMU's mps2-an386 board (../shared/docs/EMBEDDED.md).
+# toolchain and build-std, on QEMU's mps2-an386 board (docs/firmware.md).
 #
 #   tools/firmware.sh build   build both binaries (release profile of firmware/Cargo.toml)
 #   tools/firmware.sh clippy  Debian's clippy over the firmware (all targets, -D warnings,

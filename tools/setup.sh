@@ -3,7 +3,7 @@
 # Debian's Rust toolchain with the standard library sources (rustc-web, rust-web-src,
 # cargo-web: the rustup toolchain has no bare-metal target and no rust-src, and rustup cannot
 # download them), the lld linker, and QEMU for the Cortex-M4F board (qemu-system-arm).
-# See ../shared/docs/EMBEDDED.md. When everything is present it touches apt not at all and
+# See docs/firmware.md. When everything is present it touches apt not at all and
 # takes well under a second.
 #
 # The host workspace uses the rustup toolchain already on the machine (cargo, rustfmt,

@@ -5,7 +5,7 @@
 //! sensor measurements (relative poses, zero velocity, and later reprojections and planes).
 //! The same code runs in f64 on the host and in f32 on a Cortex-M4F.
 //!
-//! Conventions (docs: `../shared/docs/CONVENTIONS.md`): `T_a_b` is the pose of frame `b` in
+//! Conventions (docs: `docs/formats.md`): `T_a_b` is the pose of frame `b` in
 //! frame `a`; quaternions are Hamilton; every rotation error is a right perturbation
 //! `R = R_hat * Exp(dtheta)`; positions, velocities, biases and time offsets are additive.
 //! Time is `u64` nanoseconds; a measurement of sensor S stamped `t_S` was taken at IMU time
