@@ -1,6 +1,6 @@
 //! `msreg`: the command line over the host library.
 //!
-//! Exit codes (CONVENTIONS.md): 0 success; 1 the calibration ran but did not converge or
+//! Exit codes (docs/formats.md): 0 success; 1 the calibration ran but did not converge or
 //! failed its checks (the result is still written, with the reason); 2 bad input.
 
 mod cli;

@@ -22,7 +22,7 @@ pub struct ConvertArgs {
 }
 
 /// The flags that say how to read a bag: one topic per sensor and the noise / camera files
-/// a bag does not carry (CONVENTIONS.md). Flattened into `msreg convert` and `msreg
+/// a bag does not carry (docs/formats.md). Flattened into `msreg convert` and `msreg
 /// calibrate` (global there, so they may follow the pipeline's name).
 #[derive(Debug, Clone, Default, Args)]
 pub struct BagFlags {
