@@ -28,7 +28,7 @@ from pathlib import Path
 # ray caster), so it sits above it; the pipelines simulate in their studies and tests, and an
 # algorithm's own tests that need a simulated scene are integration tests (host/tests/).
 LAYERS = [
-    ("foundation", ["dataset", "pointcloud", "camera_yaml", "shared_data", "solve", "eval",
+    ("foundation", ["dataset", "export", "pointcloud", "camera_yaml", "shared_data", "solve", "eval",
                     "report", "plot"]),
     ("algorithms", ["ndt", "vision", "lidar", "mi", "bag"]),
     ("simulation", ["sim"]),

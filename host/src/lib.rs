@@ -7,6 +7,7 @@ pub mod calibrate;
 pub mod camera_yaml;
 pub mod dataset;
 pub mod eval;
+pub mod export;
 pub mod infra;
 pub mod lidar;
 pub mod lidar_camera;
