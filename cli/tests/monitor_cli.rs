@@ -112,7 +112,9 @@ fn knocked_drive_is_flagged_with_plot_and_report_and_exit_codes() {
     // estimate against the record.
     let glr = &report["sensors"][0]["nis"][100]["rotation_glr"];
     assert!(glr["statistic"].as_f64().is_some() && glr["threshold"].as_f64() > Some(0.0));
-    let estimates = report["sensors"][1]["estimates"].as_array().expect("estimates");
+    let estimates = report["sensors"][1]["estimates"]
+        .as_array()
+        .expect("estimates");
     assert_eq!(
         estimates.len(),
         report["sensors"][1]["nis"].as_array().expect("nis").len()
@@ -136,7 +138,10 @@ fn normalised_errors(written: &Path, truth: &Path) -> Vec<(String, f64)> {
             .map(f64::to_degrees);
         let trans = w.transform.translation.vector - t.transform.translation.vector;
         for k in 0..3 {
-            assert!(w.sigma_rot_deg[k] > 0.0 && w.sigma_trans_m[k] > 0.0, "{name}: sigmas");
+            assert!(
+                w.sigma_rot_deg[k] > 0.0 && w.sigma_trans_m[k] > 0.0,
+                "{name}: sigmas"
+            );
             out.push((format!("{name} rot {k}"), rot[k] / w.sigma_rot_deg[k]));
             out.push((format!("{name} trans {k}"), trans[k] / w.sigma_trans_m[k]));
         }

@@ -15,10 +15,12 @@
 //! `calibrate::planar`) the lever arm of both sensors along the rotation axis is held at the
 //! calibration of record (not observable; a Schmidt direction).
 
+pub mod drive_bag;
 mod files;
 mod replay;
 pub mod start;
 pub mod timeline;
+mod verdict;
 
 use serde::Serialize;
 
@@ -30,6 +32,9 @@ pub use replay::{
     monitor, monitor_prior, pose_steps, MonitorOptions, PoseStep, ZERO_VELOCITY_EVERY,
 };
 pub use start::FilterPrior;
+pub use verdict::{
+    RotationChange, SensorVerdict, TranslationChange, Verdict, VerdictWords, AXIS_NAMES,
+};
 
 /// Sensor names, by filter index.
 pub const SENSOR_NAMES: [&str; 2] = ["pose0", "pose1"];
@@ -195,6 +200,23 @@ pub struct ExcitationPoint {
     pub excitation: [f64; 7],
 }
 
+/// The estimate of one sensor's extrinsic after an update, against the calibration of
+/// record (the timeline's estimate panels).
+#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+pub struct EstimatePoint {
+    /// IMU time, s after the first IMU sample.
+    pub t_s: f64,
+    /// Rotation from the record to the estimate, `log(R_record^T R)` (a right perturbation:
+    /// the sensor's own axes), deg.
+    pub rotation_deg: [f64; 3],
+    /// Translation `t_imu_pose` of the estimate minus the record's (IMU frame), mm.
+    pub translation_mm: [f64; 3],
+    /// The filter's 1-sigma per rotation axis, deg.
+    pub sigma_rotation_deg: [f64; 3],
+    /// The filter's 1-sigma per translation axis, mm.
+    pub sigma_translation_mm: [f64; 3],
+}
+
 /// Timeline and summary of one sensor.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct SensorReport {
@@ -202,6 +224,8 @@ pub struct SensorReport {
     pub name: &'static str,
     /// Every update of the monitor run.
     pub nis: Vec<NisPoint>,
+    /// The extrinsic estimate after every update of the monitor run, against the record.
+    pub estimates: Vec<EstimatePoint>,
     /// Excitation over time (observability run).
     pub excitation: Vec<ExcitationPoint>,
     /// Per-DoF observability at the end of the observability run.
@@ -218,6 +242,12 @@ pub struct SensorReport {
     /// The monitor's final estimate (in the report as `final_*`).
     #[serde(skip)]
     pub estimate: ExtrinsicEstimate,
+    /// The calibration of record the monitor started from (`MonitorInput::prior`).
+    #[serde(skip)]
+    pub record: ExtrinsicEstimate,
+    /// Final covariance of the extrinsic, `[rotation (rad, right perturbation); translation
+    /// (m)]`, row-major.
+    pub final_covariance: [[f64; 6]; 6],
     /// Final `T_imu_pose` (4x4, row-major).
     pub final_t_imu_pose: [[f64; 4]; 4],
     /// Final time offset, s.
@@ -268,6 +298,21 @@ impl MonitorReport {
                     .map(move |r| format!("{} {}: {}: {}", s.name, r.dof, r.status, r.reason))
             })
             .collect()
+    }
+
+    /// What the operator should know and do (see [`Verdict`]).
+    pub fn verdict(&self) -> Verdict {
+        Verdict::of(self)
+    }
+
+    /// The re-estimated calibration: the monitor's final estimate of every sensor with its
+    /// sigmas, in the result file's sections (`pose0`, `pose1`).
+    pub fn calibration(&self) -> crate::dataset::PosePairCalibration {
+        let estimate = |k: usize| self.sensors.get(k).map(|s| s.estimate);
+        crate::dataset::PosePairCalibration {
+            pose0: estimate(0),
+            pose1: estimate(1),
+        }
     }
 
     /// The first alarm of `sensor` at or after `t_s`.

@@ -27,10 +27,12 @@ pub const EXIT_CALIBRATION_CHANGED: i32 = 3;
 /// Exit codes: 0 no calibration changed; 3 a calibration changed (alarm); 1 the filter
 /// could not start on this recording; 2 bad input.
 #[derive(Debug, Args)]
-#[command(after_help = "Exit codes: 0 no calibration changed; 3 a calibration changed (an \
+#[command(
+    after_help = "Exit codes: 0 no calibration changed; 3 a calibration changed (an \
 alarm was raised: the VERDICT line names the sensor, the axis, the angle and what to do); 1 \
 the filter could not start on this recording; 2 bad input (the file and line are named). \
-docs/monitor.md has the details.")]
+docs/monitor.md has the details."
+)]
 pub struct MonitorArgs {
     /// Dataset directory (imu0/, pose0/, pose1/; CONVENTIONS.md), or a ROS 1 `.bag` / `.mcap`
     /// file with `--pose0 TOPIC --pose1 TOPIC` (and `--initial`).
@@ -160,8 +162,15 @@ fn drive_topics(args: &MonitorArgs) -> anyhow::Result<DriveTopics> {
     Ok(DriveTopics {
         imu: TopicChoice::from_flag(args.imu.as_deref()),
         poses: [topic(&args.pose0, "pose0")?, topic(&args.pose1, "pose1")?],
-        imu_noise: args.imu_config.as_ref().map(ImuNoiseYaml::read).transpose()?,
-        pose_noise: [pose_noise(&args.pose0_config)?, pose_noise(&args.pose1_config)?],
+        imu_noise: args
+            .imu_config
+            .as_ref()
+            .map(ImuNoiseYaml::read)
+            .transpose()?,
+        pose_noise: [
+            pose_noise(&args.pose0_config)?,
+            pose_noise(&args.pose1_config)?,
+        ],
     })
 }
 
@@ -171,7 +180,9 @@ fn drive_files(
     args: &MonitorArgs,
     scratch: &Path,
 ) -> anyhow::Result<(DriveFiles, Vec<Option<String>>)> {
-    let bag_flags = [&args.imu, &args.pose0, &args.pose1].iter().any(|f| f.is_some())
+    let bag_flags = [&args.imu, &args.pose0, &args.pose1]
+        .iter()
+        .any(|f| f.is_some())
         || [&args.imu_config, &args.pose0_config, &args.pose1_config]
             .iter()
             .any(|f| f.is_some());
@@ -209,7 +220,9 @@ fn drive_files(
 
 /// Runs the monitor, prints the report and the verdict, writes the outputs.
 pub fn check(args: &MonitorArgs) -> anyhow::Result<Finding> {
-    let scratch = tempfile::Builder::new().prefix("msreg-monitor-").tempdir()?;
+    let scratch = tempfile::Builder::new()
+        .prefix("msreg-monitor-")
+        .tempdir()?;
     let (files, labels) = drive_files(args, scratch.path())?;
     let input = files.input()?;
     let mut options = MonitorOptions::default();

@@ -13,8 +13,8 @@ use nalgebra::Matrix3;
 
 use super::start::{self, ExtrinsicSigmas, FilterPrior, Start};
 use super::{
-    Alarm, ExcitationPoint, GlrPoint, JumpPoint, MonitorError, MonitorInput, MonitorReport,
-    NisPoint, SensorReport, SENSOR_NAMES,
+    Alarm, EstimatePoint, ExcitationPoint, GlrPoint, JumpPoint, MonitorError, MonitorInput,
+    MonitorReport, NisPoint, SensorReport, SENSOR_NAMES,
 };
 use crate::calibrate::convert;
 use crate::calibrate::driver::nominal_period_ns;
@@ -313,16 +313,45 @@ fn step_alarm(t_s: f64, event: &HealthEvent<f64>) -> Alarm {
     }
 }
 
-/// The monitor run: alarms and the NIS timeline per sensor.
+/// The monitor run: alarms, the NIS timeline and the estimates per sensor.
 struct MonitorRun {
     alarms: Vec<Alarm>,
     warnings: Vec<Alarm>,
     nis: [Vec<NisPoint>; 2],
+    estimates: [Vec<EstimatePoint>; 2],
+    /// The calibration of record.
+    record: [ExtrinsicEstimate; 2],
     high: [bool; 2],
+}
+
+/// Sensor `s`'s extrinsic in `ekf` against `record`.
+fn estimate_point(
+    ekf: &MonitorEkf<f64>,
+    s: SensorId,
+    record: &ExtrinsicEstimate,
+    t_s: f64,
+) -> EstimatePoint {
+    let x = convert::isometry(&ekf.extrinsic(s));
+    let (sr, st) = ekf.extrinsic_sigma(s);
+    let rotation = (record.transform.rotation.inverse() * x.rotation).scaled_axis();
+    let translation = x.translation.vector - record.transform.translation.vector;
+    EstimatePoint {
+        t_s,
+        rotation_deg: rotation.map(f64::to_degrees).into(),
+        translation_mm: (translation * 1e3).into(),
+        sigma_rotation_deg: sr.map(f64::to_degrees).into(),
+        sigma_translation_mm: (st * 1e3).into(),
+    }
 }
 
 impl MonitorRun {
     fn record(&mut self, ekf: &MonitorEkf<f64>, f: &Fused) {
+        let k = f.sensor.index();
+        self.estimates[k].push(estimate_point(ekf, f.sensor, &self.record[k], f.t_s));
+        self.record_health(ekf, f);
+    }
+
+    fn record_health(&mut self, ekf: &MonitorEkf<f64>, f: &Fused) {
         let r = &f.report;
         let dof = r.dof.max(1) as f64;
         let health = ekf.health().sensor(f.sensor);
@@ -405,6 +434,55 @@ pub fn monitor_prior(
     Ok((start, prior))
 }
 
+/// What the two runs recorded of one sensor.
+struct SensorRecords {
+    nis: Vec<NisPoint>,
+    estimates: Vec<EstimatePoint>,
+    skipped: Vec<String>,
+    excitation: Vec<ExcitationPoint>,
+    observability: Vec<crate::calibrate::observability::DofObservability>,
+}
+
+/// The report of sensor `s` at the end of the monitor run `ekf`.
+fn sensor_report(
+    ekf: &MonitorEkf<f64>,
+    s: SensorId,
+    record: &ExtrinsicEstimate,
+    r: SensorRecords,
+) -> SensorReport {
+    let covariance = ekf.extrinsic_covariance(s);
+    let estimate = ExtrinsicEstimate::from_covariance(
+        convert::isometry(&ekf.extrinsic(s)),
+        ekf.time_offset(s),
+        &covariance,
+    );
+    let prior = &record.transform;
+    SensorReport {
+        name: SENSOR_NAMES[s.index()],
+        accepted: r.nis.iter().filter(|p| p.accepted).count(),
+        rejected: r.nis.iter().filter(|p| !p.accepted && !p.held_out).count(),
+        held_out: r.nis.iter().filter(|p| p.held_out).count(),
+        nis: r.nis,
+        estimates: r.estimates,
+        excitation: r.excitation,
+        observability: r.observability,
+        skipped: r.skipped,
+        record: *record,
+        final_covariance: covariance.transpose().into(),
+        rotation_change_deg: prior
+            .rotation
+            .angle_to(&estimate.transform.rotation)
+            .to_degrees(),
+        translation_change_m: (prior.translation.vector - estimate.transform.translation.vector)
+            .norm(),
+        final_t_imu_pose: estimate.matrix().transpose().into(),
+        final_timeshift_s: estimate.timeshift_s,
+        final_sigma_rot_deg: estimate.sigma_rot_deg.into(),
+        final_sigma_trans_m: estimate.sigma_trans_m.into(),
+        estimate,
+    }
+}
+
 /// Replays the health monitor over `input` (see the module docs).
 pub fn monitor(
     input: &MonitorInput,
@@ -416,6 +494,8 @@ pub fn monitor(
         alarms: Vec::new(),
         warnings: Vec::new(),
         nis: [Vec::new(), Vec::new()],
+        estimates: [Vec::new(), Vec::new()],
+        record: input.prior,
         high: [false; 2],
     };
     let Skipped {
@@ -428,45 +508,30 @@ pub fn monitor(
         .imu
         .last()
         .map_or(0.0, |r| (r.stamp_ns - t0) as f64 * 1e-9);
-    let mut sensors = Vec::new();
-    for (s, (nis, (skipped, (excitation, observability)))) in
-        MonitorEkf::<f64>::sensor_ids().into_iter().zip(
-            m.nis.into_iter().zip(
-                skipped
-                    .into_iter()
-                    .zip(excitation.into_iter().zip(observability)),
-            ),
-        )
-    {
-        let estimate = ExtrinsicEstimate::from_covariance(
-            convert::isometry(&ekf.extrinsic(s)),
-            ekf.time_offset(s),
-            &ekf.extrinsic_covariance(s),
-        );
-        let prior = &input.prior[s.index()].transform;
-        sensors.push(SensorReport {
-            name: SENSOR_NAMES[s.index()],
-            accepted: nis.iter().filter(|p| p.accepted).count(),
-            rejected: nis.iter().filter(|p| !p.accepted && !p.held_out).count(),
-            held_out: nis.iter().filter(|p| p.held_out).count(),
-            nis,
-            excitation,
-            observability,
-            skipped,
-            rotation_change_deg: prior
-                .rotation
-                .angle_to(&estimate.transform.rotation)
-                .to_degrees(),
-            translation_change_m: (prior.translation.vector
-                - estimate.transform.translation.vector)
-                .norm(),
-            final_t_imu_pose: estimate.matrix().transpose().into(),
-            final_timeshift_s: estimate.timeshift_s,
-            final_sigma_rot_deg: estimate.sigma_rot_deg.into(),
-            final_sigma_trans_m: estimate.sigma_trans_m.into(),
-            estimate,
-        });
-    }
+    let mut parts = m
+        .nis
+        .into_iter()
+        .zip(m.estimates)
+        .zip(skipped)
+        .zip(excitation.into_iter().zip(observability));
+    let sensors: Vec<SensorReport> = MonitorEkf::<f64>::sensor_ids()
+        .into_iter()
+        .filter_map(|s| {
+            let (((nis, estimates), skipped), (excitation, observability)) = parts.next()?;
+            Some(sensor_report(
+                &ekf,
+                s,
+                &input.prior[s.index()],
+                SensorRecords {
+                    nis,
+                    estimates,
+                    skipped,
+                    excitation,
+                    observability,
+                },
+            ))
+        })
+        .collect();
     Ok(MonitorReport {
         start_stamp_ns: t0,
         duration_s,

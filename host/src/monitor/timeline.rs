@@ -1,12 +1,14 @@
 //! The monitor's timeline plot as a self-contained SVG (no font or library needed): per
 //! sensor, the NIS / dof of every update with its gate and the windowed NIS, alarms as
-//! vertical lines; then the per-DoF excitation of the observability run over time; then the
-//! observability table and the alarms in words.
+//! vertical lines; then the per-DoF excitation of the observability run over time; then each
+//! sensor's extrinsic estimate against the calibration of record (rotation and translation
+//! per axis, with the filter's 3-sigma band); then the observability table and the alarms in
+//! words.
 
 use std::fmt::Write;
 use std::path::Path;
 
-use super::{MonitorReport, SensorReport};
+use super::{EstimatePoint, MonitorReport, SensorReport};
 
 const WIDTH: f64 = 1200.0;
 const PANEL_H: f64 = 190.0;
@@ -171,6 +173,84 @@ fn excitation_panel(out: &mut String, r: &MonitorReport, s: &SensorReport, top: 
     }
 }
 
+/// One axis of an estimate panel: value and 1-sigma.
+type AxisOf = fn(&EstimatePoint, usize) -> (f64, f64);
+
+/// Rotation (deg) or translation (mm) of `s`'s estimate minus the record, per axis, each
+/// with its 3-sigma band, the record as the zero line, alarms as vertical lines.
+fn estimate_panel(out: &mut String, r: &MonitorReport, s: &SensorReport, top: f64, rotation: bool) {
+    let (what, unit, of): (&str, &str, AxisOf) = if rotation {
+        ("rotation", "deg", |e, k| {
+            (e.rotation_deg[k], e.sigma_rotation_deg[k])
+        })
+    } else {
+        ("translation", "mm", |e, k| {
+            (e.translation_mm[k], e.sigma_translation_mm[k])
+        })
+    };
+    // The scale: the largest |estimate| and 3 sigma after the first second (the start's
+    // prior sigmas would flatten the rest).
+    let late = s.estimates.iter().filter(|e| e.t_s > 1.0);
+    let span = late
+        .flat_map(|e| (0..3).map(move |k| of(e, k)))
+        .fold(0.0, |m: f64, (v, sd)| m.max(v.abs() + 3.0 * sd))
+        .max(if rotation { 0.1 } else { 1.0 });
+    let p = Panel {
+        top,
+        t1: r.duration_s.max(1e-6),
+        y0: -span,
+        y1: span,
+    };
+    p.frame(
+        out,
+        &format!(
+            "{}: {what} estimate minus the calibration of record (0), per axis, 3-sigma band",
+            s.name
+        ),
+        unit,
+    );
+    let zero = p.y(0.0);
+    let _ = write!(
+        out,
+        "<line x1='{LEFT}' x2='{:.1}' y1='{zero:.1}' y2='{zero:.1}' stroke='#000' stroke-dasharray='2,3'/>",
+        WIDTH - RIGHT
+    );
+    for k in 0..3 {
+        let colour = DOF_COLOURS[k + if rotation { 0 } else { 3 }];
+        let upper = s.estimates.iter().map(|e| {
+            let (v, sd) = of(e, k);
+            format!("{:.1},{:.1}", p.x(e.t_s), p.y(v + 3.0 * sd))
+        });
+        let lower = s.estimates.iter().rev().map(|e| {
+            let (v, sd) = of(e, k);
+            format!("{:.1},{:.1}", p.x(e.t_s), p.y(v - 3.0 * sd))
+        });
+        let band: Vec<String> = upper.chain(lower).collect();
+        let _ = write!(
+            out,
+            "<polygon fill='{colour}' fill-opacity='0.15' stroke='none' points='{}'/>",
+            band.join(" ")
+        );
+        p.polyline(out, s.estimates.iter().map(|e| (e.t_s, of(e, k).0)), colour);
+        let _ = write!(
+            out,
+            "<text x='{:.1}' y='{:.1}' font-size='11' fill='{colour}'>{what} {}</text>",
+            LEFT + 8.0 + 110.0 * k as f64,
+            p.y(span) + 14.0,
+            ["x", "y", "z"][k]
+        );
+    }
+    for a in r.alarms.iter().filter(|a| a.sensor == s.name) {
+        let x = p.x(a.t_s);
+        let _ = write!(
+            out,
+            "<line x1='{x:.1}' x2='{x:.1}' y1='{:.1}' y2='{:.1}' stroke='red' stroke-width='1.5'/>",
+            p.y(p.y1),
+            p.y(p.y0)
+        );
+    }
+}
+
 fn escape(s: &str) -> String {
     s.replace('&', "&amp;")
         .replace('<', "&lt;")
@@ -180,17 +260,23 @@ fn escape(s: &str) -> String {
 /// The SVG text of the timeline.
 pub fn timeline_svg(r: &MonitorReport) -> String {
     let words = r.unobservable_words();
-    let lines = 2 + r.alarms.len().max(1) + words.len();
-    let height = 4.0 * PANEL_H + 40.0 + 16.0 * lines as f64;
+    let verdict = r.verdict().lines(&super::VerdictWords::default());
+    let lines = 3 + r.alarms.len().max(1) + words.len() + verdict.len();
+    let panels = 4.0 * r.sensors.len() as f64;
+    let height = panels * PANEL_H + 40.0 + 16.0 * lines as f64;
     let mut out = format!(
         "<svg xmlns='http://www.w3.org/2000/svg' width='{WIDTH}' height='{height:.0}' \
          font-family='sans-serif'><rect width='100%' height='100%' fill='white'/>"
     );
+    let n = r.sensors.len();
+    let top = |panel: usize| 10.0 + PANEL_H * panel as f64;
     for (k, s) in r.sensors.iter().enumerate() {
-        nis_panel(&mut out, r, s, 10.0 + PANEL_H * k as f64);
-        excitation_panel(&mut out, r, s, 10.0 + PANEL_H * (2 + k) as f64);
+        nis_panel(&mut out, r, s, top(k));
+        excitation_panel(&mut out, r, s, top(n + k));
+        estimate_panel(&mut out, r, s, top(2 * n + 2 * k), true);
+        estimate_panel(&mut out, r, s, top(2 * n + 2 * k + 1), false);
     }
-    let mut y = 4.0 * PANEL_H + 30.0;
+    let mut y = panels * PANEL_H + 30.0;
     let mut text = |out: &mut String, s: &str, colour: &str| {
         let _ = write!(
             out,
@@ -199,6 +285,11 @@ pub fn timeline_svg(r: &MonitorReport) -> String {
         );
         y += 16.0;
     };
+    text(&mut out, "Verdict:", "black");
+    for v in &verdict {
+        let colour = if v.starts_with("OK") { "black" } else { "red" };
+        text(&mut out, &format!("  {v}"), colour);
+    }
     text(&mut out, "Alarms:", "black");
     if r.alarms.is_empty() {
         text(&mut out, "  none", "black");
