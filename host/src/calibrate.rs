@@ -10,6 +10,7 @@ pub mod dynamic_init;
 pub mod error;
 pub mod extrinsic;
 pub mod gyro_bias;
+pub mod imu_imu;
 pub mod init;
 pub mod joint;
 pub mod lidar_imu;
