@@ -10,7 +10,13 @@ use crate::dataset::{CalibrationResult, SectionName, SensorKind};
 
 /// `camchain-imucam.yaml` (+ `imu.yaml`).
 pub(super) fn kalibr(result: &CalibrationResult) -> Result<Vec<ExportFile>, ExportError> {
-    files(result, ExportFormat::Kalibr, "camchain-imucam.yaml", "imu.yaml", "")
+    files(
+        result,
+        ExportFormat::Kalibr,
+        "camchain-imucam.yaml",
+        "imu.yaml",
+        "",
+    )
 }
 
 /// `kalibr_imucam_chain.yaml` (+ `kalibr_imu_chain.yaml`).
@@ -91,7 +97,10 @@ fn camera(
     let overlaps: Vec<String> = Vec::new();
     s += &format!("  cam_overlaps: [{}]\n", overlaps.join(", "));
     s += &format!("  camera_model: {}\n", k.camera_model);
-    s += &format!("  distortion_coeffs: {}\n", flow(k.distortion_coeffs.clone()));
+    s += &format!(
+        "  distortion_coeffs: {}\n",
+        flow(k.distortion_coeffs.clone())
+    );
     s += &format!("  distortion_model: {}\n", k.distortion_model);
     s += &format!("  intrinsics: {}\n", flow(k.intrinsics.clone()));
     s += &format!("  resolution: [{}, {}]\n", k.resolution[0], k.resolution[1]);

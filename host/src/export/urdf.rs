@@ -12,7 +12,9 @@ pub(super) fn render(result: &CalibrationResult) -> Result<Vec<ExportFile>, Expo
     for (name, section) in result.sections() {
         let Some(t) = t_imu0_sensor(name, result) else {
             if section.extrinsic.is_some() {
-                s += &format!("  <!-- {name}: a sensor pair, not a frame; see the result file -->\n");
+                s += &format!(
+                    "  <!-- {name}: a sensor pair, not a frame; see the result file -->\n"
+                );
             }
             continue;
         };

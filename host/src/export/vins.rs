@@ -51,7 +51,10 @@ pub(super) fn render(result: &CalibrationResult) -> Result<Vec<ExportFile>, Expo
             }
             Some(_) => {}
         }
-        files.push(ExportFile { name: file, text: body });
+        files.push(ExportFile {
+            name: file,
+            text: body,
+        });
     }
     config += "imu_topic: \"/imu0\"\nestimate_extrinsic: 0\n";
     config += &format!(
@@ -100,9 +103,7 @@ fn camera_file(
     };
     match (k.camera_model.as_str(), k.distortion_model.as_str()) {
         ("pinhole", "radtan") if shape(4, 4) => Ok(("PINHOLE", pinhole(&head, &kv, p, d))),
-        ("pinhole", "none") if shape(4, 0) => {
-            Ok(("PINHOLE", pinhole(&head, &kv, p, &[0.0; 4])))
-        }
+        ("pinhole", "none") if shape(4, 0) => Ok(("PINHOLE", pinhole(&head, &kv, p, &[0.0; 4]))),
         ("pinhole", "equidistant") if shape(4, 4) => Ok((
             "KANNALA_BRANDT",
             format!(
