@@ -78,7 +78,7 @@ pub struct AprilGridArgs {
     #[arg(long, default_value_t = 6)]
     pub tag_rows: usize,
     /// Tag side (black border to black border), metres (Kalibr tagSize).
-    #[arg(long, default_value_t = 0.025)]
+    #[arg(long, default_value_t = 0.022)]
     pub tag_size: f64,
     /// Gap between tags as a ratio of the tag size (Kalibr tagSpacing).
     #[arg(long, default_value_t = 0.3)]
