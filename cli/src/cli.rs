@@ -8,6 +8,7 @@ pub mod cameras;
 pub mod convert;
 pub mod demo;
 pub mod detect;
+pub mod export;
 pub mod infra;
 pub mod joint;
 pub mod lidar_camera;

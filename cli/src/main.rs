@@ -46,6 +46,8 @@ enum Command {
     },
     /// Convert a ROS 1 bag or an MCAP file to a dataset directory.
     Convert(cli::convert::ConvertArgs),
+    /// Write a result file for Kalibr, OpenVINS, VINS-Fusion, URDF or ROS tf (docs/export.md).
+    Export(cli::export::ExportArgs),
     /// Errors of a result file against a dataset's groundtruth/.
     Eval {
         /// Result YAML.
@@ -292,6 +294,7 @@ fn run(command: Command) -> Result<(), Failure> {
                 std::process::exit(1)
             }
         },
+        Command::Export(args) => Ok(cli::export::run(&args)?),
         Command::Match(args) => match cli::match_cmd::run(&args)? {
             cli::match_cmd::MatchOutcome { ok: true } => Ok(()),
             _ => Err(Failure::NotConverged(

@@ -470,23 +470,61 @@ impl Session {
                 gyro: Vector3::from(s.gyro),
                 accel: Vector3::from(s.accel),
             };
-            let Some(filter) = self.filter.as_mut() else {
+            if self.apply_imu(w, seq, &sample) == Err(ErrorKind::NotConfigured) {
                 return AckStatus::Rejected;
-            };
-            match filter.propagate(&sample) {
-                Ok(()) => {
-                    self.counts.imu_samples += 1;
-                    self.zero_velocity(w, seq, stamp_ns);
-                    self.imu_index += 1;
-                    // The sample is the filter's look-ahead: what it makes due can be fused.
-                    self.apply_due(w);
-                }
-                Err(e) => self.fault(w, error_kind(&e), seq, stamp_ns),
             }
         }
         self.periodic_estimate(w, seq);
         self.progress();
         AckStatus::Ok
+    }
+
+    /// One IMU sample into the filter: propagation, the zero-velocity update, then the
+    /// measurements it made due; a refusal is reported as a fault and returned.
+    fn apply_imu<W: embedded_io::Write>(
+        &mut self,
+        w: &mut W,
+        seq: u32,
+        sample: &ImuSample<f32>,
+    ) -> Result<(), ErrorKind> {
+        let Some(filter) = self.filter.as_mut() else {
+            return Err(ErrorKind::NotConfigured);
+        };
+        match filter.propagate(sample) {
+            Ok(()) => {
+                self.counts.imu_samples += 1;
+                self.zero_velocity(w, seq, sample.stamp_ns);
+                self.imu_index += 1;
+                // The sample is the filter's look-ahead: what it makes due can be fused.
+                self.apply_due(w);
+                Ok(())
+            }
+            Err(e) => {
+                let kind = error_kind(&e);
+                self.fault(w, kind, seq, sample.stamp_ns);
+                Err(kind)
+            }
+        }
+    }
+
+    /// Feeds one IMU sample measured on the device (a board's IMU driver, stamped on the
+    /// device clock) as a host `ImuBatch` sample is fed: propagation, zero-velocity update,
+    /// due measurements, periodic estimate, progress line. Before a configuration the
+    /// sample is dropped without a report (the IMU runs from boot): `Err(NotConfigured)`.
+    #[inline(never)]
+    pub fn local_imu<W: embedded_io::Write>(
+        &mut self,
+        w: &mut W,
+        sample: &ImuSample<f32>,
+    ) -> Result<(), ErrorKind> {
+        if self.filter.is_none() {
+            return Err(ErrorKind::NotConfigured);
+        }
+        let seq = self.current_seq;
+        let applied = self.apply_imu(w, seq, sample);
+        self.periodic_estimate(w, seq);
+        self.progress();
+        applied
     }
 
     /// A log line every [`PROGRESS_PERIOD_NS`] of filter time.

@@ -5,9 +5,10 @@ use std::time::{Duration, Instant};
 
 use clap::Subcommand;
 use msreg_host::link::client::{Client, ClientOptions};
+use msreg_host::link::clock_sync::ClockSyncOptions;
 use msreg_host::link::defmt;
 use msreg_host::link::view::{LiveView, Mode};
-use msreg_host::link::{replay, show, summary, ReplayOptions, StreamOptions};
+use msreg_host::link::{replay, show, summary, ReplayOptions, StreamOptions, SyncOptions};
 
 /// `msreg link ...`.
 #[derive(Debug, Subcommand)]
@@ -36,6 +37,13 @@ pub enum LinkCommand {
         /// IMU samples per frame (1-16).
         #[arg(long, default_value_t = 10)]
         batch: usize,
+        /// Map every stamp onto the device clock (clock sync), whatever the device's time
+        /// base says (docs/protocol.md "Clock sync").
+        #[arg(long)]
+        device_clock: bool,
+        /// Known floor asymmetry of the link, us (a UART: (request bytes - 1) x 10 / baud).
+        #[arg(long, default_value_t = 0.0)]
+        sync_asymmetry_us: f64,
     },
     /// Show live estimates, sigmas, NIS and health from a running device.
     Monitor {
@@ -75,6 +83,8 @@ pub fn run(command: LinkCommand) -> anyhow::Result<()> {
             record,
             estimate_period_ms,
             batch,
+            device_clock,
+            sync_asymmetry_us,
         } => {
             let options = ReplayOptions {
                 realtime,
@@ -84,6 +94,14 @@ pub fn run(command: LinkCommand) -> anyhow::Result<()> {
                     ..StreamOptions::default()
                 },
                 live_view: true,
+                sync: SyncOptions {
+                    time_base: device_clock.then_some(msreg_protocol::TimeBase::DeviceClock),
+                    estimator: ClockSyncOptions {
+                        asymmetry_ns: (sync_asymmetry_us * 1e3) as i64,
+                        ..ClockSyncOptions::default()
+                    },
+                    ..SyncOptions::default()
+                },
                 ..ReplayOptions::default()
             };
             let outcome = replay(&dataset, &port, Some(&record), &options)?;
@@ -97,6 +115,18 @@ pub fn run(command: LinkCommand) -> anyhow::Result<()> {
                 outcome.bytes as f64 / outcome.elapsed_s.max(1e-9) / 1e3,
                 record.display()
             );
+            if let Some(c) = &outcome.clock {
+                println!(
+                    "clock sync: device - host offset {:.3} ms, skew {:+.1} ppm (sigma {:.3} ms, \
+                     {:.1} ppm; path asymmetry bound {:.3} ms) from {} exchanges",
+                    c.offset_ns * 1e-6,
+                    c.skew * 1e6,
+                    c.sigma_ns * 1e-6,
+                    c.sigma_skew * 1e6,
+                    c.asymmetry_bound_ns * 1e-6,
+                    c.exchanges
+                );
+            }
             Ok(())
         }
         LinkCommand::Monitor {

@@ -43,7 +43,8 @@ pub(super) fn render(result: &CalibrationResult) -> Result<Vec<ExportFile>, Expo
         }
         match td {
             None => td = Some(ext.timeshift_s),
-            Some(t) if t != ext.timeshift_s => {
+            // One `td` for all cameras: time shifts must agree to the nanosecond.
+            Some(t) if (t - ext.timeshift_s).abs() > 1e-9 => {
                 return Err(ExportError::Unsupported {
                     format: F,
                     what: "different time shifts per camera (one td for all)".into(),

@@ -117,7 +117,7 @@ fn checkerboard_ink(t: &CheckerboardTarget) -> Result<Ink, TargetSvgError> {
             }
         }
     }
-    let square = if sw == sh {
+    let square = if (sw - sh).abs() <= f64::EPSILON * sw.abs().max(sh.abs()) {
         format!("squares {} mm", fmt(sw))
     } else {
         format!("squares {} mm wide, {} mm high", fmt(sw), fmt(sh))

@@ -360,7 +360,7 @@ mod tests {
             Some("T_imu0_imu")
         );
         assert!(SectionName::cam(1).has_camera_chain() && !SectionName::CAM0.has_camera_chain());
-        let mut sorted = vec![
+        let mut sorted = [
             SectionName::CAM0_LIDAR0,
             SectionName::pose(0),
             SectionName::cam(1),
