@@ -2,7 +2,9 @@
 # The project's test command (README, .ci/run): installs the embedded toolchain if missing,
 # checks formatting and lints, runs the host workspace's tests, then builds the Cortex-M4F
 # firmware, runs its self-test in QEMU and prints its flash/RAM use, then the HIL suite
-# (hil-tests/: the link firmware in QEMU driven over a pty by `msreg link`).
+# (hil-tests/: the link firmware in QEMU driven over a pty by `msreg link`), then builds the
+# NUCLEO-F446RE board target (tools/board.sh) and cross-builds msreg for aarch64 Linux and runs
+# it under qemu-aarch64 (tools/aarch64.sh).
 # Idempotent; needs no stdin; CI runs it as `bash .ci/run` in a fresh clone with CI=true.
 #
 # Tests on inputs from outside the repository (the real recordings of ../shared/data or
@@ -167,8 +169,16 @@ tools/firmware.sh run
 step "firmware size (tools/firmware.sh size)"
 tools/firmware.sh size
 
+step "real board: NUCLEO-F446RE format, lint, build and size (tools/board.sh)"
+rustfmt --edition 2021 --check boards/nucleo-f446re/build.rs boards/nucleo-f446re/src/*.rs
+tools/board.sh clippy
+tools/board.sh size
+
 step "HIL: link firmware in QEMU over a pty (tools/hil.sh)"
 tools/hil.sh
+
+step "companion computer: aarch64 build + qemu-aarch64 run (tools/aarch64.sh)"
+tools/aarch64.sh test
 
 printf '(%ss)\n\ntools/test.sh: all steps passed in %ss\n' \
   $((SECONDS - step_start)) $((SECONDS - total_start))

@@ -113,7 +113,11 @@ pub fn run(command: &TargetCommand) -> anyhow::Result<()> {
                 tag_size_m: a.tag_size,
                 tag_spacing: a.tag_spacing,
             };
-            (PrintTarget::AprilGrid(t), aprilgrid_yaml_string(&t), &a.sheet)
+            (
+                PrintTarget::AprilGrid(t),
+                aprilgrid_yaml_string(&t),
+                &a.sheet,
+            )
         }
     };
     let page = match sheet.page {

@@ -272,7 +272,11 @@ fn bad_exchanges_are_refused_and_change_nothing() {
     let fit = sync.add(good).expect("good");
     // ((t2 - t1) + (t3 - t4)) / 2 = (49_000 + 48_100) / 2; half the 900 ns round trip bounds it
     assert_eq!(fit.base_offset_ns + fit.offset_ns as i64, 48_550);
-    assert!((fit.asymmetry_bound_ns - 450.0).abs() < 1e-9, "{}", fit.asymmetry_bound_ns);
+    assert!(
+        (fit.asymmetry_bound_ns - 450.0).abs() < 1e-9,
+        "{}",
+        fit.asymmetry_bound_ns
+    );
     assert_eq!(fit.to_device(1_500), 50_050);
     assert_eq!(fit.to_host(50_050), 1_500);
     assert!(!fit.skew_fitted);
