@@ -9,7 +9,6 @@ use msreg_estimator::chi2::Confidence;
 use msreg_estimator::filter::MonitorEkf;
 use msreg_estimator::health::NisStatus;
 use msreg_estimator::na::{Quaternion, UnitQuaternion, Vector3};
-use msreg_estimator::propagate::Rotations;
 use msreg_estimator::{
     CameraImuEkf, Ekf, Error as FilterError, FilterConfig, ImuNoise, ImuSample, ImuState,
     InitialState, Pose, PoseImuEkf, RelativePose, SensorId, UpdateReport,
@@ -326,14 +325,7 @@ fn with_sensor<const S: usize>(
         .with_time_offset(s, p.time_offset_s, p.sigma_time_offset_s))
 }
 
-/// The propagation the device runs (docs/estimator.md, "Propagation on the device"): the
-/// rotation functions of each IMU step by their power series instead of libm's
-/// trigonometry, which evaluates in software `f64` on this FPU. Every filter the firmware
-/// builds (the link's and the self-test's) goes through here.
-pub fn device_config(mut fc: FilterConfig<f32>) -> FilterConfig<f32> {
-    fc.rotations = Rotations::Series;
-    fc
-}
+pub use crate::propagation::device_config;
 
 /// The filter tuning of a configuration (the health tuning of the monitor layout on top).
 fn filter_config(c: &Config) -> Result<FilterConfig<f32>, FilterError> {

@@ -14,6 +14,7 @@ pub mod filter;
 pub mod generator_check;
 pub mod joint;
 pub mod noise;
+pub mod propagation;
 pub mod ring;
 pub mod scenario;
 pub mod selftest;

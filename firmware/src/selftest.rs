@@ -45,7 +45,8 @@ pub fn prior(config: &ScenarioConfig) -> Pose<f32> {
 
 /// A filter at rest at the first IMU sample, with the perturbed extrinsic prior.
 pub fn new_filter(config: &ScenarioConfig, first: &ImuReading) -> Result<Filter, Error> {
-    let filter_config = crate::filter::device_config(FilterConfig::new(imu_noise(&config.spec)));
+    let filter_config =
+        crate::propagation::device_config(FilterConfig::new(imu_noise(&config.spec)));
     let init = InitialState::at_rest(first.accel)
         .ok_or(Error::InvalidConfig)?
         .with_extrinsic(SENSOR, prior(config), PRIOR_SIGMA.0, PRIOR_SIGMA.1);

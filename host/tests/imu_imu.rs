@@ -39,7 +39,9 @@ fn sample(
     while t < DURATION_S - 0.3 {
         let iso = traj.isometry(t) * t_0_b;
         let acc = (pos(t + h) - 2.0 * pos(t) + pos(t - h)) / (h * h);
-        let f = iso.rotation.inverse_transform_vector(&(acc + Vector3::new(0.0, 0.0, GRAVITY)));
+        let f = iso
+            .rotation
+            .inverse_transform_vector(&(acc + Vector3::new(0.0, 0.0, GRAVITY)));
         let w = t_0_b.rotation.inverse_transform_vector(&traj.body_rate(t));
         s.t.push(t - timeshift);
         s.gyro.push(w + bg + noisy(rng, gd * rate.sqrt()));
@@ -74,7 +76,8 @@ fn run(seed: u64) -> (SVector<f64, 7>, SMatrix<f64, 7, 7>) {
             cov[(*p, *q)] = c4[(i, k)];
         }
     }
-    cov.fixed_view_mut::<3, 3>(3, 3).copy_from(&est.cov_translation);
+    cov.fixed_view_mut::<3, 3>(3, 3)
+        .copy_from(&est.cov_translation);
     println!(
         "seed {seed}: rot {:.4} deg, lever {:.2} mm, time {:.4} ms; sigma rot {:.4} deg, lever {:.2} mm, time {:.4} ms",
         dq.norm().to_degrees(),
@@ -92,7 +95,10 @@ fn imu1_within_tolerance_over_ten_seeds() {
     let mut nees = Vec::new();
     for seed in 0..10 {
         let (e, cov) = run(seed);
-        assert!(e.fixed_rows::<3>(0).norm().to_degrees() < 0.1, "seed {seed} rotation");
+        assert!(
+            e.fixed_rows::<3>(0).norm().to_degrees() < 0.1,
+            "seed {seed} rotation"
+        );
         assert!(e.fixed_rows::<3>(3).norm() < 0.005, "seed {seed} lever");
         assert!(e[6].abs() < 0.0002, "seed {seed} time");
         nees.push((e.transpose() * cov.try_inverse().unwrap() * e)[0]);
@@ -100,5 +106,8 @@ fn imu1_within_tolerance_over_ten_seeds() {
     let mean = nees.iter().sum::<f64>() / nees.len() as f64;
     println!("NEES per seed {nees:?}, mean {mean:.2} (7 dof)");
     // Two-sided 95 % band of chi2(70) / 10: [48.76, 95.02] / 10.
-    assert!((4.876..=9.502).contains(&mean), "mean NEES {mean} outside the band");
+    assert!(
+        (4.876..=9.502).contains(&mean),
+        "mean NEES {mean} outside the band"
+    );
 }

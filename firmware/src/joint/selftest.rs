@@ -73,7 +73,8 @@ pub fn place_filter<'a>(
         .with_time_offset(LIDAR, 0.0, TIME_OFFSET_SIGMA)
         .with_extrinsic(CAMERA, prior(c, CAMERA), PRIOR_SIGMA.0, PRIOR_SIGMA.1)
         .with_time_offset(CAMERA, 0.0, TIME_OFFSET_SIGMA);
-    let config = crate::filter::device_config(FilterConfig::new(selftest::imu_noise(&c.base.spec)));
+    let config =
+        crate::propagation::device_config(FilterConfig::new(selftest::imu_noise(&c.base.spec)));
     let filter = slot.write(JointFilter::new(&config, &init)?);
     let scenario = JointScenario::new(*c).ok_or(Error::InvalidConfig)?;
     let t_c_t = scenario.camera_to_board(c.camera_time_offset);

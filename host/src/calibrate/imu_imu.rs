@@ -99,19 +99,34 @@ pub struct ImuImuOptions {
 
 impl Default for ImuImuOptions {
     fn default() -> Self {
-        Self { max_offset_s: 0.2, min_rate_spread: 0.05 }
+        Self {
+            max_offset_s: 0.2,
+            min_rate_spread: 0.05,
+        }
     }
 }
 
 fn check(which: &'static str, s: &ImuSeries) -> Result<(), ImuImuError> {
     if s.t.len() < 50 {
-        return Err(ImuImuError::TooFewSamples { which, got: s.t.len(), need: 50 });
+        return Err(ImuImuError::TooFewSamples {
+            which,
+            got: s.t.len(),
+            need: 50,
+        });
     }
     if s.gyro.len() != s.t.len() || s.accel.len() != s.t.len() {
-        return Err(ImuImuError::BadSeries { which, index: s.t.len().min(s.gyro.len()) });
+        return Err(ImuImuError::BadSeries {
+            which,
+            index: s.t.len().min(s.gyro.len()),
+        });
     }
-    match s.t.windows(2).position(|w| !(w[1] > w[0]) || !w[1].is_finite()) {
-        Some(i) => Err(ImuImuError::BadSeries { which, index: i + 1 }),
+    match s.t.windows(2).position(|w| {
+        w[1].partial_cmp(&w[0]) != Some(std::cmp::Ordering::Greater) || !w[1].is_finite()
+    }) {
+        Some(i) => Err(ImuImuError::BadSeries {
+            which,
+            index: i + 1,
+        }),
         None => Ok(()),
     }
 }
@@ -128,17 +143,18 @@ fn interp(t: &[f64], v: &[Vector3<f64>], x: f64) -> Option<Vector3<f64>> {
 
 /// Normalised correlation of the rate magnitudes at offset `ts`.
 fn correlation(s0: &ImuSeries, sn: &ImuSeries, ts: f64) -> f64 {
-    let pairs: Vec<(f64, f64)> = sn
-        .t
-        .iter()
-        .zip(&sn.gyro)
-        .filter_map(|(&t, w)| interp(&s0.t, &s0.gyro, t + ts).map(|w0| (w0.norm(), w.norm())))
-        .collect();
+    let pairs: Vec<(f64, f64)> =
+        sn.t.iter()
+            .zip(&sn.gyro)
+            .filter_map(|(&t, w)| interp(&s0.t, &s0.gyro, t + ts).map(|w0| (w0.norm(), w.norm())))
+            .collect();
     if pairs.len() < 10 {
         return f64::NEG_INFINITY;
     }
     let n = pairs.len() as f64;
-    let (ma, mb) = pairs.iter().fold((0.0, 0.0), |(a, b), p| (a + p.0 / n, b + p.1 / n));
+    let (ma, mb) = pairs
+        .iter()
+        .fold((0.0, 0.0), |(a, b), p| (a + p.0 / n, b + p.1 / n));
     let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
     for (a, b) in &pairs {
         sab += (a - ma) * (b - mb);
@@ -150,7 +166,9 @@ fn correlation(s0: &ImuSeries, sn: &ImuSeries, ts: f64) -> f64 {
 
 /// Best of `ts0 + k * step`, |k| <= n, refined by a parabola through the peak.
 fn grid_peak(s0: &ImuSeries, sn: &ImuSeries, ts0: f64, step: f64, n: i64) -> f64 {
-    let c: Vec<f64> = (-n..=n).map(|k| correlation(s0, sn, ts0 + k as f64 * step)).collect();
+    let c: Vec<f64> = (-n..=n)
+        .map(|k| correlation(s0, sn, ts0 + k as f64 * step))
+        .collect();
     let best = (0..c.len()).fold(0, |b, i| if c[i] > c[b] { i } else { b });
     let mut ts = ts0 + (best as i64 - n) as f64 * step;
     if best > 0 && best + 1 < c.len() {
@@ -208,18 +226,34 @@ fn gyro_rows(
             continue;
         };
         let mut j = SMatrix::<f64, 3, 7>::zeros();
-        j.fixed_view_mut::<3, 3>(0, 0).copy_from(&(r.matrix() * w.cross_matrix()));
-        j.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-Matrix3::identity()));
-        j.fixed_view_mut::<3, 1>(0, 6).copy_from(&((wp - wm) / (2.0 * h)));
+        j.fixed_view_mut::<3, 3>(0, 0)
+            .copy_from(&(r.matrix() * w.cross_matrix()));
+        j.fixed_view_mut::<3, 3>(0, 3)
+            .copy_from(&(-Matrix3::identity()));
+        j.fixed_view_mut::<3, 1>(0, 6)
+            .copy_from(&((wp - wm) / (2.0 * h)));
         rows.push((w0 - r * w - c, j));
     }
     rows
 }
 
 /// Normal equations of stacked rows: (J^T J, J^T e, sum e^2, residual count).
-fn normal<const N: usize>(
-    rows: &[(Vector3<f64>, SMatrix<f64, 3, N>)],
-) -> (SMatrix<f64, N, N>, SVector<f64, N>, f64, usize) {
+type Normal<const N: usize> = (SMatrix<f64, N, N>, SVector<f64, N>, f64, usize);
+
+/// Stage 2's estimate: rotation, combined gyro bias, time offset, their covariance, and the
+/// angular-rate spread.
+type GyroFit = (
+    Rotation3<f64>,
+    Vector3<f64>,
+    f64,
+    SMatrix<f64, 7, 7>,
+    Vector3<f64>,
+);
+
+/// Stage 3's estimate: lever arm, accelerometer-bias difference, lever-arm covariance.
+type LeverFit = (Vector3<f64>, Vector3<f64>, Matrix3<f64>);
+
+fn normal<const N: usize>(rows: &[(Vector3<f64>, SMatrix<f64, 3, N>)]) -> Normal<N> {
     let mut a = SMatrix::<f64, N, N>::zeros();
     let mut b = SVector::<f64, N>::zeros();
     let mut ss = 0.0;
@@ -237,23 +271,28 @@ fn gyro_stage(
     sn: &ImuSeries,
     ts0: f64,
     opts: &ImuImuOptions,
-) -> Result<(Rotation3<f64>, Vector3<f64>, f64, SMatrix<f64, 7, 7>, Vector3<f64>), ImuImuError> {
-    let pairs: Vec<_> = sn
-        .t
-        .iter()
-        .zip(&sn.gyro)
-        .filter_map(|(&t, w)| interp(&s0.t, &s0.gyro, t + ts0).map(|w0| (w0, *w)))
-        .collect();
+) -> Result<GyroFit, ImuImuError> {
+    let pairs: Vec<_> =
+        sn.t.iter()
+            .zip(&sn.gyro)
+            .filter_map(|(&t, w)| interp(&s0.t, &s0.gyro, t + ts0).map(|w0| (w0, *w)))
+            .collect();
     let (mut r, spread) = kabsch(&pairs);
     if spread.min() < opts.min_rate_spread {
-        return Err(ImuImuError::NoRotation { spread: spread.min(), min: opts.min_rate_spread });
+        return Err(ImuImuError::NoRotation {
+            spread: spread.min(),
+            min: opts.min_rate_spread,
+        });
     }
     let n = pairs.len() as f64;
     let mut c = pairs.iter().map(|p| p.0 - r * p.1).sum::<Vector3<f64>>() / n;
     let mut ts = ts0;
     for _ in 0..8 {
         let (a, b, _, _) = normal(&gyro_rows(s0, sn, &r, &c, ts));
-        let dx = a.cholesky().ok_or(ImuImuError::Singular { stage: "gyro" })?.solve(&(-b));
+        let dx = a
+            .cholesky()
+            .ok_or(ImuImuError::Singular { stage: "gyro" })?
+            .solve(&(-b));
         r *= Rotation3::new(Vector3::new(dx[0], dx[1], dx[2]));
         c += Vector3::new(dx[3], dx[4], dx[5]);
         ts += dx[6];
@@ -262,7 +301,9 @@ fn gyro_stage(
         }
     }
     let (a, _, ss, m) = normal(&gyro_rows(s0, sn, &r, &c, ts));
-    let inv = a.try_inverse().ok_or(ImuImuError::Singular { stage: "gyro covariance" })?;
+    let inv = a.try_inverse().ok_or(ImuImuError::Singular {
+        stage: "gyro covariance",
+    })?;
     Ok((r, c, ts, inv * (ss / (m as f64 - 7.0)), spread))
 }
 
@@ -289,8 +330,10 @@ fn accel_rows(
         let alpha = (wp - wm) / (2.0 * h);
         let mut j = SMatrix::<f64, 3, 6>::zeros();
         let wx = w.cross_matrix();
-        j.fixed_view_mut::<3, 3>(0, 0).copy_from(&(alpha.cross_matrix() + wx * wx));
-        j.fixed_view_mut::<3, 3>(0, 3).copy_from(&Matrix3::identity());
+        j.fixed_view_mut::<3, 3>(0, 0)
+            .copy_from(&(alpha.cross_matrix() + wx * wx));
+        j.fixed_view_mut::<3, 3>(0, 3)
+            .copy_from(&Matrix3::identity());
         rows.push((r * f - f0, j));
     }
     rows
@@ -303,15 +346,23 @@ fn lever_stage(
     r: &Rotation3<f64>,
     c: &Vector3<f64>,
     ts: f64,
-) -> Result<(Vector3<f64>, Vector3<f64>, Matrix3<f64>), ImuImuError> {
+) -> Result<LeverFit, ImuImuError> {
     let rows = accel_rows(s0, sn, r, c, ts);
     let (a, b, _, m) = normal(&rows);
-    let x = a.cholesky().ok_or(ImuImuError::Singular { stage: "lever arm" })?.solve(&b);
+    let x = a
+        .cholesky()
+        .ok_or(ImuImuError::Singular { stage: "lever arm" })?
+        .solve(&b);
     let ss: f64 = rows.iter().map(|(e, j)| (e - j * x).norm_squared()).sum();
-    let cov = a.try_inverse().ok_or(ImuImuError::Singular { stage: "lever covariance" })?
-        * (ss / (m as f64 - 6.0));
+    let cov = a.try_inverse().ok_or(ImuImuError::Singular {
+        stage: "lever covariance",
+    })? * (ss / (m as f64 - 6.0));
     let lever = Vector3::new(x[0], x[1], x[2]);
-    Ok((lever, Vector3::new(x[3], x[4], x[5]), cov.fixed_view::<3, 3>(0, 0).into()))
+    Ok((
+        lever,
+        Vector3::new(x[3], x[4], x[5]),
+        cov.fixed_view::<3, 3>(0, 0).into(),
+    ))
 }
 
 /// Calibrates imuN (`sn`) against imu0 (`s0`).
