@@ -14,8 +14,8 @@
 //! says the ring has room (a byte it cannot store is dropped and counted, as the ring would),
 //! so the indices of both sides never drift apart.
 
-use core::convert::Infallible;
 use core::cell::UnsafeCell;
+use core::convert::Infallible;
 use core::ptr::{read_volatile, write_volatile};
 use core::sync::atomic::{AtomicU32, Ordering};
 
