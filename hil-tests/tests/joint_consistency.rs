@@ -23,6 +23,8 @@
 pub mod joint;
 #[path = "../../firmware/src/noise.rs"]
 pub mod noise;
+#[path = "../../firmware/src/propagation.rs"]
+pub mod propagation;
 #[path = "../../firmware/src/scenario.rs"]
 pub mod scenario;
 #[path = "../../firmware/src/selftest.rs"]

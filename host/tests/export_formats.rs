@@ -97,7 +97,7 @@ fn strip_opencv(t: &str) -> String {
 }
 
 fn t_imu0(r: &CalibrationResult, name: SectionName) -> Isometry3<f64> {
-    msreg_host::export::t_imu0_sensor(&name, r).unwrap()
+    msreg_host::export::t_imu0_sensor(&name, r).expect("the sensor is in the result")
 }
 
 #[test]

@@ -18,7 +18,7 @@ struct Truth {
 }
 
 fn noisy(rng: &mut ChaCha8Rng, sigma: f64) -> Vector3<f64> {
-    let n = Normal::new(0.0, sigma).unwrap();
+    let n = Normal::new(0.0, sigma).expect("a finite, positive sigma");
     Vector3::new(n.sample(rng), n.sample(rng), n.sample(rng))
 }
 
@@ -101,7 +101,7 @@ fn imu1_within_tolerance_over_ten_seeds() {
         );
         assert!(e.fixed_rows::<3>(3).norm() < 0.005, "seed {seed} lever");
         assert!(e[6].abs() < 0.0002, "seed {seed} time");
-        nees.push((e.transpose() * cov.try_inverse().unwrap() * e)[0]);
+        nees.push((e.transpose() * cov.try_inverse().expect("an invertible covariance") * e)[0]);
     }
     let mean = nees.iter().sum::<f64>() / nees.len() as f64;
     println!("NEES per seed {nees:?}, mean {mean:.2} (7 dof)");
