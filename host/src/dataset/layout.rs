@@ -260,7 +260,7 @@ mod tests {
         ] {
             std::fs::create_dir(dir.path().join(folder))?;
         }
-        std::fs::write(dir.path().join("pose0"), "a file, not a folder")?;
+        std::fs::write(dir.path().join("lidar3"), "a file, not a folder")?;
         let dataset = Dataset::open(dir.path())?;
         let names: Vec<String> = dataset.sensors()?.iter().map(ToString::to_string).collect();
         assert_eq!(names, ["cam0", "cam1", "lidar0", "pose2", "imu0", "imu1"]);
