@@ -785,7 +785,6 @@ fn series_difference<T: Scalar>(
 
 #[test]
 fn series_rotations_change_the_filter_by_rounding_only() {
-    extern crate std;
     let f64_diff = series_difference(
         &series_run::<f64>(Rotations::Trigonometric),
         &series_run::<f64>(Rotations::Series),
@@ -811,8 +810,6 @@ fn series_rotations_change_the_filter_by_rounding_only() {
         &reference,
         &widen(series_run::<f32>(Rotations::Trigonometric)),
     );
-    std::println!("f64 series vs reference {f64_diff:?}");
-    std::println!("f32 series vs f64 {f32_series:?}, f32 libm vs f64 {f32_trig:?}");
     assert!(f64_diff.iter().all(|d| *d < 1.5e-13), "{f64_diff:?}");
     for (s, t) in f32_series.iter().zip(&f32_trig) {
         assert!(*s < 3.0 * t.max(1e-6), "{f32_series:?} vs {f32_trig:?}");
