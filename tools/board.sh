@@ -26,17 +26,10 @@ usage() {
   exit 2
 }
 
-# Debian's cargo with Debian's rustc, from inside the board's directory so that its
-# .cargo/config.toml (target, linker, build-std, probe-rs runner) applies; variables that
-# would override that config are dropped (as in tools/firmware.sh).
+# Debian's cargo from inside the crate directory (tools/debian_cargo.sh).
+source "$root/tools/debian_cargo.sh"
 debian_cargo() {
-  (
-    cd "$board"
-    env -u RUSTFLAGS -u CARGO_ENCODED_RUSTFLAGS -u CARGO_BUILD_TARGET -u CARGO_TARGET_DIR \
-      -u RUSTUP_TOOLCHAIN -u CARGO_BUILD_RUSTFLAGS \
-      RUSTC_BOOTSTRAP=1 RUSTC=/usr/bin/rustc RUSTDOC=/usr/bin/rustdoc \
-      /usr/bin/cargo "$@"
-  )
+  debian_cargo_in "$board" "$@"
 }
 
 build() {

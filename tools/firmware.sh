@@ -30,17 +30,10 @@ usage() {
   exit 2
 }
 
-# Debian's cargo with Debian's rustc, from inside firmware/ so that firmware/.cargo/config.toml
-# (target, runner, linker, build-std) applies. Variables that would override that config
-# (RUSTFLAGS replaces target.rustflags, a CARGO_TARGET_DIR moves the output) are dropped.
+# Debian's cargo from inside the crate directory (tools/debian_cargo.sh).
+source "$root/tools/debian_cargo.sh"
 debian_cargo() {
-  (
-    cd "$fw"
-    env -u RUSTFLAGS -u CARGO_ENCODED_RUSTFLAGS -u CARGO_BUILD_TARGET -u CARGO_TARGET_DIR \
-      -u RUSTUP_TOOLCHAIN -u CARGO_BUILD_RUSTFLAGS \
-      RUSTC_BOOTSTRAP=1 RUSTC=/usr/bin/rustc RUSTDOC=/usr/bin/rustdoc \
-      /usr/bin/cargo "$@"
-  )
+  debian_cargo_in "$fw" "$@"
 }
 
 # The opt-level of [profile.release] in firmware/Cargo.toml.
