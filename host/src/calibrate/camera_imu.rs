@@ -11,8 +11,10 @@
 //! Both start from the hand-eye rotation of PnP rotation increments against the integrated
 //! gyro (eq. 4.5) and a zero translation (no tape measure).
 
+mod chain;
 mod feed;
 pub mod frames;
+mod multi;
 mod pnp;
 mod report;
 mod start;
@@ -33,7 +35,11 @@ use crate::calibrate::driver::verdict::finish;
 use crate::dataset::{ExtrinsicEstimate, ImuNoiseYaml, ImuRecord, PoseRecord};
 
 pub(crate) use self::{feed::*, pnp::*, start::*};
+pub use chain::{compose_chain, CameraChainLink};
 pub use frames::{detect_corner_frames, DetectionSummary};
+pub use multi::{
+    calibrate_cameras, CameraFrames, MultiCameraImuCalibration, MultiCameraImuInput, MAX_CAMERAS,
+};
 pub use pnp::invert_with_covariance;
 pub use report::{CameraImuReport, FrameReprojection, Initialization, ReprojectionSample};
 
@@ -287,7 +293,7 @@ fn reprojection_calibration<T: Scalar>(
     } = feed;
     progress(1.0);
     let filter_s = started.elapsed().as_secs_f64();
-    let mut calibration = finish(
+    let calibration = finish(
         &ekf,
         run,
         standstill.as_ref(),
@@ -297,6 +303,23 @@ fn reprojection_calibration<T: Scalar>(
             filter: filter_s,
         },
     );
+    Ok(reprojection_report(
+        calibration,
+        (reprojection, sample),
+        (motion, &prior, pixel_sigma),
+        (gyro_bias_init, moving_start),
+    ))
+}
+
+/// A RepErrCal run's result with its camera report: the filter's verdict `calibration`, the
+/// feed's per-image reprojection and sample, where it started (`motion`, the prior, the
+/// corner noise) and the report words of the IMU start (gyro bias, moving start).
+pub(crate) fn reprojection_report(
+    mut calibration: crate::calibrate::driver::report::PoseImuCalibration,
+    (reprojection, sample): (Vec<FrameReprojection>, Option<ReprojectionSample>),
+    (motion, prior, pixel_sigma): (&CameraImuCalibration, &PoseImuOptions, f64),
+    (gyro_bias_init, moving_start): (String, String),
+) -> CameraImuCalibration {
     calibration.report.gyro_bias_init = gyro_bias_init;
     calibration.report.moving_start = moving_start;
     let accepted: Vec<f64> = reprojection
@@ -313,7 +336,7 @@ fn reprojection_calibration<T: Scalar>(
         prior_sigma_trans_m: prior.translation_sigma_m,
         prior_sigma_time_offset_s: prior.time_offset_sigma_s,
     };
-    Ok(calibration.map_report(|filter| CameraImuReport {
+    calibration.map_report(|filter| CameraImuReport {
         update: CameraUpdate::Reprojection,
         pixel_sigma,
         frames_with_pose,
@@ -323,5 +346,5 @@ fn reprojection_calibration<T: Scalar>(
         initialization: Some(initialization),
         sample,
         filter,
-    }))
+    })
 }

@@ -33,6 +33,14 @@ pub enum InputError {
         /// How many are needed.
         needed: usize,
     },
+    /// More cameras than one camera-IMU filter takes.
+    #[error("{found} cameras (cam0..cam{last}); one camera-IMU filter takes at most {max}", last = .found - 1)]
+    TooManyCameras {
+        /// Cameras given.
+        found: usize,
+        /// Most one filter takes.
+        max: usize,
+    },
     /// The filter refused an IMU sample (gap, time going backwards, non-finite value).
     #[error(
         "imu0/data.csv: {error}, ending at the sample stamped {stamp_ns} ns (sample {sample} of \

@@ -19,6 +19,8 @@
 //! - Ground truth: `T_cam_imu`, `timeshift_cam_imu`, the IMU trajectory, the board pose
 //!   `T_G_T` per frame and the true pixel of every corner with an in-image flag.
 
+pub mod rig;
+
 use std::collections::BTreeMap;
 use std::f64::consts::PI;
 use std::path::Path;
@@ -46,10 +48,9 @@ use crate::camera_yaml::{
 use crate::dataset::{
     write_camera_csv, write_corners_csv, write_groundtruth_csv, write_imu_csv, write_pose_csv,
     CalibrationResult, CameraFrame, CornerTruth, DatasetError, DatasetYaml, ExtrinsicEstimate,
-    GroundTruthRecord, ImuNoiseYaml, ImuRecord, PoseRecord, SectionName, CAMERA_CSV,
-    CAMERA_DATA_DIR, CAMERA_YAML, DATASET_YAML, GROUNDTRUTH_CORNERS_CSV,
-    GROUNDTRUTH_EXTRINSICS_YAML, GROUNDTRUTH_TARGET_POSES_CSV, GROUNDTRUTH_TRAJECTORY_CSV, IMU_CSV,
-    IMU_YAML, TARGET_YAML,
+    GroundTruthRecord, ImuNoiseYaml, ImuRecord, PoseRecord, SectionName, CAMERA_DATA_DIR,
+    DATASET_YAML, GROUNDTRUTH_CORNERS_CSV, GROUNDTRUTH_EXTRINSICS_YAML,
+    GROUNDTRUTH_TARGET_POSES_CSV, GROUNDTRUTH_TRAJECTORY_CSV, IMU_CSV, IMU_YAML, TARGET_YAML,
 };
 use crate::vision::aprilgrid::AprilGridPattern;
 use crate::vision::render::{
@@ -408,20 +409,7 @@ pub fn simulate_camera_imu(config: &CameraImuSimConfig) -> Result<CameraImuSim, 
         config.duration_s,
         &mut rng_for(config.seed, Stream::Imu),
     );
-    let period_ns = (1e9 / config.rate_hz).round() as u64;
-    let td_ns = (config.time_offset_s * 1e9).round() as i64;
-    let half_exposure_ns = config.exposure_s.map_or(0, |e| (e * 0.5e9).ceil() as i64);
-    // Every exposure inside the IMU record, 50 ms of margin at the start.
-    let first = (config.start_stamp_ns as i128 + 50_000_000 + i128::from(half_exposure_ns)
-        - i128::from(td_ns.min(0))) as u64;
-    let last_ok = config.start_stamp_ns as i128 + (config.duration_s * 1e9) as i128
-        - 10_000_000
-        - i128::from(half_exposure_ns)
-        - i128::from(td_ns.max(0));
-    let frame_stamps = (0u64..)
-        .map(|k| first + k * period_ns)
-        .take_while(|s| *s as i128 <= last_ok)
-        .collect();
+    let frame_stamps = frame_stamps(config);
     Ok(CameraImuSim {
         config: config.clone(),
         trajectory,
@@ -435,7 +423,55 @@ pub fn simulate_camera_imu(config: &CameraImuSimConfig) -> Result<CameraImuSim, 
     })
 }
 
+/// Stamp of every frame (camera clock), ns: every exposure inside the IMU record, 50 ms of
+/// margin at the start.
+fn frame_stamps(config: &CameraImuSimConfig) -> Vec<u64> {
+    let period_ns = (1e9 / config.rate_hz).round() as u64;
+    let td_ns = (config.time_offset_s * 1e9).round() as i64;
+    let half_exposure_ns = config.exposure_s.map_or(0, |e| (e * 0.5e9).ceil() as i64);
+    let first = (config.start_stamp_ns as i128 + 50_000_000 + i128::from(half_exposure_ns)
+        - i128::from(td_ns.min(0))) as u64;
+    let last_ok = config.start_stamp_ns as i128 + (config.duration_s * 1e9) as i128
+        - 10_000_000
+        - i128::from(half_exposure_ns)
+        - i128::from(td_ns.max(0));
+    (0u64..)
+        .map(|k| first + k * period_ns)
+        .take_while(|s| *s as i128 <= last_ok)
+        .collect()
+}
+
 impl CameraImuSim {
+    /// Another camera on the same rig: the same motion, IMU record and target, seen through
+    /// `camera` mounted at `t_cam_imu` with its own time offset (s) and image-noise seed.
+    pub fn with_camera(
+        &self,
+        camera: Camera<f64>,
+        t_cam_imu: Isometry3<f64>,
+        time_offset_s: f64,
+        seed: u64,
+    ) -> Result<CameraImuSim, SimError> {
+        let config = CameraImuSimConfig {
+            camera,
+            time_offset_s,
+            seed,
+            t_cam_imu: Some(t_cam_imu),
+            ..self.config.clone()
+        };
+        config.validate()?;
+        Ok(CameraImuSim {
+            frame_stamps: frame_stamps(&config),
+            rays: PixelRays::new(&config.camera),
+            t_cam_imu,
+            trajectory: self.trajectory.clone(),
+            imu: self.imu.clone(),
+            imu_noise: self.imu_noise.clone(),
+            groundtruth: self.groundtruth.clone(),
+            t_g_target: self.t_g_target,
+            config,
+        })
+    }
+
     /// Seconds after the start stamp of an IMU-clock stamp.
     pub fn seconds(&self, stamp_ns: u64) -> f64 {
         Clock {
@@ -637,7 +673,6 @@ impl CameraImuSim {
         self.metadata().write(dir.join(DATASET_YAML))?;
         write_imu_csv(dir.join(IMU_CSV), &self.imu)?;
         self.imu_noise.write(dir.join(IMU_YAML))?;
-        text(CAMERA_YAML, camera_yaml_string(&self.config.camera))?;
         let target_yaml = match self.printed_target() {
             Target::AprilGrid(t) => aprilgrid_yaml_string(&t),
             _ => checkerboard_yaml_string(&self.target()),
@@ -653,12 +688,29 @@ impl CameraImuSim {
             .collect();
         write_pose_csv(dir.join(GROUNDTRUTH_TARGET_POSES_CSV), &target_poses)?;
         write_corners_csv(dir.join(GROUNDTRUTH_CORNERS_CSV), &self.corner_truth())?;
+        self.write_camera(dir, "cam0", progress)
+    }
+
+    /// Writes this camera's folder `name/` under `dir`: `camera.yaml`, the rendered frames in
+    /// `data/` (in parallel; `progress` gets the fraction written) and `data.csv`.
+    pub fn write_camera(
+        &self,
+        dir: &Path,
+        name: &str,
+        progress: &(dyn Fn(f64) + Sync),
+    ) -> Result<(), DatasetError> {
+        let data_dir = format!("{name}/data");
+        create_dirs(dir, &[data_dir.as_str()])?;
+        write_text(
+            &dir.join(name).join("camera.yaml"),
+            &camera_yaml_string(&self.config.camera),
+        )?;
         let frames: Vec<CameraFrame> = self
             .frame_stamps
             .iter()
             .map(|&stamp_ns| CameraFrame {
                 stamp_ns,
-                path: dir.join(CAMERA_DATA_DIR).join(format!("{stamp_ns}.png")),
+                path: dir.join(&data_dir).join(format!("{stamp_ns}.png")),
             })
             .collect();
         let done = AtomicUsize::new(0);
@@ -671,7 +723,7 @@ impl CameraImuSim {
                 progress(n as f64 / frames.len() as f64);
                 Ok(())
             })?;
-        write_camera_csv(dir.join(CAMERA_CSV), &frames)
+        write_camera_csv(dir.join(name).join("data.csv"), &frames)
     }
 }
 

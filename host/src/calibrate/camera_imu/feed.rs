@@ -34,6 +34,8 @@ pub(crate) struct CornerFeed<'a, T: Scalar> {
     pub(crate) sample: Option<ReprojectionSample>,
     /// Whether the target, once placed, fixes the gauge ([`CornerFeed::with_gauge_at_target`]).
     pub(crate) gauge_at_target: bool,
+    /// The camera's name in the run's skip messages (`cam0`, `cam1`, ...).
+    pub(crate) name: &'static str,
 }
 
 impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize>
@@ -87,7 +89,14 @@ impl<'a, T: Scalar> CornerFeed<'a, T> {
             sample_from_ns: frames.get(frames.len() / 2).map_or(0, |f| f.stamp_ns),
             sample: None,
             gauge_at_target: false,
+            name: "cam0",
         }
+    }
+
+    /// The same feed naming its camera `name` in the run's skip messages.
+    pub(crate) fn named(mut self, name: &'static str) -> Self {
+        self.name = name;
+        self
     }
 
     /// Once the target is placed, it fixes the gauge ([`Ekf::fix_gauge`]): G's origin and yaw
@@ -115,7 +124,7 @@ impl<'a, T: Scalar> CornerFeed<'a, T> {
     pub(crate) fn skip_remaining(&mut self) {
         for frame in &self.frames[self.next..] {
             self.run
-                .skip_measurement("cam0", frame.stamp_ns, "after the last IMU sample");
+                .skip_measurement(self.name, frame.stamp_ns, "after the last IMU sample");
         }
         self.next = self.frames.len();
     }
@@ -139,17 +148,17 @@ impl<'a, T: Scalar> CornerFeed<'a, T> {
         self.next += 1;
         if index == 0 {
             self.run
-                .skip_measurement("cam0", frame.stamp_ns, "before the first IMU sample");
+                .skip_measurement(self.name, frame.stamp_ns, "before the first IMU sample");
             return;
         }
         if frame.corners.len() < MIN_CORNERS {
             self.run
-                .skip_measurement("cam0", frame.stamp_ns, "too few corners");
+                .skip_measurement(self.name, frame.stamp_ns, "too few corners");
             return;
         }
         if ekf.frame(TARGET_FRAME).is_none() {
             if let Err(why) = self.init_target(ekf, frame) {
-                self.run.skip_measurement("cam0", frame.stamp_ns, &why);
+                self.run.skip_measurement(self.name, frame.stamp_ns, &why);
                 return;
             }
         }
@@ -239,13 +248,13 @@ impl<'a, T: Scalar> CornerFeed<'a, T> {
                 });
             }
             Err(FilterError::NotProjectable) => self.run.skip_measurement(
-                "cam0",
+                self.name,
                 frame.stamp_ns,
                 "corners not projectable at the estimate",
             ),
             Err(e) => self
                 .run
-                .skip_measurement("cam0", frame.stamp_ns, &format!("{e}")),
+                .skip_measurement(self.name, frame.stamp_ns, &format!("{e}")),
         }
     }
 
