@@ -16,6 +16,7 @@ pub mod joint;
 pub mod lidar_imu;
 pub mod observability;
 pub mod planar;
+pub mod pnp_odometry;
 pub mod pose_imu;
 
 pub use error::InputError;

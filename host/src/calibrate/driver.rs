@@ -157,6 +157,29 @@ pub(crate) fn start_filter<T: Scalar>(
     ),
     (options, planar): (&PoseImuOptions, Option<&PlanarStart>),
 ) -> Result<FilterStart<T>, InputError> {
+    start_filter_with_health(
+        imu,
+        imu_noise,
+        (standstill, odometry),
+        (rotation, gyro_bias),
+        (options, planar),
+        msreg_estimator::HealthConfig::default(),
+    )
+}
+
+/// [`start_filter`] with the filter's health monitor set to `health` (the pose-IMU
+/// pipeline's constant-extrinsic pass turns its step reaction off).
+pub(crate) fn start_filter_with_health<T: Scalar>(
+    imu: &[ImuRecord],
+    imu_noise: &ImuNoiseYaml,
+    (standstill, odometry): (Option<&Standstill>, &[PoseRecord]),
+    (rotation, gyro_bias): (
+        Result<init::RotationInit, msreg_estimator::HandEyeError<f64>>,
+        Option<&GyroBiasEstimate>,
+    ),
+    (options, planar): (&PoseImuOptions, Option<&PlanarStart>),
+    health: msreg_estimator::HealthConfig<T>,
+) -> Result<FilterStart<T>, InputError> {
     let (rotation_init, init_problem) = match rotation {
         Ok(r) => (r, None),
         Err(e) => (
@@ -196,6 +219,7 @@ pub(crate) fn start_filter<T: Scalar>(
     };
     let config = FilterConfig {
         constrain_yaw: options.constrain_yaw.unwrap_or(planar.is_some()),
+        health,
         ..FilterConfig::new(convert::imu_noise::<T>(imu_noise))
     };
     let initial = match planar {
