@@ -4,6 +4,8 @@
 //! `timeshift_cam_imu`), the JSON report, the convergence plot and the reprojection overlay
 //! of one image (the dissertation's Fig. 4.4).
 
+mod rig;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -23,10 +25,10 @@ use msreg_host::calibrate::camera_imu::{detect_corner_frames, DetectionSummary};
 use msreg_host::calibrate::InputError;
 use msreg_host::camera_yaml::{read_camera_yaml, read_target_yaml, Target};
 use msreg_host::dataset::{
-    read_observed_corners, CalibrationResult, Dataset, ObservedCorner, ObservedImage, SectionName,
-    CAMERA_YAML, OBSERVED_CORNERS_CSV, TARGET_YAML,
+    read_camera_csv, read_observed_corners, CalibrationResult, Dataset, ObservedCorner,
+    ObservedImage, SectionName, SensorKind, CAMERA_YAML, OBSERVED_CORNERS_CSV, TARGET_YAML,
 };
-use msreg_host::vision::frames::CameraDataset;
+use msreg_host::vision::frames::{CameraDataset, CameraInputError};
 use msreg_host::vision::{DetectorParams, GrayImage};
 
 /// `msreg calibrate camera-imu`.
@@ -108,18 +110,22 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
             return Err(anyhow!("--pixel-sigma must be positive, got {sigma}"));
         }
     }
-    let LoadedFrames {
-        camera,
-        frames,
-        detection,
-        camera_data,
-    } = load_corner_frames(&args.dataset, args.opencv_window)?;
     let mut options = CameraImuOptions {
         update: args.update.into(),
         pixel_sigma: args.pixel_sigma,
         ..CameraImuOptions::default()
     };
     options.prior.estimate_time_offset = !args.no_time_offset;
+    let cameras = camera_count(&dataset, &args.dataset)?;
+    if cameras > 1 {
+        return rig::run(args, &dataset, cameras, &options);
+    }
+    let LoadedFrames {
+        camera,
+        frames,
+        detection,
+        camera_data,
+    } = load_corner_frames(&args.dataset, args.opencv_window)?;
     let input = CameraImuInput {
         imu: dataset.require_imu()?,
         imu_noise: dataset.require_imu_noise()?,
@@ -196,9 +202,24 @@ pub struct LoadedFrames {
 /// `cam0/data.csv` (then the images are returned too, for the overlay); `opencv_window`
 /// refines corners with OpenCV's fixed window.
 pub fn load_corner_frames(dataset: &Path, opencv_window: bool) -> anyhow::Result<LoadedFrames> {
-    let observed = dataset.join(OBSERVED_CORNERS_CSV);
+    load_camera_frames(dataset, 0, opencv_window)
+}
+
+/// [`load_corner_frames`] of camera `cam` (`camN/corners.csv`, else the images of
+/// `camN/data.csv` with `camN/camera.yaml`).
+pub fn load_camera_frames(
+    dataset: &Path,
+    cam: u16,
+    opencv_window: bool,
+) -> anyhow::Result<LoadedFrames> {
+    let folder = format!("cam{cam}");
+    let observed = if cam == 0 {
+        dataset.join(OBSERVED_CORNERS_CSV)
+    } else {
+        dataset.join(&folder).join("corners.csv")
+    };
     if !observed.is_file() {
-        let camera_data = CameraDataset::open(dataset)?;
+        let camera_data = camera_dataset(dataset, cam)?;
         let (frames, detection) = detect_for_calibration(dataset, opencv_window, &camera_data)?;
         return Ok(LoadedFrames {
             camera: camera_data.camera,
@@ -207,7 +228,11 @@ pub fn load_corner_frames(dataset: &Path, opencv_window: bool) -> anyhow::Result
             camera_data: Some(camera_data),
         });
     }
-    let camera = read_camera_yaml(&dataset.join(CAMERA_YAML))?;
+    let camera = if cam == 0 {
+        read_camera_yaml(&dataset.join(CAMERA_YAML))?
+    } else {
+        read_camera_yaml(&dataset.join(&folder).join("camera.yaml"))?
+    };
     let images = read_observed_corners(&observed)?;
     let target_path = dataset.join(TARGET_YAML);
     let target = target_path
@@ -243,6 +268,48 @@ pub fn load_corner_frames(dataset: &Path, opencv_window: bool) -> anyhow::Result
         detection,
         camera_data: None,
     })
+}
+
+/// The image inputs of camera `cam`: [`CameraDataset::open`] for `cam0`, the same files in
+/// `camN/` (and the shared `target.yaml`) for the others.
+fn camera_dataset(dataset: &Path, cam: u16) -> anyhow::Result<CameraDataset> {
+    if cam == 0 {
+        return Ok(CameraDataset::open(dataset)?);
+    }
+    let folder = dataset.join(format!("cam{cam}"));
+    let camera = read_camera_yaml(&folder.join("camera.yaml"))?;
+    let target_path = dataset.join(TARGET_YAML);
+    let target = read_target_yaml(&target_path)?;
+    if let Target::Board { .. } = target {
+        return Err(CameraInputError::NotCornerTarget { path: target_path }.into());
+    }
+    let frames = read_camera_csv(folder.join("data.csv"))?;
+    Ok(CameraDataset {
+        camera,
+        target,
+        frames,
+    })
+}
+
+/// How many cameras the dataset has: its `camN` folders, which must be `cam0..camN-1`.
+pub fn camera_count(dataset: &Dataset, dir: &Path) -> anyhow::Result<usize> {
+    let cameras = dataset.sensors_of(SensorKind::Camera)?;
+    for (n, c) in cameras.iter().enumerate() {
+        if usize::from(c.index) != n {
+            return Err(anyhow!(
+                "{}: camera folders must be cam0..cam{} without a gap; cam{n} is missing \
+                 (found {})",
+                dir.display(),
+                cameras.len() - 1,
+                cameras
+                    .iter()
+                    .map(ToString::to_string)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ));
+        }
+    }
+    Ok(cameras.len().max(1))
 }
 
 /// One image of `cam0/corners.csv` as filter input: each corner's target point from the
@@ -334,7 +401,12 @@ fn describe(target: &Target) -> String {
 
 /// The convergence plot of `T_imu_cam` (the filter's state), with the truth when the
 /// dataset has it. A plotting failure (no font) is a warning: the calibration succeeded.
-fn write_plot(path: &Path, dataset: &Dataset, calibration: &CameraImuCalibration, dir: &Path) {
+pub(crate) fn write_plot(
+    path: &Path,
+    dataset: &Dataset,
+    calibration: &CameraImuCalibration,
+    dir: &Path,
+) {
     let truth = dataset
         .groundtruth_extrinsics
         .as_ref()
@@ -362,7 +434,7 @@ fn write_plot(path: &Path, dataset: &Dataset, calibration: &CameraImuCalibration
 /// The sample image in colour: detected corners as green crosses, reprojected ones as red
 /// dots, and the reprojection error vectors in yellow, magnified so the mean one is about
 /// [`OVERLAY_MEAN_ERROR_PX`] long (Fig. 4.4). Returns the magnification.
-fn write_overlay(
+pub(crate) fn write_overlay(
     path: &Path,
     data: &CameraDataset,
     sample: &ReprojectionSample,

@@ -7,6 +7,8 @@ use super::outcome::progress_bar;
 use anyhow::anyhow;
 use clap::{Args, ValueEnum};
 
+use msreg_host::calibrate::camera_imu::MAX_CAMERAS;
+use msreg_host::sim::camera::rig::{simulate_camera_rig, CameraRigSimConfig};
 use msreg_host::sim::camera::{simulate_camera_imu, CameraImuSimConfig, CameraModelChoice};
 
 /// The `--model` values.
@@ -48,6 +50,11 @@ pub struct SimulateCameraImu {
     /// checkerboard: images, target.yaml and ground-truth corners in Kalibr's ids.
     #[arg(long)]
     pub aprilgrid: bool,
+    /// Cameras on the rig (1-4): camera n sits 11 cm along camera 0's x axis from camera
+    /// n-1, turned 4 deg towards the row's start, its time offset 3 ms after camera n-1's
+    /// (`cam0/` .. `camN-1/`, every `camN` in the ground truth with `T_cn_cnm1`).
+    #[arg(long, default_value_t = 1)]
+    pub cameras: usize,
 }
 
 /// Simulates and writes the dataset, with a progress bar on stderr.
@@ -73,6 +80,15 @@ pub fn simulate(args: &SimulateCameraImu) -> anyhow::Result<()> {
         config.noise_sigma = realistic.noise_sigma;
         config.lighting_gradient = realistic.lighting_gradient;
     }
+    if !(1..=MAX_CAMERAS).contains(&args.cameras) {
+        return Err(anyhow!(
+            "--cameras must be 1 to {MAX_CAMERAS}, got {}",
+            args.cameras
+        ));
+    }
+    if args.cameras > 1 {
+        return simulate_rig(args, config);
+    }
     let started = Instant::now();
     let sim = simulate_camera_imu(&config).map_err(|e| anyhow!("simulate: {e}"))?;
     let bar = progress_bar(
@@ -86,6 +102,31 @@ pub fn simulate(args: &SimulateCameraImu) -> anyhow::Result<()> {
         args.out_dir.display(),
         sim.imu.len(),
         sim.frame_stamps.len(),
+        started.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+/// `--cameras N` with N > 1: the row of cameras of [`CameraRigSimConfig::row`].
+fn simulate_rig(args: &SimulateCameraImu, config: CameraImuSimConfig) -> anyhow::Result<()> {
+    let started = Instant::now();
+    let rig = simulate_camera_rig(&CameraRigSimConfig::row(config, args.cameras))
+        .map_err(|e| anyhow!("simulate: {e}"))?;
+    let bar = progress_bar(
+        1000,
+        "{spinner} rendering images [{bar:40}] {percent}% {elapsed}",
+    );
+    rig.write(&args.out_dir, &|f| bar.set_position((f * 1000.0) as u64))?;
+    bar.finish_and_clear();
+    eprintln!(
+        "msreg: wrote {} ({} IMU samples, {} cameras, {} images, {:.1} s)",
+        args.out_dir.display(),
+        rig.cameras[0].imu.len(),
+        rig.cameras.len(),
+        rig.cameras
+            .iter()
+            .map(|c| c.frame_stamps.len())
+            .sum::<usize>(),
         started.elapsed().as_secs_f64()
     );
     Ok(())
