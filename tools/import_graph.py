@@ -32,7 +32,7 @@ LAYERS = [
                     "report", "plot"]),
     ("algorithms", ["ndt", "vision", "lidar", "mi", "bag"]),
     ("simulation", ["sim"]),
-    ("pipelines", ["calibrate", "lidar_camera", "infra", "monitor", "link"]),
+    ("pipelines", ["calibrate", "check", "lidar_camera", "infra", "monitor", "link"]),
 ]
 LAYER_OF = {m: i for i, (_, mods) in enumerate(LAYERS) for m in mods}
 

@@ -5,6 +5,7 @@
 pub mod aruco;
 pub mod camera_imu;
 pub mod cameras;
+pub mod check;
 pub mod convert;
 pub mod demo;
 pub mod detect;

@@ -13,8 +13,10 @@ use clap::{Args, Parser, Subcommand};
 use cli::outcome::Outcome;
 use msreg_host::calibrate::driver::report::PoseImuOptions;
 use msreg_host::calibrate::pose_imu::{self, PoseImuInput};
+use msreg_host::check::Needs;
 use msreg_host::dataset::{CalibrationResult, Dataset, SectionName};
 use msreg_host::eval;
+use msreg_host::export::ExportFormat;
 use msreg_host::sim::{self, SimConfig};
 
 #[derive(Parser)]
@@ -41,12 +43,21 @@ enum Command {
         /// Topics and noise files when the dataset argument is a bag.
         #[command(flatten)]
         bag: cli::convert::BagFlags,
+        /// Also write the result for another tool, next to the result file, after a
+        /// successful calibration: kalibr, openvins, vins-fusion, urdf or tf (as `msreg
+        /// export`).
+        #[arg(long, global = true, value_parser = cli::export::parse_format)]
+        format: Option<ExportFormat>,
         #[command(subcommand)]
         task: Task,
     },
+    /// Check a dataset directory (or a bag) before calibrating: missing files, stream
+    /// overlap, rates and gaps, units, unknown keys, clock offsets, excitation and the
+    /// target's scale. Exit code 2 when it finds an error.
+    Check(cli::check::CheckArgs),
     /// Convert a ROS 1 bag or an MCAP file to a dataset directory.
     Convert(cli::convert::ConvertArgs),
-    /// Write a result file for Kalibr, OpenVINS, VINS-Fusion, URDF or ROS tf (docs/export.md).
+    /// Write a result file for Kalibr, OpenVINS, VINS-Fusion, URDF or ROS tf.
     Export(cli::export::ExportArgs),
     /// Errors of a result file against a dataset's groundtruth/.
     Eval {
@@ -190,7 +201,8 @@ struct CalibratePoseImu {
     /// Result YAML.
     #[arg(short, long, default_value = "result.yaml")]
     output: PathBuf,
-    /// JSON report (convergence history, sigmas, NIS, events).
+    /// Report: an HTML page when the name ends in .html, else JSON (convergence history,
+    /// sigmas, NIS, events).
     #[arg(long)]
     report: Option<PathBuf>,
     /// Keep the time offset fixed at zero.
@@ -233,7 +245,14 @@ fn main() -> ExitCode {
 
 fn run(command: Command) -> Result<(), Failure> {
     match command {
-        Command::Calibrate { bag, task } => calibrate(&bag, task),
+        Command::Calibrate { bag, format, task } => calibrate(&bag, format, task),
+        Command::Check(args) => match cli::check::run(&args)? {
+            true => Ok(()),
+            false => Err(Failure::BadInput(anyhow!(
+                "{}: the check found errors (listed above)",
+                args.dataset.display()
+            ))),
+        },
         Command::Simulate {
             scenario: Scenario::PoseImu(args),
         } => simulate_pose_imu(&args),
@@ -305,9 +324,32 @@ fn run(command: Command) -> Result<(), Failure> {
 }
 
 /// `msreg calibrate <task>`: a bag given as the dataset is converted first (its temporary
-/// dataset lives until the calibration has written its outputs).
-fn calibrate(bag: &cli::convert::BagFlags, mut task: Task) -> Result<(), Failure> {
+/// dataset lives until the calibration has written its outputs); the dataset check runs
+/// next (its errors stop with exit code 2); after a successful calibration the result is
+/// also exported as `format`, next to the result file.
+fn calibrate(
+    bag: &cli::convert::BagFlags,
+    format: Option<ExportFormat>,
+    mut task: Task,
+) -> Result<(), Failure> {
     let _converted = cli::convert::dataset_from_bag(task.dataset_mut(), bag)?;
+    if let Some(needs) = task.needs() {
+        cli::check::before_calibration(task.dataset_mut(), needs)?;
+    }
+    let output = task.output().to_path_buf();
+    run_task(task)?;
+    if let Some(format) = format {
+        let dir = match output.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        cli::export::export_file(&output, format, &dir)?;
+    }
+    Ok(())
+}
+
+/// Runs one calibration.
+fn run_task(task: Task) -> Result<(), Failure> {
     match task {
         Task::PoseImu(args) => calibrate_pose_imu(&args),
         Task::LidarImu(args) => exit_code_of(cli::lidar_imu::calibrate(&args)?),
@@ -326,6 +368,32 @@ fn calibrate(bag: &cli::convert::BagFlags, mut task: Task) -> Result<(), Failure
 }
 
 impl Task {
+    /// What the dataset check asks of the dataset; `None` for the pipelines whose layout
+    /// the check does not know (no IMU: cameras, lidar-camera, infra, prior-map).
+    fn needs(&self) -> Option<Needs> {
+        match self {
+            Task::PoseImu(_) => Some(Needs::PoseImu),
+            Task::CameraImu(_) => Some(Needs::CameraImu),
+            Task::LidarImu(_) => Some(Needs::LidarImu),
+            Task::Joint(_) => Some(Needs::Joint),
+            _ => None,
+        }
+    }
+
+    /// The result file every calibration writes.
+    fn output(&self) -> &Path {
+        match self {
+            Task::PoseImu(args) => &args.output,
+            Task::LidarImu(args) => &args.output,
+            Task::LidarCamera(args) => &args.output,
+            Task::CameraImu(args) => &args.output,
+            Task::Cameras(args) => &args.output,
+            Task::Joint(args) => &args.output,
+            Task::Infra(args) => &args.output,
+            Task::PriorMap(args) => &args.output,
+        }
+    }
+
     /// The dataset argument every calibration takes.
     fn dataset_mut(&mut self) -> &mut PathBuf {
         match self {

@@ -362,6 +362,14 @@ fn distortion(doc: &Doc, map: &Mapping) -> Result<Distortion<f64>, YamlError> {
         Some(_) => doc.string(map, "distortion_model")?,
     };
     let coeffs = match map.get("distortion_coeffs") {
+        None | Some(Value::Null) if model != "none" => {
+            // Reported at the model's line: the key itself is absent (a typo is named by
+            // `msreg check`'s unknown-key warning).
+            return Err(doc.invalid(
+                "distortion_model",
+                format!("missing key `distortion_coeffs` (distortion_model `{model}` needs it)"),
+            ));
+        }
         None | Some(Value::Null) => Vec::new(),
         Some(_) => doc.numbers(map, "distortion_coeffs")?,
     };

@@ -5,6 +5,7 @@
 pub mod bag;
 pub mod calibrate;
 pub mod camera_yaml;
+pub mod check;
 pub mod dataset;
 pub mod eval;
 pub mod export;

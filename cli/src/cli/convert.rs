@@ -132,7 +132,7 @@ pub fn dataset_from_bag(
     };
     run(&args)?;
     eprintln!(
-        "msreg: calibrating {} through that temporary dataset (keep one with `msreg convert`)",
+        "msreg: reading {} through that temporary dataset (keep one with `msreg convert`)",
         dataset.display()
     );
     *dataset = args.dataset;

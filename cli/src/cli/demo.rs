@@ -138,15 +138,57 @@ impl Pipeline {
     }
 }
 
-/// Runs the command line `args` in this process, as `msreg args...` would.
-fn msreg(args: &[String]) -> Result<(), Failure> {
-    let cli = Cli::try_parse_from(std::iter::once("msreg".to_string()).chain(args.iter().cloned()))
-        .map_err(|e| Failure::BadInput(anyhow::anyhow!("demo: {e}")))?;
-    run(cli.command)
+/// Runs the command line `args` as `msreg args...` would: in this process when the
+/// directory is kept, else as a child process whose output lines naming the temporary
+/// `hide` directory (removed at the end) are dropped.
+fn msreg(args: &[String], hide: Option<&Path>) -> Result<(), Failure> {
+    let Some(hide) = hide else {
+        let cli =
+            Cli::try_parse_from(std::iter::once("msreg".to_string()).chain(args.iter().cloned()))
+                .map_err(|e| Failure::BadInput(anyhow::anyhow!("demo: {e}")))?;
+        return run(cli.command);
+    };
+    let exe = std::env::current_exe().context("demo: cannot find the msreg executable")?;
+    let output = std::process::Command::new(exe)
+        .args(args)
+        .output()
+        .context("demo: cannot run msreg")?;
+    let hide = hide.to_string_lossy();
+    let shown = |text: &[u8]| -> Vec<String> {
+        String::from_utf8_lossy(text)
+            .lines()
+            .filter(|l| !l.contains(hide.as_ref()))
+            .map(str::to_string)
+            .collect()
+    };
+    shown(&output.stdout).iter().for_each(|l| println!("{l}"));
+    let errors = shown(&output.stderr);
+    errors.iter().for_each(|l| eprintln!("{l}"));
+    let last = String::from_utf8_lossy(&output.stderr)
+        .lines()
+        .last()
+        .unwrap_or("")
+        .to_string();
+    match output.status.code() {
+        Some(0) => Ok(()),
+        Some(1) => Err(Failure::NotConverged(
+            last.trim_start_matches("msreg: calibration did not converge: ")
+                .to_string(),
+        )),
+        _ => Err(Failure::BadInput(anyhow::anyhow!(
+            "demo: `msreg {}` failed: {last}",
+            args.first().map_or("", String::as_str)
+        ))),
+    }
 }
 
 /// One pipeline: simulate, calibrate, evaluate. Returns the error rows and a note.
-fn demo_one(pipeline: Pipeline, seed: u64, dir: &Path) -> Result<(String, String), Failure> {
+fn demo_one(
+    pipeline: Pipeline,
+    seed: u64,
+    dir: &Path,
+    hide: Option<&Path>,
+) -> Result<(String, String), Failure> {
     let name = pipeline.name();
     let data = dir.join("dataset");
     let path = |p: &Path| p.to_string_lossy().into_owned();
@@ -159,7 +201,7 @@ fn demo_one(pipeline: Pipeline, seed: u64, dir: &Path) -> Result<(String, String
     ];
     simulate.extend(pipeline.simulate_options().iter().map(|s| s.to_string()));
     let started = Instant::now();
-    msreg(&simulate)?;
+    msreg(&simulate, hide)?;
     let simulated_s = started.elapsed().as_secs_f64();
     let result = dir.join("result.yaml");
     let mut calibrate = vec![
@@ -176,7 +218,7 @@ fn demo_one(pipeline: Pipeline, seed: u64, dir: &Path) -> Result<(String, String
         calibrate.push(path(&dir.join(file)));
     }
     let started = Instant::now();
-    let converged = match msreg(&calibrate) {
+    let converged = match msreg(&calibrate, hide) {
         Ok(()) => "converged".to_string(),
         Err(Failure::NotConverged(why)) => format!("DID NOT CONVERGE: {why}"),
         Err(e) => return Err(e),
@@ -221,7 +263,8 @@ pub fn run_demo(args: &DemoArgs) -> Result<(), Failure> {
     let mut notes = Vec::new();
     for p in &pipelines {
         eprintln!("msreg demo: {} ...", p.name());
-        let (r, note) = demo_one(*p, args.seed, &root.join(p.name()))?;
+        let hide = args.keep.is_none().then_some(root.as_path());
+        let (r, note) = demo_one(*p, args.seed, &root.join(p.name()), hide)?;
         rows.push_str(&format!("{}:\n{r}", p.name()));
         notes.push(note);
     }

@@ -2,7 +2,7 @@
 //! result file in the formats other tools read (docs/export.md). Every failure is bad input
 //! (exit 2), named with the file and, for a missing key, the key.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::Args;
@@ -26,15 +26,26 @@ pub struct ExportArgs {
 /// Runs the export and prints the files written.
 pub fn run(args: &ExportArgs) -> anyhow::Result<()> {
     let format: ExportFormat = args.format.parse()?;
-    let result = CalibrationResult::read(&args.result)?;
-    for key in result.unknown_keys() {
+    export_file(&args.result, format, &args.out)
+}
+
+/// `--format` of `msreg calibrate`: a format name as clap reads it.
+pub fn parse_format(name: &str) -> Result<ExportFormat, String> {
+    name.parse().map_err(|e: export::ExportError| e.to_string())
+}
+
+/// Exports the result file `result` as `format` into `out` (a file for one-file formats,
+/// else a directory), warning about unknown keys and printing the files written.
+pub fn export_file(result: &Path, format: ExportFormat, out: &Path) -> anyhow::Result<()> {
+    let calibration = CalibrationResult::read(result)?;
+    for key in calibration.unknown_keys() {
         eprintln!(
             "msreg: warning: {}: unknown key `{key}` ignored",
-            args.result.display()
+            result.display()
         );
     }
-    let written = export::write(&result, format, &args.out)
-        .with_context(|| format!("{}: cannot export as {format}", args.result.display()))?;
+    let written = export::write(&calibration, format, out)
+        .with_context(|| format!("{}: cannot export as {format}", result.display()))?;
     for path in written {
         println!("msreg: wrote {}", path.display());
     }
