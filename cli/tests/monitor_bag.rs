@@ -150,8 +150,22 @@ fn a_bag_without_its_pose_topics_or_calibration_exits_2() -> TestResult {
             "--initial",
         ),
         (
-            vec!["monitor", b, "--initial", i, "--pose0", TOPICS[1]],
-            "--pose1",
+            vec!["monitor", b, "--initial", i, "--pose1", TOPICS[2]],
+            "--pose0",
+        ),
+        (
+            // --pose1 is optional (one pose sensor), its noise file without it is not.
+            vec![
+                "monitor",
+                b,
+                "--initial",
+                i,
+                "--pose0",
+                TOPICS[1],
+                "--pose1-config",
+                i,
+            ],
+            "--pose1-config without --pose1",
         ),
         (
             vec![

@@ -1,7 +1,8 @@
 //! `msreg monitor`: the on-vehicle calibration health monitor (estimator/src/health.rs)
-//! replayed on the host over an IMU and two pose sensors (`pose0`, e.g. LiDAR odometry;
-//! `pose1`, e.g. a camera's visual odometry), all in one filter (the joint layout without a
-//! target frame, `MonitorEkf`), started from the vehicle's calibration of record.
+//! replayed on the host over an IMU and `N` pose sensors (`pose0`, e.g. LiDAR odometry;
+//! `pose1`, e.g. a camera's visual odometry; ... up to [`MAX_POSE_SENSORS`]), all in one
+//! filter (`N` extrinsics and time offsets, two clones per sensor, no target frame; with two
+//! sensors the joint layout `MonitorEkf`), started from the vehicle's calibration of record.
 //!
 //! Two runs over the same data:
 //! - the **monitor**: extrinsics and time offsets start at the calibration of record with its
@@ -19,6 +20,7 @@ pub mod drive_bag;
 mod files;
 mod replay;
 pub mod start;
+pub mod target_odometry;
 pub mod timeline;
 mod verdict;
 
@@ -36,22 +38,28 @@ pub use verdict::{
     RotationChange, SensorVerdict, TranslationChange, Verdict, VerdictWords, AXIS_NAMES,
 };
 
+/// The most pose sensors one monitor filter takes (its layout is fixed at compile time:
+/// `15 + 7 N + 12 N` error states, one instantiation per `N`).
+pub const MAX_POSE_SENSORS: usize = 4;
+
 /// Sensor names, by filter index.
-pub const SENSOR_NAMES: [&str; 2] = ["pose0", "pose1"];
+pub const SENSOR_NAMES: [&str; MAX_POSE_SENSORS] = ["pose0", "pose1", "pose2", "pose3"];
 
 /// What the monitor replays.
-#[derive(Debug, Clone, Copy)]
+/// `poses`, `pose_noise` and `prior` have one entry per pose sensor (`pose0`, `pose1`, ...,
+/// 1 to [`MAX_POSE_SENSORS`] of them, the same number in each).
+#[derive(Debug, Clone)]
 pub struct MonitorInput<'a> {
     /// `imu0/data.csv`.
     pub imu: &'a [ImuRecord],
     /// `imu0/imu.yaml`.
     pub imu_noise: &'a ImuNoiseYaml,
-    /// `pose0/data.csv`, `pose1/data.csv`.
-    pub poses: [&'a [PoseRecord]; 2],
-    /// `pose0/sensor.yaml`, `pose1/sensor.yaml`.
-    pub pose_noise: [&'a PoseSensorYaml; 2],
-    /// The calibration of record, `pose0` and `pose1`.
-    pub prior: [ExtrinsicEstimate; 2],
+    /// `poseN/data.csv` of every pose sensor.
+    pub poses: Vec<&'a [PoseRecord]>,
+    /// `poseN/sensor.yaml` of every pose sensor.
+    pub pose_noise: Vec<&'a PoseSensorYaml>,
+    /// The calibration of record, `poseN` of every pose sensor.
+    pub prior: Vec<ExtrinsicEstimate>,
 }
 
 /// Why the monitor could not run.
@@ -63,8 +71,26 @@ pub enum MonitorError {
     /// A pose sensor has fewer than two poses.
     #[error("{sensor}/data.csv: fewer than two poses")]
     TooFewPoses {
-        /// `pose0` or `pose1`.
+        /// `pose0`, `pose1`, ...
         sensor: &'static str,
+    },
+    /// No pose sensor, more than [`MAX_POSE_SENSORS`], or inputs of different lengths.
+    #[error(
+        "the monitor takes 1 to {max} pose sensors (pose0/ ... with a calibration of record \
+         each); got {poses} odometries, {noise} sensor.yaml, {prior} calibrations of record{needed}"
+    )]
+    PoseSensorCount {
+        /// Odometries given.
+        poses: usize,
+        /// `sensor.yaml` files given.
+        noise: usize,
+        /// Calibration-of-record sections given.
+        prior: usize,
+        /// Largest number the monitor takes.
+        max: usize,
+        /// What this use of the monitor needs beyond that (empty, or e.g. "; the device's
+        /// monitoring layout takes exactly two").
+        needed: &'static str,
     },
     /// The mean accelerometer reading of the standstill is not gravity.
     #[error(
@@ -125,7 +151,7 @@ impl MonitorError {
 pub struct Alarm {
     /// IMU time, s after the first IMU sample.
     pub t_s: f64,
-    /// `pose0` or `pose1`.
+    /// `pose0`, `pose1`, ...
     pub sensor: &'static str,
     /// `rotation_step`, `translation_step` (the GLR step detectors); among the warnings,
     /// `nis_high` (the windowed NIS crossed its upper chi-square bound).
@@ -220,7 +246,7 @@ pub struct EstimatePoint {
 /// Timeline and summary of one sensor.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct SensorReport {
-    /// `pose0` or `pose1`.
+    /// `pose0`, `pose1`, ...
     pub name: &'static str,
     /// Every update of the monitor run.
     pub nis: Vec<NisPoint>,
@@ -280,7 +306,7 @@ pub struct MonitorReport {
     /// Warnings in time order: the windowed NIS test crossing its upper bound (`nis_high`),
     /// a consistency signal, not a detection (docs/monitor.md has its measured rate).
     pub warnings: Vec<Alarm>,
-    /// `pose0`, `pose1`.
+    /// `pose0`, `pose1`, ... (one per pose sensor).
     pub sensors: Vec<SensorReport>,
     /// Zero-velocity updates (of no sensor) the filter refused, with the reason.
     pub zero_velocity_skipped: Vec<String>,
@@ -306,13 +332,14 @@ impl MonitorReport {
     }
 
     /// The re-estimated calibration: the monitor's final estimate of every sensor with its
-    /// sigmas, in the result file's sections (`pose0`, `pose1`).
-    pub fn calibration(&self) -> crate::dataset::PosePairCalibration {
-        let estimate = |k: usize| self.sensors.get(k).map(|s| s.estimate);
-        crate::dataset::PosePairCalibration {
-            pose0: estimate(0),
-            pose1: estimate(1),
+    /// sigmas, in the result file's sections (`pose0`, `pose1`, ..., one per sensor).
+    pub fn calibration(&self) -> crate::dataset::CalibrationResult {
+        let mut result = crate::dataset::CalibrationResult::new();
+        for (k, s) in self.sensors.iter().enumerate() {
+            let index = u16::try_from(k).unwrap_or(u16::MAX);
+            result.set_extrinsic(crate::dataset::SectionName::pose(index), s.estimate);
         }
+        result
     }
 
     /// The first alarm of `sensor` at or after `t_s`.

@@ -34,14 +34,18 @@ fn try_run(seed: u64, target: KnockTarget) -> (DriveSim, Result<MonitorReport, M
         ..DriveSimConfig::default()
     })
     .expect("simulate");
-    let noise = [0, 1].map(|k| msreg_host::sim::pose_sensor_yaml(&sim.sensors[k].config));
+    let noise: Vec<_> = sim
+        .sensors
+        .iter()
+        .map(|s| msreg_host::sim::pose_sensor_yaml(&s.config))
+        .collect();
     let imu_noise = msreg_host::sim::imu_noise_yaml(&sim.config.imu);
     let input = MonitorInput {
         imu: &sim.imu,
         imu_noise: &imu_noise,
-        poses: [&sim.sensors[0].poses, &sim.sensors[1].poses],
-        pose_noise: [&noise[0], &noise[1]],
-        prior: [sim.sensors[0].prior, sim.sensors[1].prior],
+        poses: sim.sensors.iter().map(|s| s.poses.as_slice()).collect(),
+        pose_noise: noise.iter().collect(),
+        prior: sim.sensors.iter().map(|s| s.prior).collect(),
     };
     let report = monitor(&input, &MonitorOptions::default());
     (sim, report)

@@ -34,11 +34,12 @@ the filter could not start on this recording; 2 bad input (the file and line are
 docs/monitor.md has the details."
 )]
 pub struct MonitorArgs {
-    /// Dataset directory (imu0/, pose0/, pose1/; CONVENTIONS.md), or a ROS 1 `.bag` / `.mcap`
-    /// file with `--pose0 TOPIC --pose1 TOPIC` (and `--initial`).
+    /// Dataset directory (imu0/ and the pose sensors pose0/ ... poseN-1/, one to four of them;
+    /// docs/formats.md), or a ROS 1 `.bag` / `.mcap` file with `--pose0 TOPIC [--pose1 TOPIC]`
+    /// (and `--initial`).
     pub dataset: PathBuf,
-    /// The calibration of record (a result file with `pose0` and `pose1` sections); default
-    /// `<dataset>/calibration.yaml`; required with a bag.
+    /// The calibration of record (a result file with a `poseN` section per pose sensor);
+    /// default `<dataset>/calibration.yaml`; required with a bag.
     #[arg(long)]
     pub initial: Option<PathBuf>,
     /// Timeline plot (SVG).
@@ -48,7 +49,7 @@ pub struct MonitorArgs {
     #[arg(long)]
     pub report: Option<PathBuf>,
     /// Write the re-estimated calibration (every sensor's final estimate with its sigmas, in
-    /// the result file's sections `pose0`, `pose1`) to this file.
+    /// the result file's sections `pose0`, `pose1`, ..., one per pose sensor) to this file.
     #[arg(long)]
     pub write_calibration: Option<PathBuf>,
     /// Accepted for old scripts; an alarm now always exits 3.
@@ -60,7 +61,8 @@ pub struct MonitorArgs {
     /// With a bag: the first pose sensor's topic (nav_msgs/Odometry, PoseStamped, ...).
     #[arg(long)]
     pub pose0: Option<String>,
-    /// With a bag: the second pose sensor's topic.
+    /// With a bag: the second pose sensor's topic (optional: without it the monitor watches
+    /// one pose sensor).
     #[arg(long)]
     pub pose1: Option<String>,
     /// With a bag: Kalibr imu.yaml with the IMU's noise figures (default: docs/bags.md).
@@ -159,15 +161,23 @@ fn drive_topics(args: &MonitorArgs) -> anyhow::Result<DriveTopics> {
         })
     };
     let pose_noise = |p: &Option<PathBuf>| p.as_ref().map(PoseSensorYaml::read).transpose();
+    if args.pose1.is_none() && args.pose1_config.is_some() {
+        bail!(
+            "{}: --pose1-config without --pose1 TOPIC",
+            args.dataset.display()
+        );
+    }
+    let mut poses = vec![topic(&args.pose0, "pose0")?];
+    poses.extend(args.pose1.clone());
     Ok(DriveTopics {
         imu: TopicChoice::from_flag(args.imu.as_deref()),
-        poses: [topic(&args.pose0, "pose0")?, topic(&args.pose1, "pose1")?],
+        poses,
         imu_noise: args
             .imu_config
             .as_ref()
             .map(ImuNoiseYaml::read)
             .transpose()?,
-        pose_noise: [
+        pose_noise: vec![
             pose_noise(&args.pose0_config)?,
             pose_noise(&args.pose1_config)?,
         ],
@@ -195,7 +205,8 @@ fn drive_files(
             );
         }
         let files = DriveFiles::read(&args.dataset, args.initial.as_deref())?;
-        return Ok((files, vec![None, None]));
+        let labels = vec![None; files.pose_sensors()];
+        return Ok((files, labels));
     }
     let Some(initial) = &args.initial else {
         bail!(
@@ -215,7 +226,7 @@ fn drive_files(
         eprintln!("msreg: warning: {w}");
     }
     let files = DriveFiles::read(&dir, Some(initial))?;
-    Ok((files, topics.poses.map(Some).to_vec()))
+    Ok((files, topics.poses.into_iter().map(Some).collect()))
 }
 
 /// Runs the monitor, prints the report and the verdict, writes the outputs.

@@ -3,19 +3,23 @@
 use std::path::PathBuf;
 
 use anyhow::anyhow;
-use clap::{Args, ValueEnum};
+use clap::Args;
 
 use msreg_host::sim::drive_sim::{simulate_drive, DriveSimConfig, KnockTarget};
 
-/// Which sensor the knock hits.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum KnockSensorArg {
-    /// The camera's visual odometry.
-    Pose1,
-    /// The LiDAR odometry.
-    Pose0,
-    /// No knock.
-    None,
+/// `--knock-sensor`: `none` or `poseK`.
+fn knock_sensor(text: &str) -> Result<KnockTarget, String> {
+    if text == "none" {
+        return Ok(KnockTarget::None);
+    }
+    text.strip_prefix("pose")
+        .and_then(|k| k.parse::<usize>().ok())
+        .map(|k| match k {
+            0 => KnockTarget::Pose0,
+            1 => KnockTarget::Pose1,
+            k => KnockTarget::Pose(k),
+        })
+        .ok_or_else(|| format!("`{text}`: expected `none` or `poseK` (pose0, pose1, ...)"))
 }
 
 /// `msreg simulate drive`.
@@ -35,9 +39,13 @@ pub struct SimulateDrive {
     /// Knock angle, deg.
     #[arg(long, default_value_t = 1.0, allow_hyphen_values = true)]
     pub knock_deg: f64,
-    /// Knocked sensor.
-    #[arg(long, value_enum, default_value_t = KnockSensorArg::Pose1)]
-    pub knock_sensor: KnockSensorArg,
+    /// Knocked sensor: `pose0` (the LiDAR), `pose1` (the camera), `poseK`, or `none`.
+    #[arg(long, value_parser = knock_sensor, default_value = "pose1")]
+    pub knock_sensor: KnockTarget,
+    /// Number of pose sensors: pose0 (LiDAR odometry), pose1 (camera VO), pose2, ... (further
+    /// LiDAR odometries), each with its own mounting, time offset and noise.
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u16).range(1..))]
+    pub pose_sensors: u16,
 }
 
 /// The simulator options of the arguments.
@@ -47,11 +55,8 @@ pub fn config_of(args: &SimulateDrive) -> DriveSimConfig {
         duration_s: args.duration,
         knock_at_s: args.knock_s,
         knock_deg: args.knock_deg,
-        knock_target: match args.knock_sensor {
-            KnockSensorArg::Pose0 => KnockTarget::Pose0,
-            KnockSensorArg::Pose1 => KnockTarget::Pose1,
-            KnockSensorArg::None => KnockTarget::None,
-        },
+        knock_target: args.knock_sensor,
+        pose_sensors: usize::from(args.pose_sensors),
         ..DriveSimConfig::default()
     }
 }
@@ -64,12 +69,17 @@ pub fn simulate(args: &SimulateDrive) -> anyhow::Result<()> {
         Some((name, at)) => format!("{name} knocked by {} deg at {at} s", args.knock_deg),
         None => "no knock".into(),
     };
+    let poses: Vec<String> = sim
+        .sensors
+        .iter()
+        .enumerate()
+        .map(|(k, s)| format!("{} pose{k} poses", s.poses.len()))
+        .collect();
     eprintln!(
-        "msreg: wrote {} ({} IMU samples, {} LiDAR odometry poses, {} VO poses; {knock})",
+        "msreg: wrote {} ({} IMU samples, {}; {knock})",
         args.out_dir.display(),
         sim.imu.len(),
-        sim.sensors[0].poses.len(),
-        sim.sensors[1].poses.len(),
+        poses.join(", "),
     );
     Ok(())
 }

@@ -1,7 +1,11 @@
 //! The replay loop: IMU samples in order, each pose fused as soon as it is due (in IMU-time
-//! order across the two sensors), as the firmware does it.
+//! order across the pose sensors), as the firmware does it.
+//!
+//! The filter's layout is fixed at compile time (`S` sensors, `C = 2 S` clones, `N` error
+//! states); [`monitor`] picks the layout for the number of pose sensors of its input
+//! ([`MAX_POSE_SENSORS`](super::MAX_POSE_SENSORS) at most), and everything below is generic
+//! over it.
 
-use msreg_estimator::filter::MonitorEkf;
 use std::f64::consts::PI;
 
 use msreg_estimator::chi2::{self, Confidence};
@@ -11,10 +15,10 @@ use msreg_estimator::update::UpdateReport;
 use msreg_estimator::{Error as FilterError, FilterConfig, HealthEvent, SensorId};
 use nalgebra::Matrix3;
 
-use super::start::{self, ExtrinsicSigmas, FilterPrior, Start};
+use super::start::{self, Ekf, ExtrinsicSigmas, FilterPrior, Start};
 use super::{
     Alarm, EstimatePoint, ExcitationPoint, GlrPoint, JumpPoint, MonitorError, MonitorInput,
-    MonitorReport, NisPoint, SensorReport, SENSOR_NAMES,
+    MonitorReport, NisPoint, SensorReport, MAX_POSE_SENSORS, SENSOR_NAMES,
 };
 use crate::calibrate::convert;
 use crate::calibrate::driver::nominal_period_ns;
@@ -97,8 +101,8 @@ impl PoseStep {
 /// the first IMU sample `t0_ns` are dropped; the first pose after, and every pose after a gap
 /// of more than [`MAX_GAP_PERIODS`] nominal periods, anchors; every other pose is the
 /// increment from the one before. Also returns a note per gap.
-pub fn pose_steps(
-    ekf: &MonitorEkf<f64>,
+pub fn pose_steps<const S: usize, const C: usize, const N: usize>(
+    ekf: &Ekf<S, C, N>,
     s: SensorId,
     input: &MonitorInput,
     t0_ns: u64,
@@ -159,8 +163,12 @@ struct Fused {
     report: UpdateReport<f64>,
 }
 
-fn feeds(ekf: &MonitorEkf<f64>, input: &MonitorInput, t0_ns: u64) -> [Feed; 2] {
-    MonitorEkf::<f64>::sensor_ids().map(|s| {
+fn feeds<const S: usize, const C: usize, const N: usize>(
+    ekf: &Ekf<S, C, N>,
+    input: &MonitorInput,
+    t0_ns: u64,
+) -> [Feed; S] {
+    Ekf::<S, C, N>::sensor_ids().map(|s| {
         let (steps, skipped) = pose_steps(ekf, s, input, t0_ns);
         Feed {
             steps,
@@ -175,11 +183,15 @@ fn feeds(ekf: &MonitorEkf<f64>, input: &MonitorInput, t0_ns: u64) -> [Feed; 2] {
 /// device (`firmware/src/session.rs`): an increment the filter cannot chain (no anchor, or
 /// older than its window) re-anchors at its end; one refused otherwise is skipped and the
 /// next pose anchors.
-fn fuse_next(ekf: &mut MonitorEkf<f64>, s: SensorId, feed: &mut Feed) -> Option<UpdateReport<f64>> {
+fn fuse_next<const S: usize, const C: usize, const N: usize>(
+    ekf: &mut Ekf<S, C, N>,
+    s: SensorId,
+    feed: &mut Feed,
+) -> Option<UpdateReport<f64>> {
     let step = feed.steps[feed.next];
     feed.next += 1;
     let stamp = step.stamp_ns();
-    let anchor = |ekf: &mut MonitorEkf<f64>, feed: &mut Feed| match ekf.anchor(s, stamp) {
+    let anchor = |ekf: &mut Ekf<S, C, N>, feed: &mut Feed| match ekf.anchor(s, stamp) {
         Ok(()) => feed.anchored = true,
         Err(e) => {
             feed.anchored = false;
@@ -210,9 +222,12 @@ fn fuse_next(ekf: &mut MonitorEkf<f64>, s: SensorId, feed: &mut Feed) -> Option<
     }
 }
 
-/// The due step (of either sensor) with the earliest IMU time.
-fn earliest_due(ekf: &MonitorEkf<f64>, feeds: &[Feed; 2]) -> Option<SensorId> {
-    MonitorEkf::<f64>::sensor_ids()
+/// The due step (of any sensor) with the earliest IMU time.
+fn earliest_due<const S: usize, const C: usize, const N: usize>(
+    ekf: &Ekf<S, C, N>,
+    feeds: &[Feed; S],
+) -> Option<SensorId> {
+    Ekf::<S, C, N>::sensor_ids()
         .into_iter()
         .filter_map(|s| {
             let feed = &feeds[s.index()];
@@ -227,11 +242,11 @@ fn earliest_due(ekf: &MonitorEkf<f64>, feeds: &[Feed; 2]) -> Option<SensorId> {
 }
 
 /// Runs `ekf` over the recording, calling `on_update` after every update.
-fn run(
-    ekf: &mut MonitorEkf<f64>,
+fn run<const S: usize, const C: usize, const N: usize>(
+    ekf: &mut Ekf<S, C, N>,
     input: &MonitorInput,
-    prior: &FilterPrior,
-    on_update: &mut dyn FnMut(&MonitorEkf<f64>, &Fused),
+    prior: &FilterPrior<S>,
+    on_update: &mut dyn FnMut(&Ekf<S, C, N>, &Fused),
 ) -> Result<Skipped, MonitorError> {
     let mut zero_velocity = Vec::new();
     let t0 = input.imu[0].stamp_ns;
@@ -272,14 +287,14 @@ fn run(
         }
     }
     Ok(Skipped {
-        sensors: feeds.map(|f| f.skipped),
+        sensors: feeds.into_iter().map(|f| f.skipped).collect(),
         zero_velocity,
     })
 }
 
 /// What a replay could not use, with the reasons.
 struct Skipped {
-    sensors: [Vec<String>; 2],
+    sensors: Vec<Vec<String>>,
     zero_velocity: Vec<String>,
 }
 
@@ -317,16 +332,16 @@ fn step_alarm(t_s: f64, event: &HealthEvent<f64>) -> Alarm {
 struct MonitorRun {
     alarms: Vec<Alarm>,
     warnings: Vec<Alarm>,
-    nis: [Vec<NisPoint>; 2],
-    estimates: [Vec<EstimatePoint>; 2],
+    nis: Vec<Vec<NisPoint>>,
+    estimates: Vec<Vec<EstimatePoint>>,
     /// The calibration of record.
-    record: [ExtrinsicEstimate; 2],
-    high: [bool; 2],
+    record: Vec<ExtrinsicEstimate>,
+    high: Vec<bool>,
 }
 
 /// Sensor `s`'s extrinsic in `ekf` against `record`.
-fn estimate_point(
-    ekf: &MonitorEkf<f64>,
+fn estimate_point<const S: usize, const C: usize, const N: usize>(
+    ekf: &Ekf<S, C, N>,
     s: SensorId,
     record: &ExtrinsicEstimate,
     t_s: f64,
@@ -345,13 +360,21 @@ fn estimate_point(
 }
 
 impl MonitorRun {
-    fn record(&mut self, ekf: &MonitorEkf<f64>, f: &Fused) {
+    fn record<const S: usize, const C: usize, const N: usize>(
+        &mut self,
+        ekf: &Ekf<S, C, N>,
+        f: &Fused,
+    ) {
         let k = f.sensor.index();
         self.estimates[k].push(estimate_point(ekf, f.sensor, &self.record[k], f.t_s));
         self.record_health(ekf, f);
     }
 
-    fn record_health(&mut self, ekf: &MonitorEkf<f64>, f: &Fused) {
+    fn record_health<const S: usize, const C: usize, const N: usize>(
+        &mut self,
+        ekf: &Ekf<S, C, N>,
+        f: &Fused,
+    ) {
         let r = &f.report;
         let dof = r.dof.max(1) as f64;
         let health = ekf.health().sensor(f.sensor);
@@ -403,12 +426,27 @@ impl MonitorRun {
 }
 
 /// The start and the monitor run's filter prior (the calibration of record with its
-/// sigmas): what `msreg monitor` runs and `msreg link replay` sends the device.
+/// sigmas) of a drive with two pose sensors: what `msreg link replay` sends the device, whose
+/// monitoring layout takes exactly two (an input with another number is refused).
 pub fn monitor_prior(
     input: &MonitorInput,
     options: &MonitorOptions,
-) -> Result<(Start, FilterPrior), MonitorError> {
-    validate(input)?;
+) -> Result<(Start, FilterPrior<2>), MonitorError> {
+    monitor_prior_of::<2>(
+        input,
+        options,
+        "; the device's monitoring layout takes exactly two",
+    )
+}
+
+/// [`monitor_prior`] with `S` pose sensors (what `msreg monitor` runs); `needed` is added to
+/// the error when `input` has another number.
+fn monitor_prior_of<const S: usize>(
+    input: &MonitorInput,
+    options: &MonitorOptions,
+    needed: &'static str,
+) -> Result<(Start, FilterPrior<S>), MonitorError> {
+    validate(input, S, needed)?;
     let start = start::start(input)?;
     let mut config = FilterConfig::new(convert::imu_noise::<f64>(input.imu_noise));
     config.health.step_forgetting = options.step_forgetting;
@@ -418,18 +456,22 @@ pub fn monitor_prior(
     config.health.resolvable_step_factor = 1.0;
     // The knock's own increment (docs/estimator.md), as on the device.
     config.health = config.health.with_jump_detector();
-    let sigmas = input.prior.map(|p| ExtrinsicSigmas {
-        rotation: p
-            .sigma_rot_deg
-            .amax()
-            .to_radians()
-            .max(options.min_prior_sigma_rotation),
-        translation: p
-            .sigma_trans_m
-            .amax()
-            .max(options.min_prior_sigma_translation),
-        time_offset: options.prior_sigma_time_offset,
-    });
+    let sigmas: Vec<ExtrinsicSigmas> = input
+        .prior
+        .iter()
+        .map(|p| ExtrinsicSigmas {
+            rotation: p
+                .sigma_rot_deg
+                .amax()
+                .to_radians()
+                .max(options.min_prior_sigma_rotation),
+            translation: p
+                .sigma_trans_m
+                .amax()
+                .max(options.min_prior_sigma_translation),
+            time_offset: options.prior_sigma_time_offset,
+        })
+        .collect();
     let prior = start.prior(input, &config, &sigmas);
     Ok((start, prior))
 }
@@ -444,8 +486,8 @@ struct SensorRecords {
 }
 
 /// The report of sensor `s` at the end of the monitor run `ekf`.
-fn sensor_report(
-    ekf: &MonitorEkf<f64>,
+fn sensor_report<const S: usize, const C: usize, const N: usize>(
+    ekf: &Ekf<S, C, N>,
     s: SensorId,
     record: &ExtrinsicEstimate,
     r: SensorRecords,
@@ -483,26 +525,41 @@ fn sensor_report(
     }
 }
 
-/// Replays the health monitor over `input` (see the module docs).
+/// Replays the health monitor over `input` (see the module docs), in the filter layout of
+/// its number of pose sensors (1 to [`MAX_POSE_SENSORS`]).
 pub fn monitor(
     input: &MonitorInput,
     options: &MonitorOptions,
 ) -> Result<MonitorReport, MonitorError> {
-    let (start, prior) = monitor_prior(input, options)?;
-    let mut ekf = prior.filter()?;
+    match input.poses.len() {
+        1 => monitor_with::<1, 2, 34>(input, options),
+        2 => monitor_with::<2, 4, 53>(input, options),
+        3 => monitor_with::<3, 6, 72>(input, options),
+        4 => monitor_with::<4, 8, 91>(input, options),
+        _ => Err(count_error(input, "")),
+    }
+}
+
+/// [`monitor`] in the layout with `S` sensors.
+fn monitor_with<const S: usize, const C: usize, const N: usize>(
+    input: &MonitorInput,
+    options: &MonitorOptions,
+) -> Result<MonitorReport, MonitorError> {
+    let (start, prior) = monitor_prior_of::<S>(input, options, "")?;
+    let mut ekf = prior.filter_of::<C, N>()?;
     let mut m = MonitorRun {
         alarms: Vec::new(),
         warnings: Vec::new(),
-        nis: [Vec::new(), Vec::new()],
-        estimates: [Vec::new(), Vec::new()],
-        record: input.prior,
-        high: [false; 2],
+        nis: vec![Vec::new(); S],
+        estimates: vec![Vec::new(); S],
+        record: input.prior.clone(),
+        high: vec![false; S],
     };
     let Skipped {
         sensors: skipped,
         zero_velocity,
     } = run(&mut ekf, input, &prior, &mut |e, f| m.record(e, f))?;
-    let (excitation, observability) = observability_run(input, &start, &prior, options)?;
+    let (excitation, observability) = observability_run::<S, C, N>(input, &start, &prior, options)?;
     let t0 = input.imu[0].stamp_ns;
     let duration_s = input
         .imu
@@ -514,7 +571,7 @@ pub fn monitor(
         .zip(m.estimates)
         .zip(skipped)
         .zip(excitation.into_iter().zip(observability));
-    let sensors: Vec<SensorReport> = MonitorEkf::<f64>::sensor_ids()
+    let sensors: Vec<SensorReport> = Ekf::<S, C, N>::sensor_ids()
         .into_iter()
         .filter_map(|s| {
             let (((nis, estimates), skipped), (excitation, observability)) = parts.next()?;
@@ -546,25 +603,25 @@ pub fn monitor(
 }
 
 type Observability = (
-    [Vec<ExcitationPoint>; 2],
-    [Vec<crate::calibrate::observability::DofObservability>; 2],
+    Vec<Vec<ExcitationPoint>>,
+    Vec<Vec<crate::calibrate::observability::DofObservability>>,
 );
 
 /// The observability run: wide priors, alarms off; excitation over time and the final
 /// per-DoF table of each sensor.
-fn observability_run(
+fn observability_run<const S: usize, const C: usize, const N: usize>(
     input: &MonitorInput,
     start: &Start,
-    monitor_prior: &FilterPrior,
+    monitor_prior: &FilterPrior<S>,
     options: &MonitorOptions,
 ) -> Result<Observability, MonitorError> {
     let mut config = monitor_prior.config;
     // Never armed: sigmas are never negative.
     config.health.arm_sigma_rotation = -1.0;
     config.health.arm_sigma_translation = -1.0;
-    let prior = start.prior(input, &config, &[options.observability_prior; 2]);
-    let mut ekf = prior.filter()?;
-    let mut excitation: [Vec<ExcitationPoint>; 2] = [Vec::new(), Vec::new()];
+    let prior = start.prior::<S>(input, &config, &[options.observability_prior; S]);
+    let mut ekf = prior.filter_of::<C, N>()?;
+    let mut excitation: Vec<Vec<ExcitationPoint>> = vec![Vec::new(); S];
     run(&mut ekf, input, &prior, &mut |e, f| {
         excitation[f.sensor.index()].push(ExcitationPoint {
             t_s: f.t_s,
@@ -575,18 +632,38 @@ fn observability_run(
         axis: p.axis_imu,
         reason: PLANAR_REASON.into(),
     });
-    let tables = MonitorEkf::<f64>::sensor_ids().map(|s| {
+    let tables = Ekf::<S, C, N>::sensor_ids().map(|s| {
         let (sr, st) = ekf.extrinsic_sigma(s);
         let sigma = [sr.x, sr.y, sr.z, st.x, st.y, st.z, ekf.time_offset_sigma(s)];
         let cov = ekf.extrinsic_covariance(s);
         let translation_cov: Matrix3<f64> = cov.fixed_view::<3, 3>(3, 3).into_owned();
         observability::table(&sigma, &ekf.prior_sigma(s), &translation_cov, held.as_ref())
     });
-    Ok((excitation, tables))
+    Ok((excitation, tables.into()))
 }
 
-/// Enough data to run, with messages naming the file.
-fn validate(input: &MonitorInput) -> Result<(), MonitorError> {
+/// The error for an input whose pose sensors are not 1 to [`MAX_POSE_SENSORS`] (or whose
+/// odometries, noise files and calibrations of record differ in number).
+fn count_error(input: &MonitorInput, needed: &'static str) -> MonitorError {
+    MonitorError::PoseSensorCount {
+        poses: input.poses.len(),
+        noise: input.pose_noise.len(),
+        prior: input.prior.len(),
+        max: MAX_POSE_SENSORS,
+        needed,
+    }
+}
+
+/// Enough data to run, with messages naming the file; `sensors` pose sensors in each part.
+fn validate(
+    input: &MonitorInput,
+    sensors: usize,
+    needed: &'static str,
+) -> Result<(), MonitorError> {
+    let counts = [input.poses.len(), input.pose_noise.len(), input.prior.len()];
+    if counts.iter().any(|&n| n != sensors) || sensors > MAX_POSE_SENSORS {
+        return Err(count_error(input, needed));
+    }
     if input.imu.len() < 2 {
         return Err(MonitorError::TooFewImuSamples);
     }

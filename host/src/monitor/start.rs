@@ -3,7 +3,7 @@
 //! pipeline's code), the extrinsics and time offsets from the calibration of record.
 
 use msreg_estimator::filter::MonitorEkf;
-use msreg_estimator::{FilterConfig, InitialState};
+use msreg_estimator::{FilterConfig, InitialState, SensorPrior};
 use nalgebra::{Isometry3, Vector3};
 
 use super::{MonitorError, MonitorInput};
@@ -12,6 +12,10 @@ use crate::calibrate::driver::{moving_start, nominal_period_ns, MovingStart};
 use crate::calibrate::gyro_bias::{self, GyroBiasEstimate};
 use crate::calibrate::init::{self, RotationIncrement, Standstill};
 use crate::calibrate::planar::{self, PlanarMotion};
+
+/// The monitor's filter with `S` pose sensors (`C` clones, `N` error states; no frames).
+pub(crate) type Ekf<const S: usize, const C: usize, const N: usize> =
+    msreg_estimator::Ekf<f64, S, C, N>;
 
 /// Shortest stationary start used for the IMU prior, s.
 const MIN_STANDSTILL_S: f64 = 1.0;
@@ -42,7 +46,8 @@ pub struct Start {
     pub planar: Option<PlanarMotion>,
     /// The standstill, if the recording starts with one (zero-velocity updates run there).
     pub standstill: Option<Standstill>,
-    imu: InitialState<f64, 2>,
+    /// The IMU state and its sigmas (no sensors yet: [`Start::prior`] adds them).
+    imu: InitialState<f64, 0>,
 }
 
 /// `pose0`'s rotation increments on the IMU clock (prior time offset).
@@ -85,9 +90,9 @@ pub fn start(input: &MonitorInput) -> Result<Start, MonitorError> {
     })
 }
 
-fn at_rest(s: &Standstill) -> Result<(InitialState<f64, 2>, String), MonitorError> {
+fn at_rest(s: &Standstill) -> Result<(InitialState<f64, 0>, String), MonitorError> {
     let mut state =
-        InitialState::<f64, 2>::at_rest(s.accel_mean).ok_or(MonitorError::NotGravity {
+        InitialState::<f64, 0>::at_rest(s.accel_mean).ok_or(MonitorError::NotGravity {
             accel_norm: s.accel_mean.norm(),
         })?;
     state.imu.gyro_bias = s.gyro_mean;
@@ -98,7 +103,7 @@ fn at_rest(s: &Standstill) -> Result<(InitialState<f64, 2>, String), MonitorErro
 fn moving(
     input: &MonitorInput,
     fit: Option<&GyroBiasEstimate>,
-) -> Result<(InitialState<f64, 2>, String), MonitorError> {
+) -> Result<(InitialState<f64, 0>, String), MonitorError> {
     let r0 = input.prior[0].transform.rotation;
     let prior = moving_start(
         input.imu,
@@ -112,8 +117,8 @@ fn moving(
         MovingStart::NotNeeded => MonitorError::NoImuPrior,
     })?;
     let accel = input.imu[0].accel;
-    let mut state = InitialState::<f64, 2>::at_rest(accel)
-        .or_else(|| InitialState::<f64, 2>::at_rest(Vector3::new(0.0, 0.0, 9.81)))
+    let mut state = InitialState::<f64, 0>::at_rest(accel)
+        .or_else(|| InitialState::<f64, 0>::at_rest(Vector3::new(0.0, 0.0, 9.81)))
         .ok_or(MonitorError::NoImuPrior)?;
     state.imu.rotation =
         convert::pose::<f64>(&Isometry3::from_parts(Default::default(), prior.rotation)).rotation;
@@ -137,28 +142,48 @@ fn moving(
     Ok((state, words))
 }
 
-/// Everything the monitor's filter starts from: the one source of the host's f64 filter
-/// (`msreg monitor`) and of the device's configuration (`msreg link replay`, which sends
-/// these values as they are).
+/// The IMU part of `imu` with `S` sensors at their defaults.
+fn with_sensors<const S: usize>(imu: &InitialState<f64, 0>) -> InitialState<f64, S> {
+    InitialState {
+        imu: imu.imu,
+        sigma_orientation: imu.sigma_orientation,
+        sigma_position: imu.sigma_position,
+        sigma_velocity: imu.sigma_velocity,
+        sigma_gyro_bias: imu.sigma_gyro_bias,
+        sigma_accel_bias: imu.sigma_accel_bias,
+        sensors: [SensorPrior::default(); S],
+    }
+}
+
+/// Everything the monitor's filter with `S` pose sensors starts from: the one source of the
+/// host's f64 filter (`msreg monitor`) and, with two, of the device's configuration (`msreg
+/// link replay`, which sends these values as they are).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct FilterPrior {
+pub struct FilterPrior<const S: usize = 2> {
     /// Filter and health-monitor tuning.
     pub config: FilterConfig<f64>,
-    /// The IMU state and both sensors' priors, with sigmas.
-    pub init: InitialState<f64, 2>,
-    /// Planar motion: the lever arm of both sensors along this IMU-frame axis is held.
+    /// The IMU state and every sensor's prior, with sigmas.
+    pub init: InitialState<f64, S>,
+    /// Planar motion: the lever arm of every sensor along this IMU-frame axis is held.
     pub hold_axis: Option<Vector3<f64>>,
     /// Zero-velocity updates while IMU stamps are at or before this (a standstill start).
     pub zero_velocity_until_ns: Option<u64>,
 }
 
-impl FilterPrior {
-    /// The filter at this prior.
+impl FilterPrior<2> {
+    /// The filter at this prior (two sensors: the device's monitoring layout).
     pub fn filter(&self) -> Result<MonitorEkf<f64>, MonitorError> {
-        let mut ekf = MonitorEkf::<f64>::new(&self.config, &self.init)
+        self.filter_of()
+    }
+}
+
+impl<const S: usize> FilterPrior<S> {
+    /// The filter at this prior, in the layout with `C` clones and `N` error states.
+    pub fn filter_of<const C: usize, const N: usize>(&self) -> Result<Ekf<S, C, N>, MonitorError> {
+        let mut ekf = Ekf::<S, C, N>::new(&self.config, &self.init)
             .map_err(|error| MonitorError::InvalidPrior { error })?;
         if let Some(axis) = self.hold_axis {
-            for s in MonitorEkf::<f64>::sensor_ids() {
+            for s in Ekf::<S, C, N>::sensor_ids() {
                 ekf.hold_translation_axis(s, Some(axis))
                     .map_err(|error| MonitorError::PlanarAxis { error })?;
             }
@@ -168,16 +193,19 @@ impl FilterPrior {
 }
 
 impl Start {
-    /// The prior at this start with the calibration of record and the given sigmas, the
-    /// lever arm along the planar axis held for both sensors.
-    pub fn prior(
+    /// The prior at this start with the calibration of record and the given sigmas (one per
+    /// sensor of `input`), the lever arm along the planar axis held for every sensor.
+    pub fn prior<const S: usize>(
         &self,
         input: &MonitorInput,
         config: &FilterConfig<f64>,
-        sigmas: &[ExtrinsicSigmas; 2],
-    ) -> FilterPrior {
-        let mut state = self.imu;
-        for (s, sigma) in MonitorEkf::<f64>::sensor_ids().into_iter().zip(sigmas) {
+        sigmas: &[ExtrinsicSigmas],
+    ) -> FilterPrior<S> {
+        let mut state = with_sensors::<S>(&self.imu);
+        for (s, sigma) in msreg_estimator::SensorId::all::<S>()
+            .into_iter()
+            .zip(sigmas)
+        {
             let prior = &input.prior[s.index()];
             state = state
                 .with_extrinsic(

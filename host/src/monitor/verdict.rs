@@ -53,7 +53,7 @@ impl TranslationChange {
 /// One sensor's verdict.
 #[derive(Debug, Clone, Copy, Serialize, PartialEq)]
 pub struct SensorVerdict {
-    /// `pose0`, `pose1`.
+    /// `pose0`, `pose1`, ...
     pub sensor: &'static str,
     /// A step alarm was raised on the sensor: its mounting changed.
     pub moved: bool,
@@ -250,10 +250,13 @@ impl Verdict {
                     )
                 })
                 .collect();
+            let count = match self.sensors.len() {
+                1 => "the one sensor".to_string(),
+                n => format!("all {n} sensors"),
+            };
             return vec![format!(
-                "OK: all {} sensors within {rot:.2} deg / {trans:.1} mm of the calibration of \
-                 record ({}); no action needed",
-                self.sensors.len(),
+                "OK: {count} within {rot:.2} deg / {trans:.1} mm of the calibration of record \
+                 ({}); no action needed",
                 each.join("; ")
             )];
         }

@@ -9,9 +9,17 @@
 //!   camera or a VIO front end); a monocular VO, known only up to scale, would need a scale
 //!   state this filter does not have.
 //!
-//! Either sensor can be knocked (a 1 deg rotation of its mounting, by default the camera's,
-//! partway through). Both odometries come from [`super::synthesize_odometry`]: each increment
-//! of the true sensor motion perturbed by the noise its `sensor.yaml` states.
+//! That is the default of two pose sensors; [`DriveSimConfig::pose_sensors`] takes any number
+//! from one (`pose0` alone, drawn exactly as in the two-sensor drive of the same seed) up:
+//! `pose2`, `pose3`, ... are further LiDAR odometries ([`DriveSimConfig::extra`]), each with
+//! its own mounting ([`super::random_mounting`]), time offset and noise, drawn from random
+//! streams of their own ([`EXTRA_SENSOR_STREAMS`]), so adding a sensor leaves the others'
+//! data unchanged.
+//!
+//! Any sensor can be knocked (a 1 deg rotation of its mounting, by default the camera's,
+//! partway through). Every odometry comes from [`super::synthesize_odometry`]: each increment
+//! of the true sensor motion (the trajectory and the sensor's own mounting) perturbed by the
+//! noise its `sensor.yaml` states.
 //!
 //! The vehicle also carries its calibration of record: `calibration.yaml` in the dataset, the
 //! true mountings and time offsets before any knock, each perturbed by the sigmas it states
@@ -32,14 +40,21 @@ use super::drive::DriveConfig;
 use super::odometry::{mounting_at, pose_sensor_yaml};
 use super::trajectory::{MotionKind, Trajectory, TrajectoryConfig};
 use super::{
-    imu_noise_yaml, random_mounting, rng_for, simulate_motion, synthesize_odometry, Stream,
+    imu_noise_yaml, random_mounting, rng_for, seeded_rng, simulate_motion, synthesize_odometry,
+    Stream,
 };
 use crate::dataset::{
-    write_groundtruth_csv, write_imu_csv, write_pose_csv, DatasetError, DatasetYaml,
-    ExtrinsicEstimate, GroundTruthRecord, ImuRecord, PosePairCalibration, PoseRecord,
+    write_groundtruth_csv, write_imu_csv, write_pose_csv, CalibrationResult, DatasetError,
+    DatasetYaml, ExtrinsicEstimate, GroundTruthRecord, ImuRecord, PoseRecord, SectionName,
     CALIBRATION_OF_RECORD_YAML, DATASET_YAML, GROUNDTRUTH_EXTRINSICS_YAML,
     GROUNDTRUTH_TRAJECTORY_CSV, IMU_CSV, IMU_YAML,
 };
+
+/// Random streams of the pose sensors after the first two: sensor `k >= 2` draws its
+/// mounting, time offset, knock axis and calibration of record from stream
+/// `EXTRA_SENSOR_STREAMS + 2 k` and its odometry noise from the next (the simulators' other
+/// streams are below 300: `sim.rs`).
+pub const EXTRA_SENSOR_STREAMS: u64 = 300;
 
 /// The knock's ground truth.
 pub const GROUNDTRUTH_KNOCK_YAML: &str = "groundtruth/knock.yaml";
@@ -53,6 +68,20 @@ pub enum KnockTarget {
     Pose0,
     /// `pose1`, the camera.
     Pose1,
+    /// `poseK` of any index `K` (`Pose(0)` is `Pose0`, `Pose(1)` is `Pose1`).
+    Pose(usize),
+}
+
+impl KnockTarget {
+    /// The knocked sensor's index, if any.
+    pub fn index(&self) -> Option<usize> {
+        match *self {
+            KnockTarget::None => None,
+            KnockTarget::Pose0 => Some(0),
+            KnockTarget::Pose1 => Some(1),
+            KnockTarget::Pose(k) => Some(k),
+        }
+    }
 }
 
 /// Options of the drive scenario.
@@ -70,6 +99,11 @@ pub struct DriveSimConfig {
     pub lidar: PoseSimConfig,
     /// Camera VO (`pose1`); likewise.
     pub camera: PoseSimConfig,
+    /// Number of pose sensors (at least 1): `pose0` the LiDAR, `pose1` the camera, `pose2`
+    /// on further LiDAR odometries with [`DriveSimConfig::extra`].
+    pub pose_sensors: usize,
+    /// LiDAR odometry of `pose2`, `pose3`, ...; likewise.
+    pub extra: PoseSimConfig,
     /// Time offsets are drawn uniformly in +- this, s.
     pub max_time_offset_s: f64,
     /// Knocked sensor.
@@ -106,6 +140,14 @@ impl Default for DriveSimConfig {
             camera: PoseSimConfig {
                 rate_hz: 20.0,
                 rotation_noise_rad: 0.1f64.to_radians(),
+                translation_noise_m: 0.01,
+                ..PoseSimConfig::default()
+            },
+            pose_sensors: 2,
+            // A second LiDAR's scan-to-scan odometry, as pose0's.
+            extra: PoseSimConfig {
+                rate_hz: 10.0,
+                rotation_noise_rad: 0.05f64.to_radians(),
                 translation_noise_m: 0.01,
                 ..PoseSimConfig::default()
             },
@@ -151,8 +193,9 @@ pub struct DriveSim {
     pub imu: Vec<ImuRecord>,
     /// `groundtruth/trajectory.csv`.
     pub groundtruth: Vec<GroundTruthRecord>,
-    /// `pose0` (LiDAR odometry) and `pose1` (camera VO).
-    pub sensors: [PoseSensorSim; 2],
+    /// `pose0` (LiDAR odometry), `pose1` (camera VO), `pose2`, ... (LiDAR odometries): as
+    /// many as [`DriveSimConfig::pose_sensors`].
+    pub sensors: Vec<PoseSensorSim>,
 }
 
 /// A forward-looking camera: optical axis (z) along the vehicle's x, image x to its right
@@ -230,6 +273,25 @@ pub fn simulate_drive(config: &DriveSimConfig) -> Result<DriveSim, SimError> {
             message: "knock time and angle must be finite".into(),
         });
     }
+    if config.pose_sensors == 0 {
+        return Err(SimError::InvalidOption {
+            option: "pose-sensors",
+            message: "a drive needs at least one pose sensor".into(),
+        });
+    }
+    if let Some(k) = config
+        .knock_target
+        .index()
+        .filter(|&k| k >= config.pose_sensors)
+    {
+        return Err(SimError::InvalidOption {
+            option: "knock-sensor",
+            message: format!(
+                "pose{k} is knocked but the drive has {} pose sensor(s)",
+                config.pose_sensors
+            ),
+        });
+    }
     let (clock, trajectory, imu) = simulate_motion(
         config.seed,
         DEFAULT_START_STAMP_NS,
@@ -240,78 +302,121 @@ pub fn simulate_drive(config: &DriveSimConfig) -> Result<DriveSim, SimError> {
     let mut rng = rng_for(config.seed, Stream::DriveMounting);
     let mountings = [random_mounting(&mut rng), camera_mounting(&mut rng)];
     let bases = [&config.lidar, &config.camera];
-    let targets = [KnockTarget::Pose0, KnockTarget::Pose1];
-    let sensors: Vec<PoseSensorSim> = (0..2)
-        .map(|k| {
-            let mut pose_config = bases[k].clone();
-            pose_config.time_offset_s = rng.gen_range(-1.0..=1.0) * config.max_time_offset_s;
-            let delta = knock_delta(&mountings[k], config.knock_deg, &mut rng);
-            pose_config.knock = (config.knock_target == targets[k]).then_some(Knock {
-                at_s: config.knock_at_s,
-                delta,
-            });
-            let prior = prior_of(&mountings[k], pose_config.time_offset_s, config, &mut rng);
-            let stream = [Stream::DriveOdometry0, Stream::DriveOdometry1][k];
-            let poses = synthesize_odometry(
-                &trajectory,
-                &mountings[k],
-                &pose_config,
-                clock,
-                config.duration_s,
-                &mut rng_for(config.seed, stream),
-            );
-            PoseSensorSim {
-                config: pose_config,
-                t_imu_pose: mountings[k],
-                poses,
-                prior,
-            }
-        })
-        .collect();
-    let [lidar, camera]: [PoseSensorSim; 2] =
-        sensors.try_into().map_err(|_| SimError::InvalidOption {
-            option: "sensors",
-            message: "two sensors".into(),
-        })?;
+    let streams = [Stream::DriveOdometry0, Stream::DriveOdometry1];
+    let mut sensors = Vec::with_capacity(config.pose_sensors);
+    for k in 0..config.pose_sensors {
+        let sensor = if k < 2 {
+            let odometry = &mut rng_for(config.seed, streams[k]);
+            let sensor = SensorDraw::new(mountings[k], bases[k], config, k, &mut rng);
+            sensor.simulate(&trajectory, clock, config, odometry)
+        } else {
+            let stream = EXTRA_SENSOR_STREAMS + 2 * k as u64;
+            let mut own = seeded_rng(config.seed, stream);
+            let mounting = random_mounting(&mut own);
+            let sensor = SensorDraw::new(mounting, &config.extra, config, k, &mut own);
+            let odometry = &mut seeded_rng(config.seed, stream + 1);
+            sensor.simulate(&trajectory, clock, config, odometry)
+        };
+        sensors.push(sensor);
+    }
     Ok(DriveSim {
         config: config.clone(),
         trajectory,
         imu: imu.records,
         groundtruth: imu.groundtruth,
-        sensors: [lidar, camera],
+        sensors,
     })
 }
 
-impl DriveSim {
-    /// The calibration of record.
-    pub fn prior(&self) -> PosePairCalibration {
-        PosePairCalibration {
-            pose0: Some(self.sensors[0].prior),
-            pose1: Some(self.sensors[1].prior),
+/// What is drawn for one pose sensor before its odometry.
+struct SensorDraw {
+    mounting: Isometry3<f64>,
+    config: PoseSimConfig,
+    prior: ExtrinsicEstimate,
+}
+
+impl SensorDraw {
+    /// Time offset, knock and calibration of record of sensor `k`, mounted at `mounting`,
+    /// drawn from `rng` in this order.
+    fn new(
+        mounting: Isometry3<f64>,
+        base: &PoseSimConfig,
+        c: &DriveSimConfig,
+        k: usize,
+        rng: &mut impl Rng,
+    ) -> Self {
+        let mut config = base.clone();
+        config.time_offset_s = rng.gen_range(-1.0..=1.0) * c.max_time_offset_s;
+        let delta = knock_delta(&mounting, c.knock_deg, rng);
+        config.knock = (c.knock_target.index() == Some(k)).then_some(Knock {
+            at_s: c.knock_at_s,
+            delta,
+        });
+        let prior = prior_of(&mounting, config.time_offset_s, c, rng);
+        Self {
+            mounting,
+            config,
+            prior,
         }
+    }
+
+    /// The sensor with its odometry along `trajectory`, noise from `rng`.
+    fn simulate(
+        self,
+        trajectory: &Trajectory,
+        clock: super::Clock,
+        c: &DriveSimConfig,
+        rng: &mut impl Rng,
+    ) -> PoseSensorSim {
+        let poses = synthesize_odometry(
+            trajectory,
+            &self.mounting,
+            &self.config,
+            clock,
+            c.duration_s,
+            rng,
+        );
+        PoseSensorSim {
+            config: self.config,
+            t_imu_pose: self.mounting,
+            poses,
+            prior: self.prior,
+        }
+    }
+}
+
+/// The result file with `poseK` = `estimate(sensor K)` for every sensor.
+fn pose_sections(
+    sensors: &[PoseSensorSim],
+    estimate: impl Fn(&PoseSensorSim) -> ExtrinsicEstimate,
+) -> CalibrationResult {
+    let mut result = CalibrationResult::new();
+    for (k, s) in sensors.iter().enumerate() {
+        let index = u16::try_from(k).unwrap_or(u16::MAX);
+        result.set_extrinsic(SectionName::pose(index), estimate(s));
+    }
+    result
+}
+
+impl DriveSim {
+    /// The calibration of record, a `poseK` section per sensor.
+    pub fn prior(&self) -> CalibrationResult {
+        pose_sections(&self.sensors, |s| s.prior)
     }
 
     /// The true mountings at the end of the recording (zero sigmas).
-    pub fn final_extrinsics(&self) -> PosePairCalibration {
-        let exact = |s: &PoseSensorSim| {
-            Some(ExtrinsicEstimate::exact(
-                s.final_t_imu_pose(),
-                s.config.time_offset_s,
-            ))
-        };
-        PosePairCalibration {
-            pose0: exact(&self.sensors[0]),
-            pose1: exact(&self.sensors[1]),
-        }
+    pub fn final_extrinsics(&self) -> CalibrationResult {
+        pose_sections(&self.sensors, |s| {
+            ExtrinsicEstimate::exact(s.final_t_imu_pose(), s.config.time_offset_s)
+        })
     }
 
-    /// The knocked sensor's name and knock time, s after the start, if any.
-    pub fn knock(&self) -> Option<(&'static str, f64)> {
-        let names = ["pose0", "pose1"];
+    /// The knocked sensor's name (`poseK`) and knock time, s after the start, if any.
+    pub fn knock(&self) -> Option<(String, f64)> {
         self.sensors
             .iter()
-            .zip(names)
-            .find_map(|(s, n)| s.config.knock.map(|k| (n, k.at_s)))
+            .enumerate()
+            .find_map(|(k, s)| s.config.knock.map(|kn| (format!("pose{k}"), kn.at_s)))
     }
 
     /// `groundtruth/knock.yaml`.
@@ -326,10 +431,9 @@ impl DriveSim {
                     "sensor: {name}\nat_s: {at_s}\nangle_deg: {}\n",
                     self.config.knock_deg
                 ));
-                let before = PosePairCalibration {
-                    pose0: Some(ExtrinsicEstimate::exact(self.sensors[0].t_imu_pose, 0.0)),
-                    pose1: Some(ExtrinsicEstimate::exact(self.sensors[1].t_imu_pose, 0.0)),
-                };
+                let before = pose_sections(&self.sensors, |s| {
+                    ExtrinsicEstimate::exact(s.t_imu_pose, 0.0)
+                });
                 let indent = |t: String| t.lines().map(|l| format!("  {l}\n")).collect::<String>();
                 text.push_str("before:\n");
                 text.push_str(&indent(before.to_yaml_string()));
@@ -343,25 +447,55 @@ impl DriveSim {
     /// `dataset.yaml`.
     fn metadata(&self) -> DatasetYaml {
         let c = &self.config;
-        DatasetYaml {
-            sensors: vec!["imu0".into(), "pose0".into(), "pose1".into()],
-            description: format!(
-                "msreg simulator: drive, seed {}, {} s; pose0 = LiDAR odometry, pose1 = metric \
-                 camera visual odometry; knock {:?} at {} s by {} deg",
-                c.seed, c.duration_s, c.knock_target, c.knock_at_s, c.knock_deg
-            ),
-            rates_hz: BTreeMap::from([
-                ("imu0".to_string(), c.imu.rate_hz),
-                ("pose0".to_string(), c.lidar.rate_hz),
-                ("pose1".to_string(), c.camera.rate_hz),
-            ]),
+        let names = self.pose_names();
+        let kinds = [
+            "pose0 = LiDAR odometry",
+            "pose1 = metric camera visual odometry",
+        ];
+        let mut what: Vec<String> = kinds
+            .iter()
+            .take(names.len())
+            .map(|k| k.to_string())
+            .collect();
+        if names.len() > 2 {
+            what.push(format!(
+                "pose2..{} = LiDAR odometries",
+                names[names.len() - 1]
+            ));
         }
+        let mut rates_hz = BTreeMap::from([("imu0".to_string(), c.imu.rate_hz)]);
+        for (name, s) in names.iter().zip(&self.sensors) {
+            rates_hz.insert(name.clone(), s.config.rate_hz);
+        }
+        DatasetYaml {
+            sensors: std::iter::once("imu0".to_string()).chain(names).collect(),
+            description: format!(
+                "msreg simulator: drive, seed {}, {} s; {}; knock {:?} at {} s by {} deg",
+                c.seed,
+                c.duration_s,
+                what.join(", "),
+                c.knock_target,
+                c.knock_at_s,
+                c.knock_deg
+            ),
+            rates_hz,
+        }
+    }
+
+    /// `pose0`, `pose1`, ... of the sensors.
+    fn pose_names(&self) -> Vec<String> {
+        (0..self.sensors.len())
+            .map(|k| format!("pose{k}"))
+            .collect()
     }
 
     /// Writes the dataset under `dir`.
     pub fn write(&self, dir: impl AsRef<Path>) -> Result<(), DatasetError> {
         let dir = dir.as_ref();
-        super::write::create_dirs(dir, &["imu0", "pose0", "pose1", "groundtruth"])?;
+        let names = self.pose_names();
+        let mut dirs: Vec<&str> = vec!["imu0", "groundtruth"];
+        dirs.extend(names.iter().map(String::as_str));
+        super::write::create_dirs(dir, &dirs)?;
         self.metadata().write(dir.join(DATASET_YAML))?;
         write_imu_csv(dir.join(IMU_CSV), &self.imu)?;
         imu_noise_yaml(&self.config.imu).write(dir.join(IMU_YAML))?;
