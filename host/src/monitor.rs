@@ -20,7 +20,6 @@ pub mod drive_bag;
 mod files;
 mod replay;
 pub mod start;
-pub mod target_odometry;
 pub mod timeline;
 mod verdict;
 

@@ -1,6 +1,6 @@
 //! The monitor on a real recording (issue 34, item 3): EuRoC MAV `imu_april` (real ADIS16448
 //! at 200 Hz, 71.9 s, AprilGrid corners of cam0 at 20 Hz; `../shared/data/README.md`) with
-//! cam0's per-frame PnP pose as ONE pose sensor (`monitor::target_odometry`) and Kalibr's
+//! cam0's per-frame PnP pose as ONE pose sensor (`calibrate::pnp_odometry`, MoCal's odometry) and Kalibr's
 //! extrinsic as the calibration of record. Healthy: no alarm, the final estimate near the
 //! record. Knocked: the poses after `t` rotated by 1 deg (the camera's mount turned), flagged
 //! on the sensor within 5 s. Numbers: docs/monitor.md, "A real recording" (not met yet: the
@@ -13,11 +13,11 @@ use std::path::Path;
 
 use msreg_estimator::CornerObservation;
 use msreg_host::calibrate::camera_imu::CornerFrame;
+use msreg_host::calibrate::pnp_odometry::pnp_odometry;
 use msreg_host::camera_yaml::read_camera_yaml;
 use msreg_host::dataset::{
     read_observed_corners, Dataset, ExtrinsicEstimate, PoseRecord, PoseSensorYaml,
 };
-use msreg_host::monitor::target_odometry::target_odometry;
 use msreg_host::monitor::{monitor, MonitorInput, MonitorOptions, MonitorReport};
 use nalgebra::{Isometry3, Matrix4, Rotation3, Translation3, UnitQuaternion, Vector3};
 
@@ -72,7 +72,7 @@ struct Real {
 fn load() -> Option<Real> {
     let dir = msreg_host::shared_data::dir_or_skip(SET)?;
     let camera = read_camera_yaml(&dir.join("cam0/camera.yaml")).unwrap();
-    let (odometry, pose_noise) = target_odometry(&camera, &corner_frames(&dir));
+    let (odometry, pose_noise) = pnp_odometry(&camera, &corner_frames(&dir));
     // Kalibr states no sigma in the file: the record is credited with 0.1 deg / 5 mm per
     // axis (Kalibr and Basalt differ by 0.34 deg / 8 mm on this recording,
     // cli/tests/euroc_camera_imu_real.rs), and a zero time offset.
