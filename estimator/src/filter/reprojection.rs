@@ -365,3 +365,175 @@ fn no_innovation<T: Scalar>() -> ExtrinsicInnovation<T> {
         rotation_covariance: Matrix3::zeros(),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    //! The reprojection Jacobian of a rig's second camera (issue 32): in a two-camera layout
+    //! the corners camera 1 sees depend on its own extrinsic and time offset, the IMU pose and
+    //! the target, and on nothing of camera 0.
+    use super::*;
+    use crate::camera::{radtan::RadTan, Distortion, Intrinsics, Projection};
+    use crate::filter::FilterConfig;
+    use crate::propagate::{ImuNoise, ImuSample};
+    use crate::state::InitialState;
+    use crate::testing::assert_mat_close;
+    use nalgebra::{SVector, UnitQuaternion, Vector2};
+
+    /// Two cameras, one target: `15 + 2 * 7 + 6` error states.
+    const N: usize = 35;
+    type RigEkf = Ekf<f64, 2, 0, N, 1>;
+    const CAM0: SensorId = SensorId::at::<0, 2>();
+    const CAM1: SensorId = SensorId::at::<1, 2>();
+    const TARGET: FrameId = FrameId::at::<0, 1>();
+    const T0: u64 = 1_700_000_000_000_000_000;
+    /// Camera 1's image stamp: between two IMU samples, after the last fed one.
+    const STAMP: u64 = T0 + 240_000_000 + 1_234_567;
+
+    fn camera() -> Camera<f64> {
+        Camera::new(
+            Projection::Pinhole,
+            Intrinsics {
+                fu: 460.0,
+                fv: 458.0,
+                cu: 367.0,
+                cv: 248.0,
+            },
+            Distortion::RadTan(RadTan {
+                k1: -0.28,
+                k2: 0.07,
+                p1: 2e-4,
+                p2: 2e-5,
+                k3: 0.0,
+            }),
+            (752, 480),
+        )
+        .expect("camera")
+    }
+
+    /// `T_I_C0`, and `T_I_C1` 11 cm along camera 0's x axis, turned 4 deg towards it.
+    fn extrinsics() -> (Pose<f64>, Pose<f64>) {
+        let c0 = Pose::new(
+            UnitQuaternion::from_euler_angles(-1.5, 0.03, -1.6),
+            Vector3::new(0.06, -0.02, 0.01),
+        );
+        let c0_c1 = Pose::new(
+            UnitQuaternion::from_euler_angles(0.005, -0.07, 0.003),
+            Vector3::new(0.11, 0.002, -0.003),
+        );
+        (c0, c0.compose(&c0_c1))
+    }
+
+    /// A spinning, accelerating rig with camera 1's time offset `td1` (camera 0's 2 ms), the
+    /// target 0.8 m in front of camera 1 at 4 ms after the stamp whatever `td1` is.
+    fn rig_filter(td1: f64) -> RigEkf {
+        let (c0, c1) = extrinsics();
+        let mut init = InitialState::<f64, 2>::at_rest(Vector3::new(0.0, 0.0, 9.81))
+            .expect("gravity")
+            .with_extrinsic(CAM0, c0, 0.02, 0.02)
+            .with_time_offset(CAM0, 0.002, 0.01)
+            .with_extrinsic(CAM1, c1, 0.02, 0.02)
+            .with_time_offset(CAM1, td1, 0.01);
+        init.imu.velocity = Vector3::new(0.7, -0.3, 0.2);
+        init.imu.rotation = UnitQuaternion::from_euler_angles(0.3, -0.2, 1.0);
+        let mut ekf = RigEkf::new(&FilterConfig::new(ImuNoise::vn300()), &init).expect("prior");
+        // Samples every 2.5 ms up to 240 ms, then the look-ahead at 260 ms: the filter
+        // stands at 240 ms, before the image.
+        for stamp_ns in (0..=96u64)
+            .map(|k| T0 + k * 2_500_000)
+            .chain([T0 + 260_000_000])
+        {
+            ekf.propagate(&ImuSample {
+                stamp_ns,
+                gyro: Vector3::new(1.2, -0.8, 0.5),
+                accel: Vector3::new(0.5, 1.0, 9.0),
+            })
+            .expect("sample");
+        }
+        let mut at_image = ekf.clone();
+        at_image.advance_to(STAMP + 4_000_000).expect("advance");
+        let target_in_camera = Pose::new(
+            UnitQuaternion::from_euler_angles(0.2, -0.3, 0.1),
+            Vector3::new(-0.12, -0.1, 0.8),
+        );
+        let target = at_image
+            .imu()
+            .pose()
+            .compose(&c1)
+            .compose(&target_in_camera);
+        ekf.init_frame(TARGET, target, 0.05, 0.05).expect("frame");
+        ekf
+    }
+
+    /// Where camera 1 sees the corner `p` at its image's IMU time.
+    fn predicted(ekf: &RigEkf, p: &Vector3<f64>) -> Vector2<f64> {
+        let mut at_image = ekf.clone();
+        let t = at_image
+            .imu_time(CAM1, STAMP)
+            .expect("sensor")
+            .max(at_image.time_ns());
+        at_image.advance_to(t).expect("advance");
+        let p_c = reprojection::point_in_camera(
+            &at_image.imu().pose(),
+            &at_image.extrinsic(CAM1),
+            &at_image.frame(TARGET).expect("frame"),
+            p,
+        );
+        camera().project(&p_c).expect("in view").pixel
+    }
+
+    #[test]
+    fn second_camera_jacobian_matches_central_differences_over_the_whole_state() {
+        // Given the rig standing at camera 1's image IMU time
+        let td1 = 0.005;
+        let corner = Vector3::new(0.15, 0.05, 0.0);
+        let mut at_image = rig_filter(td1);
+        at_image
+            .advance_to(at_image.imu_time(CAM1, STAMP).expect("sensor"))
+            .expect("advance");
+        // When every error-state direction is perturbed there
+        let h = 1e-6;
+        let mut numeric = SMatrix::<f64, 2, N>::zeros();
+        for i in 0..N {
+            let shifted = |sign: f64| {
+                let mut e = at_image.clone();
+                let mut dx = SVector::<f64, N>::zeros();
+                dx[i] = sign * h;
+                e.apply_correction(&dx).expect("finite");
+                predicted(&e, &corner)
+            };
+            numeric.set_column(i, &((shifted(1.0) - shifted(-1.0)) / (2.0 * h)));
+        }
+        // and camera 1's time offset through the propagation to another IMU time
+        let h_td = 1e-5;
+        let td_column = (predicted(&rig_filter(td1 + h_td), &corner)
+            - predicted(&rig_filter(td1 - h_td), &corner))
+            / (2.0 * h_td);
+        numeric.set_column(Layout::<2, 0>::time_offset(CAM1).idx, &td_column);
+        // Then the analytic Jacobian agrees, camera 0's columns zero on both sides
+        let lin = reprojection::linearize(
+            &camera(),
+            &at_image.imu().pose(),
+            &at_image.extrinsic(CAM1),
+            &at_image.frame(TARGET).expect("frame"),
+            &corner,
+            &Vector2::zeros(),
+        )
+        .expect("in view");
+        let gyro = at_image.imu_now.expect("imu").gyro;
+        let analytic: SMatrix<f64, 2, N> = at_image
+            .reprojection_jacobian(CAM1, TARGET, &lin, &gyro)
+            .to_dense();
+        let cam0 = Layout::<2, 0>::extrinsic(CAM0).idx;
+        assert!(analytic.columns(cam0, 7).amax() == 0.0);
+        assert!(numeric.columns(cam0, 7).amax() < 1e-6, "{numeric}");
+        assert!(
+            analytic
+                .columns(Layout::<2, 0>::extrinsic(CAM1).idx, 7)
+                .amax()
+                > 1.0
+        );
+        // Pixels per unit error are O(500); the time-offset column carries the midpoint
+        // integrator's O(|w| |a| dt^2) velocity inconsistency (as the one-camera test).
+        assert_mat_close(&(analytic / 1000.0), &(numeric / 1000.0), 2e-4);
+    }
+}
