@@ -33,6 +33,7 @@ mod clock;
 mod config;
 pub mod drive;
 pub mod drive_sim;
+pub mod imus;
 #[cfg(test)]
 mod drive_tests;
 mod extrinsic;
@@ -64,6 +65,7 @@ pub use drive::DriveConfig;
 pub use drive_sim::{simulate_drive, DriveSim, DriveSimConfig, KnockTarget};
 pub use extrinsic::{random_mounting, random_pose};
 pub use imu::{imu_noise_yaml, synthesize_imu, ImuSynthesis};
+pub use imus::{simulate_imus, ImusSim, ImusSimConfig, SimImu};
 pub use joint::{simulate_joint, JointSim, JointSimConfig};
 pub use lidar::{simulate_lidar_imu, Environment, LidarImuSim, LidarImuSimConfig, LidarSimConfig};
 pub use lidar_camera::{

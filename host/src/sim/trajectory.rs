@@ -211,6 +211,27 @@ impl Trajectory {
         }
     }
 
+    /// The same motion seen by a second body rigidly mounted at `t_i_b` (`T_I_B`, the body
+    /// `B` in this trajectory's `I`): `T_G_B(t) = T_G_I(t) * T_I_B`, with its rate and
+    /// acceleration still analytic (the lever-arm terms of [`Mount`]). A second IMU on the
+    /// rig samples this trajectory.
+    pub fn remounted(&self, t_i_b: &Isometry3<f64>) -> Self {
+        let mount = match &self.mount {
+            None => Mount {
+                t_g_w: Isometry3::identity(),
+                t_f_i: *t_i_b,
+            },
+            Some(m) => Mount {
+                t_g_w: m.t_g_w,
+                t_f_i: m.t_f_i * t_i_b,
+            },
+        };
+        Self {
+            signals: self.signals.clone(),
+            mount: Some(mount),
+        }
+    }
+
     /// The constant frames of a look-at trajectory (`None` for the plain one).
     pub fn mount(&self) -> Option<&Mount> {
         self.mount.as_ref()
