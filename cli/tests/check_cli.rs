@@ -356,3 +356,32 @@ fn the_real_euroc_recording_passes_with_its_offset_and_scale() {
     let gravity = number_after(&t, "gravity ");
     assert!((gravity - 9.81).abs() < 0.1, "{t}");
 }
+
+/// `msreg demo` without `--keep` prints no path of its temporary directory (it is removed at
+/// the end); with `--keep` it prints that directory.
+#[test]
+fn demo_prints_only_the_keep_path() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let scratch = dir.path().join("scratch");
+    std::fs::create_dir(&scratch).expect("mkdir");
+    let out = Command::new(env!("CARGO_BIN_EXE_msreg"))
+        .args(["demo", "--only", "pose-imu"])
+        .env("TMPDIR", &scratch)
+        .output()
+        .expect("the msreg binary runs");
+    let t = text(&out);
+    assert!(out.status.success(), "{t}");
+    assert!(t.contains("pose0"), "{t}");
+    assert!(!t.contains(scratch.to_str().expect("utf-8")), "{t}");
+    let keep = dir.path().join("kept");
+    let out = msreg(&[
+        "demo",
+        "--only",
+        "pose-imu",
+        "--keep",
+        keep.to_str().expect("utf-8"),
+    ]);
+    let t = String::from_utf8_lossy(&out.stdout).to_string();
+    assert!(out.status.success(), "{t}");
+    assert!(t.contains(&format!("in {}", keep.display())), "{t}");
+}
