@@ -10,6 +10,7 @@ pub mod convert;
 pub mod demo;
 pub mod detect;
 pub mod export;
+pub mod imu_imu;
 pub mod infra;
 pub mod joint;
 pub mod lidar_camera;

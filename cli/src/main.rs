@@ -133,6 +133,9 @@ enum Scenario {
     /// N cameras on a rig waved in front of a checkerboard or AprilGrid (intrinsics: any
     /// Kalibr model, true intrinsics, T_cn_cnm1 and corners in groundtruth/).
     Cameras(cli::sim_cameras::SimulateCameras),
+    /// A rig of N IMUs on one hand-held motion, each further IMU at its own mounting, rate,
+    /// noise and clock offset (truth in groundtruth/extrinsics.yaml).
+    ImuImu(cli::imu_imu::SimulateImuImu),
 }
 
 #[derive(Args)]
@@ -192,6 +195,9 @@ enum Task {
     /// A static (fisheye) camera registered in a prior map: LiDAR map with reflectivity,
     /// satellite ortho image, GPS prior (chapter 7; ORB + PnP, then mutual information).
     PriorMap(cli::prior_map::CalibratePriorMap),
+    /// Every further IMU (imu1, imu2, ...) against imu0: rotation, lever arm and clock
+    /// offset from both IMUs' gyros and accelerometers (batch least squares).
+    ImuImu(cli::imu_imu::CalibrateImuImu),
 }
 
 #[derive(Args)]
@@ -271,6 +277,9 @@ fn run(command: Command) -> Result<(), Failure> {
         Command::Simulate {
             scenario: Scenario::Infra(args),
         } => Ok(cli::infra::simulate(&args)?),
+        Command::Simulate {
+            scenario: Scenario::ImuImu(args),
+        } => Ok(cli::imu_imu::simulate(&args)?),
         Command::Eval {
             result,
             dataset,
@@ -358,6 +367,7 @@ fn run_task(task: Task) -> Result<(), Failure> {
         Task::Cameras(args) => exit_code_of(cli::cameras::run(&args)?),
         Task::Joint(args) => exit_code_of(cli::joint::run(&args)?),
         Task::PriorMap(args) => exit_code_of(cli::prior_map::calibrate(&args)?),
+        Task::ImuImu(args) => exit_code_of(cli::imu_imu::run(&args)?),
         Task::Infra(args) => match cli::infra::calibrate(&args)? {
             true => Ok(()),
             false => Err(Failure::NotConverged(
@@ -391,6 +401,7 @@ impl Task {
             Task::Joint(args) => &args.output,
             Task::Infra(args) => &args.output,
             Task::PriorMap(args) => &args.output,
+            Task::ImuImu(args) => &args.output,
         }
     }
 
@@ -405,6 +416,7 @@ impl Task {
             Task::Joint(args) => &mut args.dataset,
             Task::Infra(args) => &mut args.dataset,
             Task::PriorMap(args) => &mut args.dataset,
+            Task::ImuImu(args) => &mut args.dataset,
         }
     }
 }
