@@ -33,11 +33,11 @@ mod clock;
 mod config;
 pub mod drive;
 pub mod drive_sim;
-pub mod imus;
 #[cfg(test)]
 mod drive_tests;
 mod extrinsic;
 mod imu;
+pub mod imus;
 pub mod joint;
 pub mod lidar;
 pub mod lidar_camera;
