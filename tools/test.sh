@@ -137,6 +137,8 @@ acceptance=(
   "msreg-host monitor_drive no_alarm_in_ten_unknocked_drives"
   "msreg-host monitor_drive false_alarms_in_forty_unknocked_drives"
   "msreg-host infra_calibrate acceptance_five_seeds"
+  "msreg-host camera_imu_rig two_camera_rig_is_accurate_and_consistent_over_ten_seeds"
+  "msreg-host monitor_pose_sensors one_pose_sensor_false_alarms_in_forty_unknocked_drives"
 )
 step "acceptance runs (${#acceptance[@]} ignored tests by name: cargo test -- --ignored --exact)"
 for entry in "${acceptance[@]}"; do
