@@ -1,5 +1,5 @@
 //! The `msreg` command line as a user meets it: exit codes, messages naming file and line,
-//! result files in the CONVENTIONS.md format.
+//! result files in the docs/formats.md format.
 
 #[path = "../../host/tests/support/common.rs"]
 mod common;

@@ -7,7 +7,7 @@
 //! initialisation is exact. Different frequencies per axis excite every rotation axis,
 //! which the motion-based (hand-eye) extrinsic needs to be observable.
 //!
-//! Frames follow `shared/docs/CONVENTIONS.md`: `G` is z-up with gravity `(0, 0, -9.81)`,
+//! Frames follow docs/formats.md: `G` is z-up with gravity `(0, 0, -9.81)`,
 //! `R_g_i` is the orientation of the IMU in `G` (ZYX Euler: `Rz(yaw) Ry(pitch) Rx(roll)`,
 //! nalgebra's `from_euler_angles`), the accelerometer measures the specific force
 //! `R_g_i^T (a_g - g_g)` and the gyroscope `omega` in the IMU frame.

@@ -1,5 +1,5 @@
 //! ROS bags and MCAP files in: a ROS 1 `.bag` (rosbag crate) or a ROS 2 / any `.mcap`
-//! (mcap crate) converted to the dataset directory layout of CONVENTIONS.md, so every
+//! (mcap crate) converted to the dataset directory layout of docs/formats.md, so every
 //! pipeline reads a recording as it reads a directory.
 //!
 //! Messages are decoded by hand from the ROS 1 wire format or CDR ([`wire`], [`msgs`]), no

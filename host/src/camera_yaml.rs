@@ -1,6 +1,6 @@
 //! Readers of Kalibr's `camera.yaml` (one camchain entry, at top level or under a single
 //! `camN:` key) into a [`Camera`], and of Kalibr's `target.yaml` into a [`Target`]
-//! (CONVENTIONS.md, "Dataset directory"). Errors name the file and, where the YAML has one,
+//! (docs/formats.md, section 2). Errors name the file and, where the YAML has one,
 //! the line.
 
 use std::path::{Path, PathBuf};
@@ -57,7 +57,7 @@ pub enum Target {
 }
 
 /// The plain rectangular board of `target.yaml` (`target_type: board`): origin at its
-/// centre, x along `width_m`, y along `height_m`, z towards the viewer (CONVENTIONS.md).
+/// centre, x along `width_m`, y along `height_m`, z towards the viewer (docs/formats.md).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Board {
     /// Extent along target x, m.
@@ -553,7 +553,7 @@ pub fn camera_yaml_string(camera: &Camera<f64>) -> String {
 }
 
 /// A `camera.yaml` for intrinsic calibration: the model and resolution, and the intrinsics
-/// when the file has them (CONVENTIONS.md, "Any number of sensors").
+/// when the file has them (docs/formats.md, sections 2 and 3).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CameraSpec {
     /// The model of `camera_model` / `distortion_model` (distortion absent: `none`).

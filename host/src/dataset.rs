@@ -1,5 +1,5 @@
 //! Readers and writers of the dataset directory layout and the calibration
-//! result file (docs: CONVENTIONS.md, "Dataset directory" and "Calibration
+//! result file (docs/formats.md, section 2 and "Calibration
 //! result").
 //!
 //! Every reader validates what it reads and fails with a [`DatasetError`]

@@ -2,7 +2,7 @@
 //! a robot with an upward fisheye `F` (cam0) and an ArUco marker `M` drives a loop under
 //! the cameras; its VO keyframes (COLMAP text model), the cameras' marker detections and
 //! the blobs the cameras make in `F` register every camera in one metric frame.
-//! Layout and result keys: CONVENTIONS.md, "Infrastructure camera network"; method and
+//! Layout and result keys: docs/formats.md, section 2.9; method and
 //! numbers: docs/infra.md.
 
 pub mod align;

@@ -1,5 +1,5 @@
 //! LiDAR point clouds: the in-memory [`PointCloud`], the PCD reader and writer
-//! (docs: CONVENTIONS.md, "Dataset directory", `lidar0/<timestamp_ns>.pcd`)
+//! (docs/formats.md, section 2, `lidar0/<timestamp_ns>.pcd`)
 //! and the voxel-grid filter.
 //!
 //! - Coordinates are `f64` ([`Point::xyz`]) like all host math; files carry

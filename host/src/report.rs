@@ -1,5 +1,5 @@
 //! `--report FILE` of every pipeline: the JSON report as it is for `*.json`, or one
-//! self-contained HTML page for `*.html` / `*.htm` (CONVENTIONS.md): the result table with
+//! self-contained HTML page for `*.html` / `*.htm` (docs/formats.md): the result table with
 //! sigmas, convergence with 3-sigma bands, NIS against its chi-square bounds, residual
 //! histograms, per-DoF excitation and sigmas, the reprojection of one image, embedded PNG
 //! overlays and the health events, as far as the report carries them. Figures are inline

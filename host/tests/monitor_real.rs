@@ -9,57 +9,20 @@
 // A test crate: its helpers may panic on bad fixtures.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use std::path::Path;
-
-use msreg_estimator::CornerObservation;
-use msreg_host::calibrate::camera_imu::CornerFrame;
 use msreg_host::calibrate::pnp_odometry::pnp_odometry;
 use msreg_host::camera_yaml::read_camera_yaml;
-use msreg_host::dataset::{
-    read_observed_corners, Dataset, ExtrinsicEstimate, PoseRecord, PoseSensorYaml,
-};
+use msreg_host::dataset::{Dataset, ExtrinsicEstimate, PoseRecord, PoseSensorYaml};
 use msreg_host::monitor::{monitor, MonitorInput, MonitorOptions, MonitorReport};
-use nalgebra::{Isometry3, Matrix4, Rotation3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{UnitQuaternion, Vector3};
 
-const SET: &str = "real/euroc-imu-april-cam0";
+#[path = "support/euroc.rs"]
+mod euroc;
+
+use euroc::{corner_frames, kalibr_t_imu_cam, SET};
 /// The bounds: the healthy estimate's drift from the record (deg) and the latency
 /// of a 1 deg knock (s).
 const MAX_DRIFT_DEG: f64 = 0.3;
 const MAX_LATENCY_S: f64 = 5.0;
-
-/// Kalibr's `T_imu_cam` of cam0 (the inverse of `groundtruth/extrinsics.yaml`'s `T_cam_imu`).
-fn kalibr_t_imu_cam(dir: &Path) -> Isometry3<f64> {
-    let path = dir.join("groundtruth/extrinsics.yaml");
-    let doc: serde_yaml::Value =
-        serde_yaml::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
-    let rows = doc["cam0"]["T_cam_imu"].as_sequence().unwrap();
-    let m = Matrix4::from_fn(|r, c| rows[r][c].as_f64().unwrap());
-    let rotation = Rotation3::from_matrix_unchecked(m.fixed_view::<3, 3>(0, 0).into_owned());
-    Isometry3::from_parts(
-        Translation3::from(m.fixed_view::<3, 1>(0, 3).into_owned()),
-        UnitQuaternion::from_rotation_matrix(&rotation),
-    )
-    .inverse()
-}
-
-/// The corners of every image (their target points from the file).
-fn corner_frames(dir: &Path) -> Vec<CornerFrame> {
-    read_observed_corners(dir.join("cam0/corners.csv"))
-        .unwrap()
-        .into_iter()
-        .map(|image| CornerFrame {
-            stamp_ns: image.stamp_ns,
-            corners: image
-                .corners
-                .iter()
-                .map(|c| CornerObservation {
-                    point_in_target: c.point.unwrap(),
-                    pixel: c.pixel,
-                })
-                .collect(),
-        })
-        .collect()
-}
 
 struct Real {
     dataset: Dataset,

@@ -1,4 +1,4 @@
-//! `msreg simulate prior-map`'s simulator: the layout of CONVENTIONS.md "Camera in a prior
+//! `msreg simulate prior-map`'s simulator: the layout of docs/formats.md "Camera in a prior
 //! map" reads back through the registration's reader; the ground truth, the survey
 //! points, the prior and the three renderings are mutually consistent.
 

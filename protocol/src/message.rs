@@ -1,6 +1,6 @@
 //! The messages. Field order is wire order (postcard: integers as varints, `i32` zig-zag,
 //! `f32` as 4 little-endian bytes, enums as a varint variant index). Units are in the field
-//! names; stamps are `u64` ns of the sender's clock (CONVENTIONS.md), poses follow
+//! names; stamps are `u64` ns of the sender's clock (docs/formats.md), poses follow
 //! `T_a_b` = pose of `b` in `a`, quaternions are Hamilton `[w, x, y, z]`.
 
 use postcard::experimental::max_size::MaxSize;

@@ -10,7 +10,7 @@
 //! hour of the header stamp, and nearer to it than to zero, makes them absolute; otherwise
 //! they are offsets from the header stamp in the first unit of the order. The scan is then
 //! stamped at its first firing, `min(header stamp, earliest point)`, and each point's `t`
-//! is its offset from that stamp (CONVENTIONS.md, `lidar0/<timestamp_ns>.pcd`).
+//! is its offset from that stamp (docs/formats.md, `lidar0/<timestamp_ns>.pcd`).
 //!
 //! Points with a non-finite coordinate, or exactly at the origin (the "no return" marker of
 //! organised clouds), are dropped.

@@ -1,5 +1,5 @@
 //! The conversion proper: decodes each message of a chosen topic and turns it into the
-//! dataset layout (CONVENTIONS.md), with the project's writers: PCD scans and PNG images
+//! dataset layout (docs/formats.md), with the project's writers: PCD scans and PNG images
 //! as they arrive, the IMU and pose CSVs (sorted, checked) at the end.
 
 use std::collections::{BTreeMap, BTreeSet};

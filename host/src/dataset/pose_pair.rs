@@ -1,4 +1,4 @@
-//! A result file with two generic pose sensors, `pose0` and `pose1` (CONVENTIONS.md: `pose1/`
+//! A result file with two generic pose sensors, `pose0` and `pose1` (docs/formats.md: `pose1/`
 //! is a second pose sensor with the layout of `pose0/`; its section has the keys of `pose0`:
 //! `T_imu_pose`, `timeshift_pose_imu`, `sigma_rot_deg`, `sigma_trans_m`). The calibration a
 //! vehicle carries for the monitor (`msreg monitor --initial`), and the drive simulator's

@@ -170,7 +170,7 @@ fn write_text(path: &Path, text: &str) -> Result<(), InfraError> {
 }
 
 impl InfraSim {
-    /// Writes the dataset layout of CONVENTIONS.md plus `groundtruth/`, with the detections
+    /// Writes the dataset layout of docs/formats.md plus `groundtruth/`, with the detections
     /// as CSV (`cam0/blobs.csv`, `infra/<id>/markers.csv`).
     pub fn write(&self, dir: &Path) -> Result<(), InfraError> {
         self.write_common(dir)?;

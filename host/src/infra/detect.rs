@@ -1,5 +1,5 @@
 //! Detections from images, for datasets that carry images instead of pre-detected CSV
-//! (CONVENTIONS.md, "Infrastructure camera network"): the robot's marker in an
+//! (docs/formats.md, section 2.9): the robot's marker in an
 //! infrastructure camera's frames (`infra/<id>/data.csv` + `data/`, ArUco with sub-pixel
 //! corners in OpenCV order) and the bright blobs in F's keyframes (`cam0/data.csv` +
 //! `data/`). Images are decoded and searched in parallel; a frame without the marker is

@@ -1,4 +1,4 @@
-//! Frame-free judging of infrastructure-camera poses (CONVENTIONS.md): one rigid transform
+//! Frame-free judging of infrastructure-camera poses (docs/formats.md): one rigid transform
 //! (least squares over camera centres, no scale) aligns the estimate to the truth; then
 //! position RMS, rotation errors and the share of axes inside 3 sigma.
 

@@ -1,5 +1,4 @@
-//! Files of the infrastructure-camera dataset (CONVENTIONS.md, "Infrastructure camera
-//! network"): `marker.yaml`, `infra/cameras.yaml`, `infra/<id>/markers.csv`,
+//! Files of the infrastructure-camera dataset (docs/formats.md, section 2.9): `marker.yaml`, `infra/cameras.yaml`, `infra/<id>/markers.csv`,
 //! `cam0/blobs.csv`, and the `infra:` result / ground-truth YAML. Errors name the file and
 //! the 1-based line.
 

@@ -58,7 +58,7 @@ impl Default for RenderLook {
 const SUPERSAMPLE: usize = 4;
 
 /// The frame of `camera` seeing marker `id` at pose `t_c_m` (`p_cam = t_c_m * p_marker`;
-/// marker frame of CONVENTIONS.md: centre origin, x right, y up, z out of the face).
+/// marker frame of docs/formats.md: centre origin, x right, y up, z out of the face).
 pub fn marker_frame<R: Rng>(
     camera: &Camera<f64>,
     t_c_m: &Isometry3<f64>,

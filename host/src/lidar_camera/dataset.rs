@@ -52,7 +52,7 @@ pub enum LidarCameraInputError {
     },
 }
 
-/// A LiDAR-camera dataset on disk (CONVENTIONS.md layout).
+/// A LiDAR-camera dataset on disk (docs/formats.md layout).
 #[derive(Clone, Debug)]
 pub struct LidarCameraDataset {
     /// The dataset directory.

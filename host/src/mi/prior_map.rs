@@ -2,7 +2,7 @@
 //! downward fisheye from a LiDAR map with reflectivity, a satellite ortho image and a
 //! coarse GPS prior. Method and measurements: docs/prior_map.md.
 //!
-//! - [`input`]: the dataset (CONVENTIONS.md "Camera in a prior map").
+//! - [`input`]: the dataset (docs/formats.md section 2.9).
 //! - [`orb`]: ORB features; [`init`]: rectification, matching against the satellite crop,
 //!   RANSAC and PnP, or PnP on user correspondences.
 //! - [`register`] (this file): the MI stage with the engine of [`crate::mi`]: the parallel

@@ -12,7 +12,7 @@ use crate::vision::GrayImage;
 const CHUNK: usize = 4096;
 
 /// How the 6-vector `delta = [omega (rad); v (m)]` moves the state pose `X`:
-/// `X (+) delta = (R Exp(omega), t + v)` (CONVENTIONS.md: right rotation perturbation,
+/// `X (+) delta = (R Exp(omega), t + v)` (docs/formats.md: right rotation perturbation,
 /// additive translation). The state is either the camera-from-points transform or its
 /// inverse.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

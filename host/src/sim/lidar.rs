@@ -14,7 +14,7 @@
 //!   `max_range_m` are dropped.
 //! - Files: `lidar0/<stamp_k>.pcd` (binary, fields `x y z intensity t ring`, `t` the firing
 //!   offset from the stamp in ns), `lidar0/lidar.yaml`, `imu0/`, `groundtruth/` with a
-//!   `lidar0` section (CONVENTIONS.md).
+//!   `lidar0` section (docs/formats.md).
 //! - Scans are generated on demand ([`LidarImuSim::scan`]) and deterministic per seed and
 //!   scan index, so a 60 s 128 x 1024 recording (1.7 GB of PCD) never has to sit in memory.
 

@@ -1,5 +1,5 @@
 //! The simulated dataset in memory and its writer to the dataset layout
-//! (CONVENTIONS.md), ground truth included.
+//! (docs/formats.md), ground truth included.
 
 use std::collections::BTreeMap;
 use std::path::Path;

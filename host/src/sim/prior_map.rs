@@ -347,7 +347,7 @@ fn survey(scene: &Intersection, camera: &Camera<f64>, t_world_cam: &Isometry3<f6
 }
 
 impl PriorMapSim {
-    /// Writes the layout of CONVENTIONS.md "Camera in a prior map" under `dir`.
+    /// Writes the layout of docs/formats.md section 2.9 under `dir`.
     pub fn write(&self, dir: &Path) -> Result<(), DatasetError> {
         create_dirs(dir, &["map", CAMERA_DATA_DIR, "groundtruth"])?;
         write_scan(&dir.join("map/map.pcd"), &self.map)?;

@@ -40,7 +40,7 @@ impl Default for BlobParams {
 /// One bright blob.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Blob {
-    /// Intensity-weighted centroid, pixels (CONVENTIONS.md pixel centres).
+    /// Intensity-weighted centroid, pixels (docs/formats.md pixel centres).
     pub u: f64,
     /// Intensity-weighted centroid, pixels.
     pub v: f64,

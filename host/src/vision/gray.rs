@@ -1,6 +1,6 @@
 //! A single-channel `f32` image (grey levels 0..255) with the few operations the detector
 //! needs: loading PNG/JPEG (colour converted to luma), bilinear sampling with the pixel
-//! convention of CONVENTIONS.md (centre of the top-left pixel = (0, 0)), separable Gaussian
+//! convention of docs/formats.md (centre of the top-left pixel = (0, 0)), separable Gaussian
 //! blur and box means.
 
 use std::path::{Path, PathBuf};

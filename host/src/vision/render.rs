@@ -2,7 +2,7 @@
 //! the image simulator: ray casting through the camera model (distortion included, rays
 //! cached per camera in [`PixelRays`]), anti-aliased by supersampling the pixels that
 //! straddle an edge, motion blur by averaging poses over the exposure, Gaussian noise and a
-//! lighting gradient. Pixel convention of CONVENTIONS.md; target frame: corner id `r * cols + c` at
+//! lighting gradient. Pixel convention of docs/formats.md; target frame: corner id `r * cols + c` at
 //! `(r * row_spacing, c * col_spacing, 0)`, z out of the printed face.
 
 use super::gray::GrayImage;

@@ -1,4 +1,4 @@
-//! The dataset of an intrinsic calibration (CONVENTIONS.md, "Any number of sensors"):
+//! The dataset of an intrinsic calibration (docs/formats.md, sections 2 and 3):
 //! `cam0/`, `cam1/`, ... each with `data.csv` and images and a `camera.yaml` that may carry
 //! only `camera_model`, `distortion_model` and `resolution`; `target.yaml` at the top.
 //!

@@ -1,4 +1,4 @@
-//! What `msreg calibrate cameras` writes: Kalibr's camchain keys per camera (CONVENTIONS.md,
+//! What `msreg calibrate cameras` writes: Kalibr's camchain keys per camera (docs/formats.md,
 //! "Calibration result") and a JSON report. The camchain text is produced by
 //! [`camchain_yaml`] alone, the one place to switch to the shared result type.
 

@@ -1,5 +1,5 @@
 //! Sensor and section names of a rig: `imuN`, `camN`, `lidarN`, `poseN` and the
-//! camera-LiDAR pairs `camN_lidarM` (CONVENTIONS "Any number of sensors"), and the names of
+//! camera-LiDAR pairs `camN_lidarM` (docs/formats.md sections 2 and 3), and the names of
 //! the degrees of freedom a section may list as `held`.
 
 use std::fmt;

@@ -1,4 +1,4 @@
-//! The prior-map dataset (CONVENTIONS.md "Camera in a prior map"): the LiDAR map, the
+//! The prior-map dataset (docs/formats.md section 2.9): the LiDAR map, the
 //! optional satellite ortho image with its `satellite.yaml`, the camera and its first
 //! image, `prior.yaml` and the optional `survey.csv`. Bad input is a [`PriorMapInputError`]
 //! naming the file (and the line where there is one).

@@ -20,7 +20,7 @@
 //!   `z > -w d` (Usenko et al. 2018, eq. (19)).
 //!
 //! Every model ends with `(u, v) = (fu m_x + cu, fv m_y + cv)` (pixel convention of
-//! CONVENTIONS.md). A point is refused where its model is not one-to-one: outside the valid
+//! docs/formats.md). A point is refused where its model is not one-to-one: outside the valid
 //! set above, or where the radial map stops increasing (a distortion polynomial folding
 //! back), so no point far outside the field of view is folded into the image. Unprojection
 //! is numerical: bisection on the angle from the axis along the pixel's azimuth, then Newton

@@ -1,7 +1,7 @@
 //! Renders a printed ArUco marker into a grey image through a homography (a planar marker
 //! under any pinhole view), anti-aliased by supersampling the pixel area: for the tests and
 //! the image simulator. Pixel `(x, y)` covers `[x - 0.5, x + 0.5] x [y - 0.5, y + 0.5]`
-//! (CONVENTIONS.md).
+//! (docs/formats.md).
 
 use nalgebra::{Matrix3, Vector2};
 
