@@ -138,21 +138,28 @@ impl Pipeline {
     }
 }
 
+/// Runs the command line `args` in this process, as `msreg args...` would.
+fn in_process(args: &[String]) -> Result<(), Failure> {
+    let cli = Cli::try_parse_from(std::iter::once("msreg".to_string()).chain(args.iter().cloned()))
+        .map_err(|e| Failure::BadInput(anyhow::anyhow!("demo: {e}")))?;
+    run(cli.command)
+}
+
 /// Runs the command line `args` as `msreg args...` would: in this process when the
 /// directory is kept, else as a child process whose output lines naming the temporary
-/// `hide` directory (removed at the end) are dropped.
+/// `hide` directory (removed at the end) are dropped. Where this executable cannot be
+/// started as a child (exit status 126/127 or a spawn error: e.g. under qemu user-mode
+/// emulation without binfmt, the aarch64 companion test), it runs in this process instead,
+/// and the temporary paths are shown.
 fn msreg(args: &[String], hide: Option<&Path>) -> Result<(), Failure> {
     let Some(hide) = hide else {
-        let cli =
-            Cli::try_parse_from(std::iter::once("msreg".to_string()).chain(args.iter().cloned()))
-                .map_err(|e| Failure::BadInput(anyhow::anyhow!("demo: {e}")))?;
-        return run(cli.command);
+        return in_process(args);
     };
     let exe = std::env::current_exe().context("demo: cannot find the msreg executable")?;
-    let output = std::process::Command::new(exe)
-        .args(args)
-        .output()
-        .context("demo: cannot run msreg")?;
+    let output = match std::process::Command::new(exe).args(args).output() {
+        Ok(output) if !matches!(output.status.code(), Some(126 | 127)) => output,
+        _ => return in_process(args),
+    };
     let hide = hide.to_string_lossy();
     let shown = |text: &[u8]| -> Vec<String> {
         String::from_utf8_lossy(text)
