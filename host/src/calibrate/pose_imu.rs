@@ -10,6 +10,7 @@ use super::InputError;
 use std::time::Instant;
 
 use msreg_estimator::{HealthConfig, PoseImuEkf, Scalar, SOLE_SENSOR};
+use nalgebra::Vector3;
 
 use super::driver::report::{PoseImuCalibration, PoseImuOptions, Timing};
 use super::driver::verdict::{finish, Run};
@@ -142,24 +143,38 @@ fn calibrate_with<T: Scalar>(
             filter: filter_s,
         },
     );
+    annotate(
+        &mut calibration,
+        (init_problem, scale_problem),
+        (planar.as_ref(), options, &bias),
+        (imu, poses),
+    );
+    calibration.report.moving_start = describe_moving_start(&moving_start);
+    calibration.report.gyro_bias_init = gyro_bias_init;
+    Ok(calibration)
+}
+
+/// The start's problems and the planar start in the report; a rotation the odometry's
+/// scale contradicts is refused.
+fn annotate(
+    calibration: &mut PoseImuCalibration,
+    (init_problem, scale_problem): (Option<String>, Option<String>),
+    (planar, options, bias): (Option<&planar::PlanarStart>, &PoseImuOptions, &Vector3<f64>),
+    (imu, poses): (&[ImuRecord], &[PoseRecord]),
+) {
     if let Some(problem) = init_problem {
         calibration.report.reasons.insert(0, problem);
         calibration.report.converged = false;
     }
-    calibration.report.planar = planar
-        .as_ref()
-        .map_or_else(String::new, |p| describe_planar(p, options));
+    calibration.report.planar = planar.map_or_else(String::new, |p| describe_planar(p, options));
     if let Some(problem) = scale_problem {
         trust::refuse_rotation(
-            &mut calibration,
+            calibration,
             &problem,
-            (planar.is_some(), &bias),
+            (planar.is_some(), bias),
             (imu, poses),
         );
     }
-    calibration.report.moving_start = describe_moving_start(&moving_start);
-    calibration.report.gyro_bias_init = gyro_bias_init;
-    Ok(calibration)
 }
 
 /// The report's words for a planar start, and whether the filter kept the rotation about
