@@ -372,7 +372,8 @@ mod tests {
     //! the corners camera 1 sees depend on its own extrinsic and time offset, the IMU pose and
     //! the target, and on nothing of camera 0.
     use super::*;
-    use crate::camera::{radtan::RadTan, Distortion, Intrinsics, Projection};
+    use crate::filter::tests::reprojection::{camera, STAMP};
+    use crate::filter::tests::T0;
     use crate::filter::FilterConfig;
     use crate::propagate::{ImuNoise, ImuSample};
     use crate::state::InitialState;
@@ -385,30 +386,6 @@ mod tests {
     const CAM0: SensorId = SensorId::at::<0, 2>();
     const CAM1: SensorId = SensorId::at::<1, 2>();
     const TARGET: FrameId = FrameId::at::<0, 1>();
-    const T0: u64 = 1_700_000_000_000_000_000;
-    /// Camera 1's image stamp: between two IMU samples, after the last fed one.
-    const STAMP: u64 = T0 + 240_000_000 + 1_234_567;
-
-    fn camera() -> Camera<f64> {
-        Camera::new(
-            Projection::Pinhole,
-            Intrinsics {
-                fu: 460.0,
-                fv: 458.0,
-                cu: 367.0,
-                cv: 248.0,
-            },
-            Distortion::RadTan(RadTan {
-                k1: -0.28,
-                k2: 0.07,
-                p1: 2e-4,
-                p2: 2e-5,
-                k3: 0.0,
-            }),
-            (752, 480),
-        )
-        .expect("camera")
-    }
 
     /// `T_I_C0`, and `T_I_C1` 11 cm along camera 0's x axis, turned 4 deg towards it.
     fn extrinsics() -> (Pose<f64>, Pose<f64>) {

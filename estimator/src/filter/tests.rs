@@ -359,7 +359,7 @@ fn a_glitch_of_one_odometry_pose_holds_the_sensor_out_only_until_refuted() {
 
 // ----- reprojection update ---------------------------------------------------------------
 
-mod reprojection {
+pub(super) mod reprojection {
     use super::*;
     use crate::camera::{radtan::RadTan, Camera, Distortion, Intrinsics, Projection};
     use crate::filter::CameraImuEkf;
@@ -369,9 +369,10 @@ mod reprojection {
     use nalgebra::Vector2;
 
     /// The image stamp the tests use: between two IMU samples, after the last fed one.
-    const STAMP: u64 = T0 + 240_000_000 + 1_234_567;
+    pub(in crate::filter) const STAMP: u64 = T0 + 240_000_000 + 1_234_567;
 
-    fn camera() -> Camera<f64> {
+    /// The EuRoC-like pinhole-radtan camera of the reprojection tests.
+    pub(in crate::filter) fn camera() -> Camera<f64> {
         Camera::new(
             Projection::Pinhole,
             Intrinsics {
