@@ -28,33 +28,9 @@ import subprocess
 import sys
 import time
 
+from opencv_venv import ensure_venv
+
 SKIP = 3
-
-
-def ensure_venv(venv):
-    """Re-executes this script in the venv, creating it first when missing."""
-    python = os.path.join(venv, "bin", "python")
-    if os.path.realpath(sys.prefix) == os.path.realpath(venv):
-        return
-    try:
-        if not os.path.exists(python):
-            subprocess.run([sys.executable, "-m", "venv", venv], check=True,
-                           capture_output=True)
-        probe = subprocess.run([python, "-c", "import cv2, numpy"], capture_output=True)
-        if probe.returncode != 0:
-            pip = subprocess.run(
-                [python, "-m", "pip", "install", "-q", "--disable-pip-version-check",
-                 "opencv-python-headless", "numpy"],
-                capture_output=True, text=True, timeout=600)
-            if pip.returncode != 0:
-                last = (pip.stderr.strip().splitlines() or ["no output"])[-1]
-                print(f"SKIP: cannot install opencv-python-headless into {venv} "
-                      f"(offline?): {last}")
-                sys.exit(SKIP)
-    except (subprocess.CalledProcessError, subprocess.TimeoutExpired, OSError) as e:
-        print(f"SKIP: cannot create the OpenCV venv {venv}: {e}")
-        sys.exit(SKIP)
-    os.execv(python, [python, os.path.abspath(__file__)] + sys.argv[1:])
 
 
 def read_corners(path):
@@ -160,7 +136,7 @@ def main():
     ap.add_argument("--resolution", type=int, nargs=2, required=True)
     ap.add_argument("--venv", default="/tmp/msreg-opencv-venv")
     args = ap.parse_args()
-    ensure_venv(args.venv)
+    ensure_venv(args.venv, __file__)
     import cv2
     obj, img, names = read_corners(args.corners)
     size = tuple(args.resolution)

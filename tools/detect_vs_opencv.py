@@ -33,6 +33,8 @@ import subprocess
 import sys
 import time
 
+from opencv_venv import ensure_venv
+
 # (set directory, file suffix, rows, cols, what a detector should report)
 SETS = [
     ("checkerboard-opencv", ".jpg", 6, 9, "9x6 board, 640x480 (left.jpg: no full board)"),
@@ -41,22 +43,6 @@ SETS = [
 ]
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-
-
-def ensure_venv(venv):
-    """Re-executes this script in the venv, creating it first when missing."""
-    python = os.path.join(venv, "bin", "python")
-    if os.path.realpath(sys.prefix) == os.path.realpath(venv):
-        return
-    if not os.path.exists(python):
-        subprocess.run([sys.executable, "-m", "venv", venv], check=True)
-    probe = subprocess.run([python, "-c", "import cv2, numpy"], capture_output=True)
-    if probe.returncode != 0:
-        subprocess.run(
-            [python, "-m", "pip", "install", "-q", "opencv-python-headless", "numpy"],
-            check=True,
-        )
-    os.execv(python, [python, os.path.abspath(__file__)] + sys.argv[1:])
 
 
 def load_avg():
@@ -139,7 +125,7 @@ def main():
     ap.add_argument("--exe", help="the detect_timing executable (default: cargo builds it)")
     ap.add_argument("--baseline", help="another detect_timing executable, timed alongside")
     args = ap.parse_args()
-    ensure_venv(args.venv)
+    ensure_venv(args.venv, __file__)
     import cv2
 
     cv2.setNumThreads(args.threads)

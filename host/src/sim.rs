@@ -41,6 +41,7 @@ pub mod imus;
 pub mod joint;
 pub mod lidar;
 pub mod lidar_camera;
+pub mod lidar_rig;
 mod odometry;
 mod output;
 mod plate;
@@ -71,6 +72,7 @@ pub use lidar::{simulate_lidar_imu, Environment, LidarImuSim, LidarImuSimConfig,
 pub use lidar_camera::{
     simulate_lidar_camera, FrameKind, LidarCameraSim, LidarCameraSimConfig, LidarModel, SimFrame,
 };
+pub use lidar_rig::{simulate_lidar_rig, LidarRigSim, MAX_RIG_LIDARS};
 pub use odometry::{pose_sensor_yaml, synthesize_odometry};
 pub use output::SimDataset;
 pub use plate::Plate;
@@ -104,7 +106,7 @@ fn rng_for(seed: u64, stream: Stream) -> ChaCha8Rng {
 
 /// ChaCha8 seeded with `seed`, on its stream `stream`: the random source of every simulator
 /// (each numbers its own streams: `Stream` here, its own enum in [`lidar_camera`], 100 and
-/// up in [`prior_map`]).
+/// up in [`prior_map`], 200 and 300 up in [`lidar_rig`]).
 pub(crate) fn seeded_rng(seed: u64, stream: u64) -> ChaCha8Rng {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     rng.set_stream(stream);

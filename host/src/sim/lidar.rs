@@ -39,7 +39,7 @@ use crate::dataset::{
     write_groundtruth_csv, write_imu_csv, CalibrationResult, DatasetError, DatasetYaml,
     ExtrinsicEstimate, GroundTruthRecord, ImuNoiseYaml, ImuRecord, LidarYaml, SectionName,
     DATASET_YAML, GROUNDTRUTH_EXTRINSICS_YAML, GROUNDTRUTH_TRAJECTORY_CSV, IMU_CSV, IMU_YAML,
-    LIDAR_DIR, LIDAR_YAML,
+    LIDAR_DIR,
 };
 use crate::lidar::ScanSource;
 use crate::pointcloud::{Point, PointCloud};
@@ -260,6 +260,9 @@ pub struct LidarImuSim {
     world: BoxWorld,
     /// Plates in the room besides its boxes (the board of a joint rig).
     plates: Vec<Plate>,
+    /// Random stream of the range noise (lidar0's, or its own for every further LiDAR of a
+    /// rig: [`super::lidar_rig`]).
+    noise_stream: u64,
 }
 
 /// Simulates the LiDAR-IMU recording described by `config` (IMU now, scans on demand).
@@ -286,6 +289,7 @@ pub fn simulate_lidar_imu(config: &LidarImuSimConfig) -> Result<LidarImuSim, Sim
         scan_stamps,
         world: config.lidar.environment.world(),
         plates: Vec::new(),
+        noise_stream: Stream::LidarNoise as u64,
     })
 }
 
@@ -328,7 +332,15 @@ impl LidarImuSim {
             scan_stamps: scan_stamps(config),
             world: config.lidar.environment.world(),
             plates,
+            noise_stream: Stream::LidarNoise as u64,
         })
+    }
+
+    /// The same LiDAR drawing its range noise from stream `stream` (a rig's further LiDARs:
+    /// [`super::lidar_rig`]).
+    pub(crate) fn with_noise_stream(mut self, stream: u64) -> Self {
+        self.noise_stream = stream;
+        self
     }
 
     /// First hit of a unit ray from `origin` in G: range, reflectivity and the cosine of
@@ -404,7 +416,7 @@ impl LidarImuSim {
                     .collect()
             })
             .collect();
-        let mut rng = frame_rng(self.config.seed, Stream::LidarNoise as u64, k);
+        let mut rng = frame_rng(self.config.seed, self.noise_stream, k);
         let mut points = Vec::with_capacity(l.columns * l.rings);
         for (c, column) in hits.iter().enumerate() {
             let t_ns = self.column_offset_ns(c);
@@ -496,11 +508,23 @@ impl LidarImuSim {
         dir: &Path,
         progress: &mut dyn FnMut(f64),
     ) -> Result<(), DatasetError> {
-        create_dirs(dir, &[LIDAR_DIR])?;
-        self.lidar_yaml().write(dir.join(LIDAR_YAML))?;
+        self.write_lidar_folder(dir, LIDAR_DIR, progress)
+    }
+
+    /// Writes the folder `folder` (`lidar0`, `lidar1`, ...: lidar.yaml and every scan) under
+    /// `dir`; `progress` gets the fraction of scans written.
+    pub fn write_lidar_folder(
+        &self,
+        dir: &Path,
+        folder: &str,
+        progress: &mut dyn FnMut(f64),
+    ) -> Result<(), DatasetError> {
+        create_dirs(dir, &[folder])?;
+        let yaml = dir.join(folder).join("lidar.yaml");
+        self.lidar_yaml().write(yaml)?;
         for (k, stamp) in self.scan_stamps.iter().enumerate() {
             write_scan(
-                &dir.join(LIDAR_DIR).join(format!("{stamp}.pcd")),
+                &dir.join(folder).join(format!("{stamp}.pcd")),
                 &self.scan(k),
             )?;
             progress((k + 1) as f64 / self.scan_stamps.len() as f64);
