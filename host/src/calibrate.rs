@@ -12,6 +12,7 @@ pub mod extrinsic;
 pub mod gyro_bias;
 pub mod imu_imu;
 pub mod init;
+pub mod jackknife;
 pub mod joint;
 pub mod lidar_imu;
 pub mod observability;

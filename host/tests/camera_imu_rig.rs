@@ -89,6 +89,8 @@ struct Outcome {
     cameras: Vec<Judged>,
     time_offset_ms: Vec<(f64, bool)>,
     chain: Judged,
+    /// The NEES with the result file's (model-error) covariances: cameras, then the chain.
+    written_nees: Vec<f64>,
     converged: bool,
 }
 
@@ -112,7 +114,29 @@ fn run(seed: u64, duration_s: f64) -> Outcome {
         .collect();
     let true_chain = rig.cameras[1].t_cam_imu * rig.cameras[0].t_cam_imu.inverse();
     let link = &c.chain[0];
+    let mut written_nees: Vec<f64> = c
+        .cameras
+        .iter()
+        .zip(&rig.cameras)
+        .map(|(est, sim)| {
+            judge(
+                &est.t_imu_sensor,
+                &est.written_covariance().0,
+                &sim.t_cam_imu.inverse(),
+            )
+            .nees
+        })
+        .collect();
+    written_nees.push(
+        judge(
+            &link.t_cn_cnm1,
+            &c.chain_model_error[0].written,
+            &true_chain,
+        )
+        .nees,
+    );
     Outcome {
+        written_nees,
         seed,
         cameras,
         time_offset_ms,
@@ -168,5 +192,15 @@ fn two_camera_rig_is_accurate_and_consistent_over_ten_seeds() {
     }
     let total = sum(&|o| o.chain.nees);
     println!("T_c1_c0: summed NEES {total:.1} (mean {:.2})", total / 10.0);
+    // The result file's covariances (the filter's with the time blocks' model error, never
+    // smaller) must not be optimistic; conservative is allowed.
+    for (k, name) in ["cam0", "cam1", "T_c1_c0"].iter().enumerate() {
+        let written = sum(&|o| o.written_nees[k]);
+        println!("{name}: summed NEES with the written covariance {written:.1}");
+        assert!(
+            written <= *band.end(),
+            "{name}: written NEES sum {written:.1}"
+        );
+    }
     assert!(band.contains(&total), "chain: summed NEES {total:.1}");
 }

@@ -64,6 +64,8 @@ struct Outcome {
     rotation_deg: f64,
     translation_mm: f64,
     nees: f64,
+    /// Camera-IMU: the NEES with the result file's (model-error) covariance.
+    written_nees: Option<f64>,
     inside_three_sigma: bool,
     converged: bool,
     /// Health-monitor events (alarms) raised during the run.
@@ -100,6 +102,7 @@ fn judge<R>(
         rotation_deg: r.norm().to_degrees(),
         translation_mm: p.norm() * 1e3,
         nees,
+        written_nees: None,
         inside_three_sigma: (0..6).all(|i| e[i].abs() <= 3.0 * c.covariance[(i, i)].sqrt())
             && offset_error.abs() <= 3.0 * c.time_offset_sigma_s,
         converged,
@@ -215,7 +218,22 @@ fn camera_imu(seed: u64, rate_hz: f64, duration_s: f64, start: Start) -> Outcome
     let status = (c.report.filter.converged, c.report.filter.events.len());
     let truth = sim.t_cam_imu.inverse();
     let id = (Pipeline::CameraImu, rate_hz, seed);
-    judge(id, &c, &truth, sim.config.time_offset_s, status)
+    let (written, _) = c.written_covariance();
+    let written_nees = judge(
+        id,
+        &ImuExtrinsicCalibration {
+            covariance: written,
+            ..c.clone()
+        },
+        &truth,
+        sim.config.time_offset_s,
+        status,
+    )
+    .nees;
+    Outcome {
+        written_nees: Some(written_nees),
+        ..judge(id, &c, &truth, sim.config.time_offset_s, status)
+    }
 }
 
 fn run(pipeline: Pipeline, rate_hz: f64, seeds: &[u64], duration_s: f64) -> Vec<Outcome> {
@@ -385,6 +403,18 @@ fn check_cell(label: &str, outcomes: &[Outcome]) -> Vec<String> {
         failures.push(format!(
             "{label}: NEES sum {nees:.1} outside {lo:.1}-{hi:.1}"
         ));
+    }
+    // The result file's covariance (camera-IMU: the filter's with the model error of the
+    // time blocks, never smaller) must not be optimistic; conservative is allowed.
+    if outcomes.iter().all(|o| o.written_nees.is_some()) {
+        let written: f64 = outcomes.iter().filter_map(|o| o.written_nees).sum();
+        println!(
+            "{label}: NEES sum with the written covariance {written:.1} (filter's {nees:.1}, at \
+             most {hi:.1})"
+        );
+        if written > hi || written > nees * (1.0 + 1e-9) {
+            failures.push(format!("{label}: written NEES sum {written:.1}"));
+        }
     }
     let worst = |f: fn(&Outcome) -> f64| outcomes.iter().map(f).fold(0.0, f64::max);
     let count = |f: fn(&Outcome) -> bool| outcomes.iter().filter(|o| f(o)).count();

@@ -14,6 +14,7 @@
 mod chain;
 mod feed;
 pub mod frames;
+mod model_error;
 mod multi;
 mod pnp;
 mod report;
@@ -23,6 +24,7 @@ use std::time::Instant;
 
 use msreg_estimator::camera::Camera;
 use msreg_estimator::{CornerObservation, Scalar, SOLE_SENSOR, TARGET_FRAME};
+use nalgebra::Matrix6;
 use serde::Serialize;
 
 use super::extrinsic::ImuExtrinsicCalibration;
@@ -38,7 +40,8 @@ pub(crate) use self::{feed::*, pnp::*, start::*};
 pub use chain::{compose_chain, CameraChainLink};
 pub use frames::{detect_corner_frames, DetectionSummary};
 pub use multi::{
-    calibrate_cameras, CameraFrames, MultiCameraImuCalibration, MultiCameraImuInput, MAX_CAMERAS,
+    calibrate_cameras, CameraFrames, ChainModelError, MultiCameraImuCalibration,
+    MultiCameraImuInput, MAX_CAMERAS,
 };
 pub use pnp::invert_with_covariance;
 pub use report::{CameraImuReport, FrameReprojection, Initialization, ReprojectionSample};
@@ -86,6 +89,10 @@ pub struct CameraImuOptions {
     pub prior: PoseImuOptions,
     /// How RepErrCal weighs each image's corners.
     pub image_noise: ImageNoise,
+    /// Whether RepErrCal also runs on each time block alone to measure the model error
+    /// (`report.model_error`) and writes the larger sigma per axis to the result file
+    /// (docs/camera_imu.md, "Covariances that hold"); costs about one more pass.
+    pub model_error: bool,
 }
 
 /// How RepErrCal weighs each image's corners.
@@ -109,6 +116,7 @@ impl Default for CameraImuOptions {
                 ..PoseImuOptions::default()
             },
             image_noise: ImageNoise::PerImage,
+            model_error: true,
         }
     }
 }
@@ -125,10 +133,27 @@ pub type CameraImuCalibration = ImuExtrinsicCalibration<CameraImuReport>;
 
 impl CameraImuCalibration {
     /// The `cam0` section of the result file: `T_cam_imu` (the inverse of the filter's
-    /// `T_imu_cam`) with its sigmas.
+    /// `T_imu_cam`) with the written sigmas: the model error's
+    /// ([`CameraImuReport::written`]) when it was measured, else the filter's.
     pub fn cam_imu_estimate(&self) -> ExtrinsicEstimate {
         let (t_cam_imu, covariance) = invert_with_covariance(&self.t_imu_sensor, &self.covariance);
+        let covariance = self
+            .report
+            .written
+            .map_or(covariance, |w| w.extrinsic_covariance());
         ExtrinsicEstimate::from_covariance(t_cam_imu, self.time_offset_s, &covariance)
+    }
+
+    /// The written covariance of `T_imu_cam` (the filter's frame) and the time offset's
+    /// written sigma: the result file's, as [`CameraImuCalibration::cam_imu_estimate`].
+    pub fn written_covariance(&self) -> (Matrix6<f64>, f64) {
+        match &self.report.written {
+            Some(w) => (
+                invert_with_covariance(&w.transform, &w.extrinsic_covariance()).1,
+                w.time_offset_sigma_s(),
+            ),
+            None => (self.covariance, self.time_offset_sigma_s),
+        }
     }
 }
 
@@ -145,18 +170,26 @@ pub fn calibrate<T: Scalar>(
         motion_calibration::<T>(input, &poses, options, &mut |f| progress(0.3 * f))?;
     let mut calibration = match options.update {
         CameraUpdate::Motion => motion,
-        CameraUpdate::Reprojection => reprojection_calibration::<T>(
-            input,
-            options,
-            &Start {
+        CameraUpdate::Reprojection => {
+            let start = Start {
                 motion: &motion,
                 pixel_sigma,
                 poses: &poses,
-            },
-            ExtrinsicPrior::AroundStart,
-            started,
-            &mut |f| progress(0.3 + 0.6 * f),
-        )?,
+            };
+            let mut c = reprojection_calibration::<T>(
+                input,
+                options,
+                &start,
+                ExtrinsicPrior::AroundStart,
+                started,
+                &mut |f| progress(0.3 + 0.5 * f),
+            )?;
+            if options.model_error {
+                model_error::add_model_error::<T>(input, options, &start, &mut c);
+            }
+            progress(0.9);
+            c
+        }
     };
     let verification = reprojection_calibration::<T>(
         input,
@@ -244,6 +277,8 @@ pub(crate) fn motion_calibration<T: Scalar>(
         frames: Vec::new(),
         initialization: None,
         sample: None,
+        model_error: None,
+        written: None,
         filter,
     });
     Ok((motion, pixel_sigma))
@@ -345,6 +380,8 @@ pub(crate) fn reprojection_report(
         frames: reprojection,
         initialization: Some(initialization),
         sample,
+        model_error: None,
+        written: None,
         filter,
     })
 }

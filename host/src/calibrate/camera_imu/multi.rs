@@ -16,9 +16,11 @@ use msreg_estimator::{Ekf, FilterConfig, InitialState, Layout, Scalar, SensorId}
 use nalgebra::Matrix6;
 
 use super::chain::{compose_chain, CameraChainLink};
+use super::model_error::{self, cam_imu, finite, Window};
 use super::*;
 use crate::calibrate::driver::report::{PoseImuOptions, Timing};
 use crate::calibrate::driver::{drive_imu, ImuHooks};
+use crate::calibrate::jackknife::{self, Estimate, ModelErrorReport};
 use crate::dataset::{CalibrationResult, ExtrinsicEstimate, SectionName};
 
 /// Most cameras one filter takes (the filter's dimension is fixed at compile time:
@@ -71,6 +73,18 @@ pub struct MultiCameraImuCalibration {
     /// `chain[n - 1]`: camera `n`'s `T_cn_cnm1` with its covariance, from the joint
     /// covariance of the two extrinsics (cross terms included).
     pub chain: Vec<CameraChainLink>,
+    /// `chain_model_error[n - 1]`: the link's model error and written covariance (the
+    /// time-block spread of the chain itself; empty when not measured).
+    pub chain_model_error: Vec<ChainModelError>,
+}
+
+/// A chain link's data-driven model error ([`crate::calibrate::jackknife`]).
+#[derive(Debug, Clone)]
+pub struct ChainModelError {
+    /// The result file's covariance of `T_cn_cnm1` (`[dtheta (right); dp]`).
+    pub written: Matrix6<f64>,
+    /// What the report says of it (its time-offset entries are zero: the chain has none).
+    pub report: ModelErrorReport,
 }
 
 impl MultiCameraImuCalibration {
@@ -82,12 +96,16 @@ impl MultiCameraImuCalibration {
             result.set_extrinsic(SectionName::cam(n as u16), camera.cam_imu_estimate());
         }
         for (k, link) in self.chain.iter().enumerate() {
+            let covariance = self
+                .chain_model_error
+                .get(k)
+                .map_or(link.covariance, |m| m.written);
             result
                 .section_mut(SectionName::cam(k as u16 + 1))
                 .camera_chain = Some(ExtrinsicEstimate::from_covariance(
                 link.t_cn_cnm1,
                 0.0,
-                &link.covariance,
+                &covariance,
             ));
         }
         result
@@ -117,6 +135,7 @@ pub fn calibrate_cameras<T: Scalar>(
         1 => Ok(MultiCameraImuCalibration {
             cameras: vec![calibrate::<T>(&input.camera(0), options, progress)?],
             chain: Vec::new(),
+            chain_model_error: Vec::new(),
         }),
         2 => {
             calibrate_rig::<T, 2, { Layout::<2, 0>::dim_with_frames(1) }>(input, options, progress)
@@ -157,7 +176,11 @@ fn calibrate_rig<T: Scalar, const S: usize, const N: usize>(
     if options.update == CameraUpdate::Motion {
         let cameras: Vec<_> = motions.into_iter().map(|(m, _)| m).collect();
         let chain = independent_chain(&cameras);
-        return Ok(MultiCameraImuCalibration { cameras, chain });
+        return Ok(MultiCameraImuCalibration {
+            cameras,
+            chain,
+            chain_model_error: Vec::new(),
+        });
     }
     let starts: Vec<Start<'_>> = motions
         .iter()
@@ -188,8 +211,16 @@ fn calibrate_rig<T: Scalar, const S: usize, const N: usize>(
     for (c, v) in cameras.iter_mut().zip(&verification) {
         c.report.verification_reprojection_error_px = v.report.mean_reprojection_error_px;
     }
+    let mut calibration = MultiCameraImuCalibration {
+        cameras,
+        chain,
+        chain_model_error: Vec::new(),
+    };
+    if options.model_error {
+        rig.add_model_error::<T, S, N>(&starts, &mut calibration);
+    }
     progress(1.0);
-    Ok(MultiCameraImuCalibration { cameras, chain })
+    Ok(calibration)
 }
 
 /// A camera's error named by its folder (the single-camera messages say `cam0`).
@@ -342,6 +373,68 @@ impl Rig<'_, '_> {
             rotation_inits,
             words,
         })
+    }
+}
+
+impl Rig<'_, '_> {
+    /// Every camera's and chain link's model error: the rig's RepErrCal on each time block
+    /// alone (in parallel) from the same starts, each one's spread against its covariances
+    /// ([`crate::calibrate::jackknife`]); the chain's from the blocks' own chains.
+    fn add_model_error<T: Scalar, const S: usize, const N: usize>(
+        &self,
+        starts: &[Start<'_>],
+        calibration: &mut MultiCameraImuCalibration,
+    ) {
+        use rayon::prelude::*;
+        let started = Instant::now();
+        let blocks = model_error::blocks_of(self.inputs[0].imu);
+        let runs: Vec<Result<_, String>> = blocks
+            .par_iter()
+            .map(|span| {
+                let windows: Vec<Window<'_>> = (self.inputs.iter().zip(starts))
+                    .map(|(input, s)| Window::of(input, s.poses, *span))
+                    .collect();
+                let inputs: Vec<CameraImuInput<'_>> = windows.iter().map(|w| w.input).collect();
+                let starts: Vec<Start<'_>> = (windows.iter().zip(starts))
+                    .map(|(w, s)| Start {
+                        poses: w.poses,
+                        ..*s
+                    })
+                    .collect();
+                let rig = Rig {
+                    inputs: &inputs,
+                    options: self.options,
+                };
+                rig.pass::<T, S, N>(
+                    &starts,
+                    ExtrinsicPrior::AroundStart,
+                    Instant::now(),
+                    &mut |_| {},
+                )
+                .map_err(|e| e.to_string())
+            })
+            .collect();
+        let time_s = started.elapsed().as_secs_f64();
+        for (k, camera) in calibration.cameras.iter_mut().enumerate() {
+            let per_block: Vec<Result<Estimate, String>> = (runs.iter())
+                .map(|r| finite(cam_imu(&r.as_ref().map_err(Clone::clone)?.0[k])))
+                .collect();
+            let (written, report) = jackknife::model_error(&cam_imu(camera), &per_block, time_s);
+            model_error::set_model_error(camera, written, report);
+        }
+        let link = |l: &CameraChainLink| Estimate::new(l.t_cn_cnm1, &l.covariance, 0.0, 0.0);
+        calibration.chain_model_error = (calibration.chain.iter().enumerate())
+            .map(|(k, full)| {
+                let per_block: Vec<Result<Estimate, String>> = (runs.iter())
+                    .map(|r| finite(link(&r.as_ref().map_err(Clone::clone)?.1[k])))
+                    .collect();
+                let (written, report) = jackknife::model_error(&link(full), &per_block, time_s);
+                ChainModelError {
+                    written: written.fixed_view::<6, 6>(0, 0).into_owned(),
+                    report,
+                }
+            })
+            .collect();
     }
 }
 

@@ -3,6 +3,7 @@
 
 use super::*;
 use crate::calibrate::driver::report::PoseImuReport;
+use crate::calibrate::jackknife::{Estimate, ModelErrorReport};
 use nalgebra::Vector2;
 use serde::Serialize;
 
@@ -44,6 +45,14 @@ pub struct CameraImuReport {
     /// Fig. 4.4); drawn by the HTML report.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub sample: Option<ReprojectionSample>,
+    /// The data-driven model error and the result file's sigmas (RepErrCal with
+    /// `CameraImuOptions::model_error`; docs/camera_imu.md, "Covariances that hold").
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub model_error: Option<ModelErrorReport>,
+    /// The result file's estimate: `T_cam_imu` and the time offset with the written
+    /// covariance (`None`: the filter's is written).
+    #[serde(skip)]
+    pub written: Option<Estimate>,
     /// Filter report: convergence, NIS, excitation, health events, history.
     #[serde(flatten)]
     pub filter: PoseImuReport,
