@@ -11,7 +11,7 @@ use std::process::ExitCode;
 use anyhow::anyhow;
 use clap::{Args, Parser, Subcommand};
 use cli::outcome::Outcome;
-use msreg_host::calibrate::driver::report::PoseImuOptions;
+use msreg_host::calibrate::driver::report::{PoseImuOptions, SectionFrame};
 use msreg_host::calibrate::pose_imu::{self, PoseImuInput};
 use msreg_host::check::Needs;
 use msreg_host::dataset::{CalibrationResult, Dataset, SectionName};
@@ -476,12 +476,17 @@ fn calibrate_pose_imu(args: &CalibratePoseImu) -> Result<(), Failure> {
     let calibration = outcome.map_err(|e: msreg_host::calibrate::InputError| {
         Failure::BadInput(anyhow!("{}: {e}", args.dataset.display()))
     })?;
-    let result = CalibrationResult::new()
+    let mut result = CalibrationResult::new()
         .with_extrinsic(SectionName::POSE0, calibration.imu_sensor_estimate());
-    result.write(&args.output)?;
-    if let Some(path) = &args.report {
-        msreg_host::report::write_report(path, &calibration.report)?;
-    }
+    result
+        .section_mut(SectionName::POSE0)
+        .hold_all(calibration.report.held_dofs(SectionFrame::ImuSensor));
+    cli::outcome::write_outputs(
+        &result,
+        &args.output,
+        args.report.as_deref(),
+        &calibration.report,
+    )?;
     eprintln!("msreg: wrote {}", args.output.display());
     warn_unobservable(&calibration.report.observability);
     if let Some(path) = &args.plot {

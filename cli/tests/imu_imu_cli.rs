@@ -67,7 +67,7 @@ fn a_simulated_three_imu_rig_is_calibrated_and_scored() {
     }
     // The report has a row per IMU with the same numbers' sigmas.
     let rows: Value = serde_json::from_str(&std::fs::read_to_string(report).unwrap()).unwrap();
-    let rows = rows.as_array().unwrap();
+    let rows = rows["imus"].as_array().unwrap();
     assert_eq!(rows.len(), 2);
     for (n, row) in rows.iter().enumerate() {
         assert_eq!(row["sensor"], format!("imu{}", n + 1));

@@ -358,8 +358,8 @@ fn joint_report_renders_both_sensors() {
     let ids = [
         "status-cam0",
         "status-lidar0",
-        "result-cam0",
-        "result-lidar0",
+        "result-cam0-T_cam_imu",
+        "result-lidar0-T_imu_lidar",
         "fig-convergence-cam0",
         "fig-nis-cam0",
         "fig-convergence-lidar0",

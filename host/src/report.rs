@@ -8,6 +8,7 @@
 mod data;
 mod figures;
 mod html;
+pub mod result_file;
 mod slices;
 mod svg;
 #[cfg(test)]
@@ -31,6 +32,14 @@ pub enum ReportError {
         path: PathBuf,
         /// Cause.
         source: serde_json::Error,
+    },
+    /// The result file's text is not YAML (a bug of the command that made it).
+    #[error("{path}: the result file's text is not YAML: {source}")]
+    ResultYaml {
+        /// Result path.
+        path: PathBuf,
+        /// Cause.
+        source: serde_yaml::Error,
     },
     /// The file could not be written, or an image to embed could not be read.
     #[error("{path}: {source}")]
@@ -101,6 +110,76 @@ pub fn write_report_with_figures<R: Serialize + ?Sized>(
         serde_json::to_string_pretty(report).map_err(serialize)?
     };
     std::fs::write(path, text).map_err(|source| ReportError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Where a calibration's outputs go: the result file and, with `--report`, the report.
+pub struct RunOutputs<'a> {
+    /// The result file (`-o`).
+    pub result_path: &'a Path,
+    /// Its YAML text, as written (e.g. `CalibrationResult::to_yaml_string`).
+    pub result_yaml: &'a str,
+    /// The report (`--report`), if asked for.
+    pub report_path: Option<&'a Path>,
+    /// PNG files to embed in the HTML page (see [`write_report_with_images`]).
+    pub images: &'a [PathBuf],
+    /// SVG figures for the HTML page (see [`write_report_with_figures`]).
+    pub figures: &'a [SvgFigure],
+}
+
+/// Writes the result file and the report from one source, the result's YAML text: the
+/// report carries that text's numbers under `result_file` (parsed from it) and the HTML
+/// page's result tables are drawn from them, so the two outputs cannot disagree.
+pub fn write_result_and_report<R: Serialize + ?Sized>(
+    outputs: &RunOutputs<'_>,
+    report: &R,
+) -> Result<(), ReportError> {
+    let path = outputs.result_path;
+    // Refuse text that is no YAML before anything is written.
+    result_value(path, outputs.result_yaml)?;
+    std::fs::write(path, outputs.result_yaml).map_err(|source| ReportError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    match outputs.report_path {
+        Some(report_path) => write_report_for_result(
+            report_path,
+            report,
+            (path, outputs.result_yaml),
+            outputs.images,
+            outputs.figures,
+        ),
+        None => Ok(()),
+    }
+}
+
+/// The report alone, with the numbers of the result file `(path, yaml)` a command wrote
+/// (see [`write_result_and_report`]), for commands that write the report later.
+pub fn write_report_for_result<R: Serialize + ?Sized>(
+    report_path: &Path,
+    report: &R,
+    (result_path, result_yaml): (&Path, &str),
+    images: &[PathBuf],
+    figures: &[SvgFigure],
+) -> Result<(), ReportError> {
+    let file = result_value(result_path, result_yaml)?;
+    let mut value = serde_json::to_value(report).map_err(|source| ReportError::Serialize {
+        path: report_path.to_path_buf(),
+        source,
+    })?;
+    match value.as_object_mut() {
+        Some(map) => {
+            map.insert(result_file::KEY.to_string(), file);
+        }
+        None => value = serde_json::json!({ "report": value, result_file::KEY: file }),
+    }
+    write_report_with_figures(report_path, &value, images, figures)
+}
+
+fn result_value(path: &Path, yaml: &str) -> Result<serde_json::Value, ReportError> {
+    result_file::value_of(yaml).map_err(|source| ReportError::ResultYaml {
         path: path.to_path_buf(),
         source,
     })

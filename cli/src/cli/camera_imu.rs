@@ -22,6 +22,7 @@ use msreg_host::calibrate::camera_imu::{
     CameraUpdate, CornerFrame, ReprojectionSample,
 };
 use msreg_host::calibrate::camera_imu::{detect_corner_frames, DetectionSummary};
+use msreg_host::calibrate::driver::report::SectionFrame;
 use msreg_host::calibrate::InputError;
 use msreg_host::camera_yaml::{read_camera_yaml, read_target_yaml, Target};
 use msreg_host::dataset::{
@@ -142,9 +143,17 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
     filtering.finish_and_clear();
     let calibration =
         outcome.map_err(|e: InputError| anyhow!("{}: {e}", args.dataset.display()))?;
-    CalibrationResult::new()
-        .with_extrinsic(SectionName::CAM0, calibration.cam_imu_estimate())
-        .write(&args.output)?;
+    let mut result =
+        CalibrationResult::new().with_extrinsic(SectionName::CAM0, calibration.cam_imu_estimate());
+    let frame = SectionFrame::SensorImu(calibration.t_imu_sensor.rotation.to_rotation_matrix());
+    result
+        .section_mut(SectionName::CAM0)
+        .hold_all(calibration.report.filter.held_dofs(frame));
+    let report = CameraImuCliReport {
+        detection,
+        calibration: calibration.report.clone(),
+    };
+    super::outcome::write_outputs(&result, &args.output, args.report.as_deref(), &report)?;
     let r = &calibration.report;
     eprintln!(
         "msreg: wrote {} ({:?}: {} images fused, mean NIS/dof {:.2}; mean reprojection error \
@@ -155,13 +164,6 @@ pub fn run(args: &CalibrateCameraImu) -> anyhow::Result<Outcome> {
         r.filter.mean_nis_per_dof,
         r.verification_reprojection_error_px
     );
-    if let Some(path) = &args.report {
-        let report = CameraImuCliReport {
-            detection,
-            calibration: calibration.report.clone(),
-        };
-        msreg_host::report::write_report(path, &report)?;
-    }
     if let Some(path) = &args.plot {
         write_plot(path, &dataset, &calibration, &args.dataset);
     }

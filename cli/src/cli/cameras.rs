@@ -126,7 +126,8 @@ pub fn run(args: &CalibrateCameras) -> anyhow::Result<Outcome> {
     let result = calibrate_cameras(&inputs, &options)
         .map_err(|e| anyhow!("{}: {e}", args.dataset.display()))?;
     let calibration_s = start.elapsed().as_secs_f64();
-    write(&args.output, &camchain_yaml(&result))?;
+    let result_yaml = camchain_yaml(&result);
+    write(&args.output, &result_yaml)?;
     for cam in &result.cameras {
         write(
             &camera_yaml_path(&args.output, &cam.name),
@@ -166,7 +167,13 @@ pub fn run(args: &CalibrateCameras) -> anyhow::Result<Outcome> {
             calibration_s,
             calibration: report(&result),
         };
-        msreg_host::report::write_report(path, &cli)?;
+        msreg_host::report::write_report_for_result(
+            path,
+            &cli,
+            (&args.output, &result_yaml),
+            &[],
+            &[],
+        )?;
     }
     let reasons = vec!["the bundle adjustment hit its iteration cap".to_string()];
     Ok(Outcome::of(result.converged, &reasons))

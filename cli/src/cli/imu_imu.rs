@@ -119,7 +119,8 @@ pub fn run(args: &CalibrateImuImu) -> anyhow::Result<Outcome> {
     let rig = calibrate_rig(&dataset, &options, |sensor| {
         eprintln!("msreg: calibrating {sensor} against imu0");
     })?;
-    rig.result.write(&args.output)?;
+    let result_yaml = rig.result.to_yaml_string();
+    super::outcome::write_outputs(&rig.result, &args.output, None, &())?;
     let rows = rows(&rig);
     for row in &rows {
         println!(
@@ -140,8 +141,14 @@ pub fn run(args: &CalibrateImuImu) -> anyhow::Result<Outcome> {
     }
     println!("msreg: wrote {}", args.output.display());
     if let Some(path) = &args.report {
-        let text = serde_json::to_string_pretty(&rows)?;
-        std::fs::write(path, text).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+        let report = serde_json::json!({ "imus": &rows });
+        msreg_host::report::write_report_for_result(
+            path,
+            &report,
+            (&args.output, &result_yaml),
+            &[],
+            &[],
+        )?;
         println!("msreg: wrote {}", path.display());
     }
     let held: Vec<String> = rows

@@ -82,6 +82,7 @@ pub fn calibrate(args: &CalibrateInfra) -> anyhow::Result<bool> {
     let data = msreg_host::infra::dataset::InfraDataset::open(&args.dataset)?;
     let mut cal = msreg_host::infra::pipeline::calibrate(&data)
         .with_context(|| format!("{}", args.dataset.display()))?;
+    let result_yaml = cal.result.to_yaml_string();
     cal.result.write(&args.output)?;
     if let Some(path) = &args.report {
         // A simulated dataset's truth goes into the top view (aligned onto the estimate).
@@ -90,7 +91,13 @@ pub fn calibrate(args: &CalibrateInfra) -> anyhow::Result<bool> {
             let truth = msreg_host::infra::io::InfraResultFile::read(&truth)?;
             cal.report.top_view.add_truth(&truth)?;
         }
-        msreg_host::report::write_report(path, &cal.report)?;
+        msreg_host::report::write_report_for_result(
+            path,
+            &cal.report,
+            (&args.output, &result_yaml),
+            &[],
+            &[],
+        )?;
     }
     let failed: Vec<&msreg_host::infra::pipeline::CameraReport> =
         cal.report.cameras.iter().filter(|c| !c.solved).collect();

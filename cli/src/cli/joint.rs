@@ -16,7 +16,7 @@ use super::camera_imu::{load_corner_frames, LoadedFrames};
 use super::outcome::{progress_bar, Outcome};
 use msreg_host::calibrate::camera_imu::invert_with_covariance;
 use msreg_host::calibrate::camera_imu::DetectionSummary;
-use msreg_host::calibrate::driver::report::PoseImuReport;
+use msreg_host::calibrate::driver::report::{PoseImuReport, SectionFrame};
 use msreg_host::calibrate::joint::{
     calibrate, chained_pairwise, JointCalibration, JointInput, JointOptions, LoopConsistency,
     OverlaySample, PlaneStats,
@@ -114,7 +114,9 @@ pub fn run(args: &CalibrateJoint) -> anyhow::Result<Outcome> {
     };
     bar.finish_and_clear();
     let joint = outcome.map_err(bad_input)?;
-    result(&joint).write(&args.output)?;
+    let result = result(&joint);
+    let result_yaml = result.to_yaml_string();
+    super::outcome::write_outputs(&result, &args.output, None, &())?;
     print_summary(args, &joint);
     let (loop_consistency, chained) = if args.compare_pairwise {
         let bar = progress_bar(
@@ -150,7 +152,13 @@ pub fn run(args: &CalibrateJoint) -> anyhow::Result<Outcome> {
             lidar: joint.lidar.report.clone(),
             loop_consistency,
         };
-        msreg_host::report::write_report(path, &report)?;
+        msreg_host::report::write_report_for_result(
+            path,
+            &report,
+            (&args.output, &result_yaml),
+            &[],
+            &[],
+        )?;
     }
     let mut reasons = Vec::new();
     for (name, report) in [
@@ -170,10 +178,18 @@ pub fn result(joint: &JointCalibration) -> CalibrationResult {
     let cam0 = ExtrinsicEstimate::from_covariance(t_cam_imu, camera.time_offset_s, &cam_covariance);
     let cam0_lidar0 =
         ExtrinsicEstimate::from_covariance(joint.t_cam_lidar, 0.0, &joint.cam_lidar_covariance);
-    CalibrationResult::new()
+    let mut result = CalibrationResult::new()
         .with_extrinsic(SectionName::CAM0, cam0)
         .with_extrinsic(SectionName::LIDAR0, joint.lidar.imu_sensor_estimate())
-        .with_extrinsic(SectionName::CAM0_LIDAR0, cam0_lidar0)
+        .with_extrinsic(SectionName::CAM0_LIDAR0, cam0_lidar0);
+    let frame = SectionFrame::SensorImu(camera.t_imu_sensor.rotation.to_rotation_matrix());
+    result
+        .section_mut(SectionName::CAM0)
+        .hold_all(camera.report.held_dofs(frame));
+    result
+        .section_mut(SectionName::LIDAR0)
+        .hold_all(joint.lidar.report.held_dofs(SectionFrame::ImuSensor));
+    result
 }
 
 fn print_summary(args: &CalibrateJoint, joint: &JointCalibration) {

@@ -200,8 +200,13 @@ pub fn calibrate(args: &CalibrateLidarCamera) -> anyhow::Result<Outcome> {
         rejected: &rejected,
         extraction_time_s,
     };
+    let mut result_yaml = None;
     let result = match outcome {
-        Ok(solution) => finish(args, &data, &frames, &solution, &mut report)?,
+        Ok(solution) => {
+            let (outcome, yaml) = finish(args, &data, &frames, &solution, &mut report)?;
+            result_yaml = Some(yaml);
+            outcome
+        }
         Err(e) => {
             let why = match &e {
                 SolveError::TooFewViews { .. } => format!(
@@ -217,19 +222,29 @@ pub fn calibrate(args: &CalibrateLidarCamera) -> anyhow::Result<Outcome> {
     };
     if let Some(path) = &args.report {
         let overlay = args.overlay.clone().unwrap_or(path.with_extension("png"));
-        msreg_host::report::write_report_with_images(path, &report, &[overlay])?;
+        match &result_yaml {
+            Some(yaml) => msreg_host::report::write_report_for_result(
+                path,
+                &report,
+                (&args.output, yaml),
+                &[overlay],
+                &[],
+            )?,
+            None => msreg_host::report::write_report_with_images(path, &report, &[overlay])?,
+        }
     }
     Ok(result)
 }
 
-/// Writes the result and overlay of a solved calibration and fills the report.
+/// Writes the result and overlay of a solved calibration and fills the report; the
+/// outcome and the result file's text.
 fn finish(
     args: &CalibrateLidarCamera,
     data: &LidarCameraDataset,
     frames: &[FrameFeatures],
     solution: &Solution,
     report: &mut Report<'_>,
-) -> anyhow::Result<Outcome> {
+) -> anyhow::Result<(Outcome, String)> {
     let estimate = ExtrinsicEstimate::from_covariance(
         isometry(&solution.t_cam_lidar),
         0.0,
@@ -248,9 +263,8 @@ fn finish(
     report.ppc = Some(solution.ppc.clone());
     report.pbpc = solution.pbpc.clone();
     report.frames = solution.frames.clone();
-    CalibrationResult::new()
-        .with_extrinsic(SectionName::CAM0_LIDAR0, estimate)
-        .write(&args.output)?;
+    let result = CalibrationResult::new().with_extrinsic(SectionName::CAM0_LIDAR0, estimate);
+    super::outcome::write_outputs(&result, &args.output, None, &())?;
     eprintln!(
         "msreg: wrote {} (MLRE {:.3} px over {} frames; PPC-Cal alone {:.3} px)",
         args.output.display(),
@@ -265,11 +279,12 @@ fn finish(
     if let (Some(path), Some(first)) = (overlay, frames.first()) {
         write_overlay(&path, data, first, &data.camera, &solution.t_cam_lidar)?;
     }
-    Ok(if converged {
+    let outcome = if converged {
         Outcome::Converged
     } else {
         Outcome::NotConverged("the solver hit its iteration limit".into())
-    })
+    };
+    Ok((outcome, result.to_yaml_string()))
 }
 
 /// The image of `frame` in colour with its LiDAR edge points (red) and board points

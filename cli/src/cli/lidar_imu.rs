@@ -8,6 +8,7 @@ use clap::Args;
 use indicatif::ProgressBar;
 
 use super::outcome::{progress_bar, Outcome};
+use msreg_host::calibrate::driver::report::SectionFrame;
 use msreg_host::calibrate::lidar_imu::{self, LidarImuInput, LidarImuOptions};
 use msreg_host::calibrate::InputError;
 use msreg_host::dataset::{CalibrationResult, Dataset, SectionName};
@@ -131,12 +132,17 @@ pub fn calibrate(args: &CalibrateLidarImu) -> anyhow::Result<Outcome> {
     progress.finish_and_clear();
     let calibration =
         outcome.map_err(|e: InputError| anyhow!("{}: {e}", args.dataset.display()))?;
-    CalibrationResult::new()
-        .with_extrinsic(SectionName::LIDAR0, calibration.imu_sensor_estimate())
-        .write(&args.output)?;
-    if let Some(path) = &args.report {
-        msreg_host::report::write_report(path, &calibration.report)?;
-    }
+    let mut result = CalibrationResult::new()
+        .with_extrinsic(SectionName::LIDAR0, calibration.imu_sensor_estimate());
+    result
+        .section_mut(SectionName::LIDAR0)
+        .hold_all(calibration.report.filter.held_dofs(SectionFrame::ImuSensor));
+    super::outcome::write_outputs(
+        &result,
+        &args.output,
+        args.report.as_deref(),
+        &calibration.report,
+    )?;
     if let Some(path) = &args.plot {
         let series = msreg_host::calibrate::convergence::extrinsic_series(
             &calibration.report.filter.history,

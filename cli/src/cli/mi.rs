@@ -14,13 +14,14 @@ use serde::Serialize;
 use super::outcome::Outcome;
 use msreg_host::camera_yaml::read_camera_yaml;
 use msreg_host::dataset::{
-    list_scans, read_camera_csv, CalibrationResult, ExtrinsicEstimate, SectionName, CAMERA_CSV,
-    CAMERA_YAML,
+    list_scans, read_camera_csv, CalibrationResult, Dof, ExtrinsicEstimate, SectionName,
+    CAMERA_CSV, CAMERA_YAML,
 };
 use msreg_host::mi::scene::rank_normalize;
 use msreg_host::mi::search::{default_prior_sigma, Constraint, Observability, Refined};
 use msreg_host::mi::targetless::{calibrate_targetless, TargetlessOptions, TargetlessResult};
 use msreg_host::pointcloud::{read_pcd, PointCloud};
+use msreg_host::report::{write_result_and_report, RunOutputs};
 use msreg_host::vision::GrayImage;
 
 /// Names of the six DoF of `delta`.
@@ -113,6 +114,16 @@ fn unconstrained(r: &Refined) -> impl Iterator<Item = (&'static str, Constraint)
         .zip(&r.constraint)
         .filter(|(_, c)| c.is_unconstrained())
         .map(|(n, c)| (*n, *c))
+}
+
+/// The result file's `held` of a refinement: every DoF the MI does not constrain (held at
+/// the initial value, flat, or not a maximum: its value is the initial guess's, not the
+/// data's), by its index in `[rotation; translation]`.
+pub fn held_dofs(r: &Refined) -> Vec<Dof> {
+    (0..6)
+        .filter(|&k| r.constraint[k].is_unconstrained())
+        .filter_map(Dof::extrinsic)
+        .collect()
 }
 
 /// Names of the DoFs the MI does not constrain.
@@ -239,12 +250,21 @@ pub fn calibrate(args: &TargetlessArgs<'_>) -> anyhow::Result<Outcome> {
     let seconds = clock.elapsed().as_secs_f64();
     let refined = &result.refined;
     let estimate = ExtrinsicEstimate::from_covariance(refined.x, 0.0, &refined.covariance);
-    let mut text = CalibrationResult::new()
-        .with_extrinsic(SectionName::CAM0_LIDAR0, estimate)
-        .to_yaml_string();
+    let mut file = CalibrationResult::new().with_extrinsic(SectionName::CAM0_LIDAR0, estimate);
+    file.section_mut(SectionName::CAM0_LIDAR0)
+        .hold_all(held_dofs(refined));
+    let mut text = file.to_yaml_string();
     text.push_str(&mi_section("cam0_lidar0_mi", refined));
-    std::fs::write(args.output, text)
-        .with_context(|| format!("{}: cannot write", args.output.display()))?;
+    write_result_and_report(
+        &RunOutputs {
+            result_path: args.output,
+            result_yaml: &text,
+            report_path: None,
+            images: &[],
+            figures: &[],
+        },
+        &(),
+    )?;
     print_summary(args.output, &result, seconds);
     let overlay = args
         .overlay
@@ -260,10 +280,12 @@ pub fn calibrate(args: &TargetlessArgs<'_>) -> anyhow::Result<Outcome> {
     write_overlay(&before, &image, &cloud, &camera, &initial)?;
     if let Some(path) = args.report {
         let report = make_report(args, &image_path, &scan_path, &result, seconds);
-        msreg_host::report::write_report_with_images(
+        msreg_host::report::write_report_for_result(
             path,
             &report,
+            (args.output, &text),
             &[before.clone(), overlay.clone()],
+            &[],
         )?;
     }
     Ok(outcome_of(refined))

@@ -31,3 +31,23 @@ pub fn progress_bar(len: u64, template: &str) -> ProgressBar {
     }
     bar
 }
+
+/// Writes `result` to `output` and, when asked, `report` to `report_path` carrying the
+/// same numbers (one YAML text for both: `report::write_result_and_report`).
+pub fn write_outputs<R: serde::Serialize + ?Sized>(
+    result: &msreg_host::dataset::CalibrationResult,
+    output: &std::path::Path,
+    report_path: Option<&std::path::Path>,
+    report: &R,
+) -> Result<(), msreg_host::report::ReportError> {
+    msreg_host::report::write_result_and_report(
+        &msreg_host::report::RunOutputs {
+            result_path: output,
+            result_yaml: &result.to_yaml_string(),
+            report_path,
+            images: &[],
+            figures: &[],
+        },
+        report,
+    )
+}

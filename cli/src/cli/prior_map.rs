@@ -119,8 +119,15 @@ pub fn calibrate(args: &CalibratePriorMap) -> anyhow::Result<Outcome> {
         "  mi: {}\n  nmi: {}\n",
         r.smoothed.mi, r.smoothed.nmi
     ));
+    let held: Vec<&str> = super::mi::held_dofs(r).iter().map(|d| d.as_str()).collect();
+    if !held.is_empty() {
+        text.push_str(&format!(
+            "  held: [{}]  # at their prior: not determined by the data\n",
+            held.join(", ")
+        ));
+    }
     text.push_str(&mi_section("cam0_mi", r));
-    std::fs::write(&args.output, text)
+    std::fs::write(&args.output, &text)
         .with_context(|| format!("{}: cannot write", args.output.display()))?;
     let overlay = args
         .overlay
@@ -161,7 +168,13 @@ pub fn calibrate(args: &CalibratePriorMap) -> anyhow::Result<Outcome> {
     );
     eprint!("{}", dof_table(r));
     if let Some(path) = &args.report {
-        msreg_host::report::write_report_with_images(path, &report, &[before, overlay])?;
+        msreg_host::report::write_report_for_result(
+            path,
+            &report,
+            (&args.output, &text),
+            &[before, overlay],
+            &[],
+        )?;
     }
     Ok(outcome_of(r))
 }

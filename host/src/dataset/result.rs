@@ -201,6 +201,13 @@ impl ResultSection {
             && self.held.is_empty()
     }
 
+    /// Marks every one of `dofs` as held.
+    pub fn hold_all(&mut self, dofs: impl IntoIterator<Item = Dof>) {
+        for dof in dofs {
+            self.hold(dof);
+        }
+    }
+
     /// Marks `dof` as held (kept sorted and unique).
     pub fn hold(&mut self, dof: Dof) {
         if let Err(at) = self.held.binary_search(&dof) {

@@ -41,7 +41,13 @@ const MAX_TABLE_ROWS: usize = 200;
 pub fn page(report: &Value, images: &[Image<'_>], figures: &[super::SvgFigure]) -> String {
     let kind = Kind::of(report);
     let history = History::read(report);
-    let rows = data::result_rows(report, history.as_ref());
+    let file_tables = report
+        .get(super::result_file::KEY)
+        .map(super::result_file::tables);
+    let rows = match &file_tables {
+        Some(tables) => tables.first().map(|t| t.rows.clone()).unwrap_or_default(),
+        None => data::result_rows(report, history.as_ref()),
+    };
     let mut out = String::new();
     let _ = write!(
         out,
@@ -50,9 +56,12 @@ pub fn page(report: &Value, images: &[Image<'_>], figures: &[super::SvgFigure]) 
         escape(kind.title())
     );
     status(&mut out, report, "status");
-    result_table(&mut out, kind.transform(), "result", &rows);
+    match &file_tables {
+        Some(tables) => result_file_tables(&mut out, tables, history.is_some()),
+        None => result_table(&mut out, kind.transform(), "result", &rows),
+    }
     if kind == Kind::Joint {
-        joint_sensors(&mut out, report);
+        joint_sensors(&mut out, report, file_tables.is_none());
     }
     let mut section = |title: &str, body: Option<String>| {
         if let Some(body) = body {
@@ -132,7 +141,9 @@ fn strings(v: Option<&Value>) -> Vec<String> {
 
 /// The joint filter's two sensors, each with its status, result, convergence and NIS
 /// (element ids suffixed `-cam0` / `-lidar0`).
-fn joint_sensors(out: &mut String, report: &Value) {
+/// `with_results`: also each sensor's result table from its last history point (reports
+/// without the result file).
+fn joint_sensors(out: &mut String, report: &Value, with_results: bool) {
     for (key, scope, transform) in [
         ("camera", "-cam0", "cam0: T_imu_cam"),
         ("lidar", "-lidar0", "lidar0: T_imu_lidar"),
@@ -144,12 +155,14 @@ fn joint_sensors(out: &mut String, report: &Value) {
             continue;
         };
         status(out, sensor, &format!("status{scope}"));
-        result_table(
-            out,
-            transform,
-            &format!("result{scope}"),
-            &data::result_rows(sensor, Some(&h)),
-        );
+        if with_results {
+            result_table(
+                out,
+                transform,
+                &format!("result{scope}"),
+                &data::result_rows(sensor, Some(&h)),
+            );
+        }
         for (title, body) in [
             ("convergence", figures::convergence(&h, scope)),
             ("NIS over time", figures::nis(sensor, &h, scope)),
@@ -187,6 +200,62 @@ fn result_table(out: &mut String, transform: &str, id: &str, rows: &[data::Resul
         "</table><p>Rotation as a rotation vector; its sigmas are those of the filter's \
          rotation perturbation.</p></section>",
     );
+}
+
+/// The result file's transforms (section `result`), one table each (`result-pose0-T_imu_pose`),
+/// with a `held` column; `filtered`: the run has a filter history, whose last state the
+/// convergence figures show.
+fn result_file_tables(
+    out: &mut String,
+    tables: &[super::result_file::ResultTable],
+    filtered: bool,
+) {
+    out.push_str("<section id=\"result\"><h2>Result (the numbers of the result file)</h2>");
+    for t in tables {
+        let _ = write!(
+            out,
+            "<h3>{}</h3><table id=\"{}\"><tr><th>DoF</th><th>value</th><th>1-sigma</th>\
+             <th>3-sigma</th><th>unit</th><th>status</th></tr>",
+            escape(&t.label),
+            escape(&t.id)
+        );
+        for (name, value, sigma, unit) in &t.rows {
+            let held = if t.is_held(name) {
+                "held at its prior"
+            } else {
+                ""
+            };
+            let _ = write!(
+                out,
+                "<tr><td class=\"k\">{name}</td><td>{value:.4}</td><td>{}</td><td>{}</td>\
+                 <td class=\"k\">{unit}</td><td class=\"k\">{held}</td></tr>",
+                number(*sigma),
+                number(3.0 * sigma)
+            );
+        }
+        out.push_str("</table>");
+    }
+    out.push_str(
+        "<p>Rotation as the rotation vector of each transform as the file stores it; \
+         translation in mm, time shift in ms (the file gives no sigma for it: -). A DoF \
+         marked held is at its prior: the data did not determine it.",
+    );
+    if filtered {
+        out.push_str(
+            " The convergence figures show the filter's state; where the pipeline replaced \
+             part of it (see the reasons above), this table is the result.",
+        );
+    }
+    out.push_str("</p></section>");
+}
+
+/// A table cell's number, `-` for NaN.
+fn number(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:.4}")
+    } else {
+        "-".to_string()
+    }
 }
 
 fn overlays(images: &[Image<'_>]) -> Option<String> {

@@ -13,7 +13,8 @@ use msreg_host::calibrate::camera_imu::{
     calibrate_cameras, CameraFrames, CameraImuOptions, DetectionSummary, MultiCameraImuCalibration,
     MultiCameraImuInput,
 };
-use msreg_host::dataset::Dataset;
+use msreg_host::calibrate::driver::report::SectionFrame;
+use msreg_host::dataset::{Dataset, SectionName};
 
 /// One camera in the JSON report.
 #[derive(Debug, Clone, Serialize)]
@@ -80,7 +81,19 @@ pub fn run(
     };
     filtering.finish_and_clear();
     let calibration = outcome.map_err(|e| anyhow!("{}: {e}", args.dataset.display()))?;
-    calibration.result().write(&args.output)?;
+    let mut result = calibration.result();
+    for (n, c) in calibration.cameras.iter().enumerate() {
+        let frame = SectionFrame::SensorImu(c.t_imu_sensor.rotation.to_rotation_matrix());
+        result
+            .section_mut(SectionName::cam(n as u16))
+            .hold_all(c.report.filter.held_dofs(frame));
+    }
+    crate::cli::outcome::write_outputs(
+        &result,
+        &args.output,
+        args.report.as_deref(),
+        &report(&calibration, &loaded),
+    )?;
     for (n, c) in calibration.cameras.iter().enumerate() {
         let r = &c.report;
         eprintln!(
@@ -106,9 +119,6 @@ fn write_extras(
     calibration: &MultiCameraImuCalibration,
     loaded: Vec<LoadedFrames>,
 ) -> anyhow::Result<Outcome> {
-    if let Some(path) = &args.report {
-        msreg_host::report::write_report(path, &report(calibration, &loaded))?;
-    }
     let cam0 = &calibration.cameras[0];
     if let Some(path) = &args.plot {
         write_plot(path, dataset, cam0, &args.dataset);

@@ -141,3 +141,82 @@ pub struct Timing {
 
 /// The outcome: `T_imu_pose` with its covariance, the time offset, and the report.
 pub type PoseImuCalibration = ImuExtrinsicCalibration<PoseImuReport>;
+
+/// A held direction holds every axis of the result's frame it has at least this component
+/// on (10 deg off an axis still holds only that axis).
+const HELD_AXIS_COMPONENT: f64 = 0.17;
+
+/// Which frame the result file's section uses for `T_imu_sensor`'s perturbations: the
+/// filter's own (`pose0.T_imu_pose`, `lidar0.T_imu_lidar`) or its inverse (`camN.T_cam_imu`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SectionFrame {
+    /// The section stores `T_imu_sensor` itself.
+    ImuSensor,
+    /// The section stores `T_sensor_imu`, the inverse of the filter's `T_imu_sensor` whose
+    /// rotation `R_imu_sensor` is given.
+    SensorImu(nalgebra::Rotation3<f64>),
+}
+
+impl PoseImuReport {
+    /// The degrees of freedom the result holds at their prior, in the section's frame: every
+    /// observability row `not observable` or `not trusted` (a held lever-arm direction holds
+    /// the axes it has a component of at least 0.17 on), and the time shift when it was not
+    /// estimated (no `time offset` row: its prior was 0).
+    pub fn held_dofs(&self, frame: SectionFrame) -> Vec<crate::dataset::Dof> {
+        use crate::dataset::Dof;
+        use nalgebra::{Matrix3, Vector3};
+        // Directions of the filter's perturbation [rotation in the sensor frame;
+        // translation in the IMU frame] into the section's.
+        let (rotation, translation) = match frame {
+            SectionFrame::ImuSensor => (Matrix3::identity(), Matrix3::identity()),
+            SectionFrame::SensorImu(r) => (*r.matrix(), r.matrix().transpose()),
+        };
+        let mut held = Vec::new();
+        let hold_along = |held: &mut Vec<Dof>, frame: &Matrix3<f64>, d: Vector3<f64>, first| {
+            let d = frame * d;
+            for k in 0..3 {
+                if d[k].abs() >= HELD_AXIS_COMPONENT {
+                    held.extend(Dof::extrinsic(first + k));
+                }
+            }
+        };
+        let mut timeshift_row = false;
+        for row in &self.observability {
+            timeshift_row |= row.dof == "time offset";
+            if row.status != "not observable" && row.status != "not trusted" {
+                continue;
+            }
+            let axis = |name: &str| match name.chars().last() {
+                Some('x') => Some(Vector3::x()),
+                Some('y') => Some(Vector3::y()),
+                Some('z') => Some(Vector3::z()),
+                _ => None,
+            };
+            match row.dof.as_str() {
+                "time offset" => held.push(Dof::Timeshift),
+                d if d.starts_with("rotation ") => {
+                    if let Some(a) = axis(d) {
+                        hold_along(&mut held, &rotation, a, 0);
+                    }
+                }
+                d if d.starts_with("translation along") => {
+                    if let Some(a) = self.held_axis {
+                        hold_along(&mut held, &translation, Vector3::from(a), 3);
+                    }
+                }
+                d if d.starts_with("translation ") => {
+                    if let Some(a) = axis(d) {
+                        hold_along(&mut held, &translation, a, 3);
+                    }
+                }
+                _ => {}
+            }
+        }
+        if !timeshift_row {
+            held.push(Dof::Timeshift);
+        }
+        held.sort();
+        held.dedup();
+        held
+    }
+}
