@@ -22,6 +22,7 @@ use super::init::{self};
 use super::planar::{self};
 use crate::dataset::{ImuNoiseYaml, ImuRecord, PoseRecord, PoseSensorYaml};
 
+pub mod model_error;
 mod steps;
 mod trust;
 
