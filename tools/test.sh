@@ -60,11 +60,13 @@ cargo fmt --all -- --check
 rustfmt --edition 2021 --check firmware/build.rs firmware/src/lib.rs firmware/src/main.rs \
   firmware/src/bin/*.rs
 
-step "lint (cargo clippy --workspace --all-targets -D warnings; the HIL test target too)"
-cargo clippy --workspace --all-targets -- -D warnings
+step "lint (cargo clippy --release --workspace --all-targets -D warnings; the HIL test target too)"
+# --release: the build scripts (with the C of zstd/lz4/bzip2) and proc macros it compiles are
+# the ones the release test build below reuses, instead of a second, debug set.
+cargo clippy --release --workspace --all-targets -- -D warnings
 # `--all-targets` skips `test = false` targets: the HIL suite (run by tools/hil.sh below)
 # is linted, and so compiled, here, before the long steps.
-cargo clippy -p msreg-hil-tests --test hil -- -D warnings
+cargo clippy --release -p msreg-hil-tests --test hil -- -D warnings
 
 step "import graph (tools/import_graph.py: imports point down, no cycle, no CLI crate in the library)"
 python3 tools/import_graph.py
@@ -116,11 +118,24 @@ elif ! make_aruco_reference; then
 fi
 export MSREG_OPENCV_DOC_HTML=$aruco_html MSREG_ARUCO_REFERENCE=$aruco_reference
 
-step "test (cargo test --workspace --release)"
-# Kept for the skip notices below (tee: cargo's own output is shown as it runs).
+step "test (cargo nextest run --workspace --release, then the doc tests)"
+# cargo-nextest (on the machine image; `cargo test` when absent) runs every test of every
+# binary on both cores: `cargo test` runs the binaries one after another, so a binary with one
+# long test leaves a core idle. Each test is its own process, so the tests' `SKIP:` notices
+# (host/src/shared_data.rs) are collected in $MSREG_SKIP_LOG as well as in the log.
 test_log=$(mktemp)
-trap 'rm -f "$test_log"' EXIT
-cargo test --workspace --release 2>&1 | tee "$test_log"
+skip_log=$(mktemp)
+trap 'rm -f "$test_log" "$skip_log"' EXIT
+export MSREG_SKIP_LOG=$skip_log
+if cargo nextest --version >/dev/null 2>&1; then
+  use_nextest=1
+  cargo nextest run --workspace --release --no-fail-fast --profile ci 2>&1 | tee "$test_log"
+  cargo test --workspace --release --doc 2>&1 | tee -a "$test_log"
+else
+  use_nextest=0
+  echo "NOTICE: cargo-nextest absent: cargo test runs the binaries one after another"
+  cargo test --workspace --release 2>&1 | tee "$test_log"
+fi
 
 # The acceptance runs that a plain `cargo test` skips (#[ignore]: seconds to a minute of
 # seeds each) but that fit CI: each under ~60 s on 2 cores (README, "Acceptance tests": this list, the
@@ -140,18 +155,36 @@ acceptance=(
   "msreg-host camera_imu_rig two_camera_rig_is_accurate_and_consistent_over_ten_seeds"
   "msreg-host monitor_pose_sensors one_pose_sensor_false_alarms_in_forty_unknocked_drives"
 )
-step "acceptance runs (${#acceptance[@]} ignored tests by name: cargo test -- --ignored --exact)"
-for entry in "${acceptance[@]}"; do
-  read -r package target name <<<"$entry"
-  started=$SECONDS
-  cargo test --release -q -p "$package" --test "$target" -- --ignored --exact "$name"
-  printf '  %s %s::%s passed (%ss)\n' "$package" "$target" "$name" $((SECONDS - started))
-done
+step "acceptance runs (${#acceptance[@]} ignored tests by name, --run-ignored only)"
+if ((use_nextest)); then
+  # One nextest run over the list, both cores busy; it prints each test's time.
+  filter=""
+  for entry in "${acceptance[@]}"; do
+    read -r package target name <<<"$entry"
+    filter+="${filter:+ | }(package($package) & binary($target) & test(=$name))"
+  done
+  # A name that matches nothing would pass silently: the list must find every entry.
+  found=$(cargo nextest list --workspace --release --run-ignored only -E "$filter" 2>/dev/null |
+    grep -c '::' || true)
+  if ((found != ${#acceptance[@]})); then
+    echo "tools/test.sh: the acceptance list names ${#acceptance[@]} tests, nextest finds $found" >&2
+    exit 1
+  fi
+  cargo nextest run --workspace --release --profile ci --no-fail-fast --run-ignored only \
+    -E "$filter" 2>&1 | tee -a "$test_log"
+else
+  for entry in "${acceptance[@]}"; do
+    read -r package target name <<<"$entry"
+    started=$SECONDS
+    cargo test --release -q -p "$package" --test "$target" -- --ignored --exact "$name"
+    printf '  %s %s::%s passed (%ss)\n' "$package" "$target" "$name" $((SECONDS - started))
+  done
+fi
 
 # Every test whose input is absent printed a `SKIP:` line past cargo's capture
 # (host/src/shared_data.rs); with CI=true those tests failed in the test step instead.
 step "real-data tests: skip notices"
-skips=$(grep -o 'SKIP: .*' "$test_log" | sort -u || true)
+skips=$(cat "$test_log" "$skip_log" | grep -o 'SKIP: .*' | sort -u || true)
 if [[ -z $skips ]]; then
   echo "no test skipped: every real-data test ran on its data"
 else

@@ -6,7 +6,9 @@
 //!   services set `CI=true`), the test panics, so a CI run that checked nothing fails;
 //! - otherwise it writes `SKIP: <test binary>::<test name>: <what> is absent ...` to the
 //!   terminal and returns. The line goes to stderr past the test harness's capture, so a plain
-//!   `cargo test` shows it beside the passing test (tools/test.sh lists every such line).
+//!   `cargo test` shows it beside the passing test, and is appended to the file
+//!   `$MSREG_SKIP_LOG` when that is set (tools/test.sh sets it: cargo-nextest hides a passing
+//!   test's stderr; the script lists every such line).
 //!
 //! Every test that needs an input from outside the repository goes through
 //! [`dir_or_skip`], [`file_or_skip`] or [`present_or_skip`].
@@ -81,6 +83,17 @@ fn absent(paths: &[String], how: &str) {
     // shows it; one write per line keeps parallel tests' lines whole.
     let line = format!("SKIP: {test}: {what}; under CI=true this fails\n");
     let _ = std::io::stderr().write_all(line.as_bytes());
+    // A runner that captures whole processes (cargo-nextest hides a passing test's stderr)
+    // collects the notices in this file instead (tools/test.sh sets it).
+    if let Some(path) = std::env::var_os("MSREG_SKIP_LOG") {
+        let file = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(path);
+        if let Ok(mut file) = file {
+            let _ = file.write_all(line.as_bytes());
+        }
+    }
 }
 
 fn verb(n: usize) -> &'static str {
