@@ -13,10 +13,10 @@
 //! Log lines (`defmt`, typed primitive arguments only: see `msreg link log`) mark the
 //! configuration, each fault, each alarm and the progress every [`PROGRESS_PERIOD_NS`].
 //!
-//! Clock sync: a `TimeSync` request is answered with the device clock when its frame ended
-//! (the caller's receive stamp) and just before the reply is written, ahead of its ack. This
-//! firmware's IMU arrives over the link, so its filter runs on the host's stamps
-//! ([`TIME_BASE`]).
+//! Clock sync: a `TimeSync` request is answered with the device clock when its frame's
+//! first byte arrived (the caller's receive stamp) and just before the reply is written,
+//! ahead of its ack. This firmware's IMU arrives over the link, so its filter runs on the
+//! host's stamps ([`TIME_BASE`]).
 
 use heapless::Deque;
 use msreg_estimator::health::{HealthEvent, NisStatus};
@@ -288,7 +288,7 @@ impl Session {
     }
 
     /// Applies one decoded packet and acknowledges it. `rx_ns`: the device clock when the
-    /// frame ended; `clock`: the device clock now (ns, the same clock).
+    /// frame's first byte arrived; `clock`: the device clock now (ns, the same clock).
     #[inline(never)]
     pub fn handle<W: embedded_io::Write>(
         &mut self,

@@ -7,17 +7,21 @@
 //! write 1 to clear), `CTRL` +0x08 (bit 0 TX enable, bit 1 RX enable, bit 3 RX interrupt),
 //! `INTSTATUS/INTCLEAR` +0x0C (bit 1 RX), `BAUDDIV` +0x10.
 //!
-//! Receive time stamps (clock sync, docs/protocol.md): the interrupt handler stamps every
-//! frame delimiter (`0x00`) it stores with the device clock ([`DeviceClock::now_ns`]), tagged
-//! with the byte's index in the stream; when the main loop takes that byte out of the ring,
-//! [`Uart::frame_end_ns`] returns its stamp. The handler stores a byte only when its own count
-//! says the ring has room (a byte it cannot store is dropped and counted, as the ring would),
-//! so the indices of both sides never drift apart.
+//! Receive time stamps (clock sync, docs/protocol.md): the interrupt handler stamps the first
+//! byte of every frame (a non-zero byte after a delimiter `0x00`, or the stream's first) it
+//! stores with the device clock ([`DeviceClock::now_ns`]), tagged with the byte's index in
+//! the stream; when the main loop takes that byte out of the ring, [`Uart::frame_start_ns`]
+//! returns its stamp. The frame's first byte, not its delimiter: the host stamps the start of
+//! what it writes and reads too, so the frame's own transfer time (a UART's serialisation,
+//! QEMU's byte-at-a-time receive) is in neither direction's delay. The handler stores a byte
+//! only when its own count says the ring has room (a byte it cannot store is dropped and
+//! counted, as the ring would), so the indices of both sides never drift apart, and both
+//! sides tell a frame's first byte from the same stored sequence.
 
 use core::cell::UnsafeCell;
 use core::convert::Infallible;
 use core::ptr::{read_volatile, write_volatile};
-use core::sync::atomic::{AtomicU32, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
 use cortex_m::interrupt::InterruptNumber;
 use cortex_m::peripheral::NVIC;
@@ -50,10 +54,13 @@ static STORED: AtomicU32 = AtomicU32::new(0);
 static TAKEN: AtomicU32 = AtomicU32::new(0);
 /// Bytes the handler dropped because [`RX`] was full by its count.
 static DROPPED: AtomicU32 = AtomicU32::new(0);
-/// Receive stamps of the delimiters waiting in [`RX`].
+/// Receive stamps of the frames' first bytes waiting in [`RX`].
 static STAMPS: StampQueue = StampQueue::new();
+/// The last byte the handler stored was a delimiter (or none was stored yet): the next
+/// non-zero byte starts a frame.
+static STORED_AT_START: AtomicBool = AtomicBool::new(true);
 
-/// Delimiter stamps that may wait (more, e.g. in a burst of tiny frames, are dropped: those
+/// Frame-start stamps that may wait (more, e.g. in a burst of tiny frames, are dropped: those
 /// frames have no receive stamp).
 const STAMPS_MAX: usize = 16;
 
@@ -153,16 +160,17 @@ fn drain_rx_register() {
     }
 }
 
-/// Interrupt side: stores `byte` if the ring has room by our count, stamping delimiters.
+/// Interrupt side: stores `byte` if the ring has room by our count, stamping frame starts.
 fn store(byte: u8) {
     let index = STORED.load(Ordering::Relaxed);
     if index.wrapping_sub(TAKEN.load(Ordering::Acquire)) as usize >= RX_RING {
         DROPPED.fetch_add(1, Ordering::Relaxed);
         return;
     }
-    if byte == 0 {
+    if byte != 0 && STORED_AT_START.load(Ordering::Relaxed) {
         STAMPS.push((index, DeviceClock::now_ns()));
     }
+    STORED_AT_START.store(byte == 0, Ordering::Relaxed);
     // Cannot drop: the ring's tail is at or past TAKEN, so it holds no more than we count.
     RX.push(byte);
     STORED.store(index.wrapping_add(1), Ordering::Release);
@@ -185,8 +193,10 @@ static mut RAM_VECTORS: Vectors = Vectors([0; 48]);
 
 /// UART0 with interrupt-driven receive.
 pub struct Uart {
-    /// Receive stamp of the last delimiter taken, if it had one.
-    frame_end_ns: Option<u64>,
+    /// Receive stamp of the first byte of the last frame begun, if it had one.
+    frame_start_ns: Option<u64>,
+    /// The last byte taken was a delimiter (or none was taken yet).
+    at_start: bool,
 }
 
 impl Uart {
@@ -212,7 +222,10 @@ impl Uart {
             write_reg(CTRL, CTRL_TX_EN | CTRL_RX_EN | CTRL_RX_IRQ);
             NVIC::unmask(Irq::Uart0Rx);
         }
-        Self { frame_end_ns: None }
+        Self {
+            frame_start_ns: None,
+            at_start: true,
+        }
     }
 
     /// Bytes dropped because the receive ring was full, since the last call.
@@ -221,19 +234,22 @@ impl Uart {
             .saturating_add(DROPPED.swap(0, Ordering::Relaxed))
     }
 
-    /// Next received byte, if any (non-blocking). A delimiter sets [`Self::frame_end_ns`].
+    /// Next received byte, if any (non-blocking). A frame's first byte sets
+    /// [`Self::frame_start_ns`].
     pub fn try_read_byte(&mut self) -> Option<u8> {
         let (byte, index) = take()?;
-        if byte == 0 {
-            self.frame_end_ns = STAMPS.take(index);
+        if byte != 0 && self.at_start {
+            self.frame_start_ns = STAMPS.take(index);
         }
+        self.at_start = byte == 0;
         Some(byte)
     }
 
-    /// Device clock when the last delimiter taken by [`Self::try_read_byte`] was received
-    /// (the end of the frame it closed), ns; `None` when its stamp was not kept.
-    pub fn frame_end_ns(&self) -> Option<u64> {
-        self.frame_end_ns
+    /// Device clock when the first byte of the frame last begun by [`Self::try_read_byte`]
+    /// was received, ns (after its delimiter: the frame just closed); `None` when its stamp
+    /// was not kept.
+    pub fn frame_start_ns(&self) -> Option<u64> {
+        self.frame_start_ns
     }
 
     /// Sleeps until an interrupt unless a byte is already waiting.

@@ -88,8 +88,8 @@ pub enum TimeBase {
 pub struct TimeSyncReply {
     /// The request's `t1_ns`, echoed.
     pub t1_ns: u64,
-    /// Device clock when the request's closing delimiter was received (UART RX interrupt),
-    /// ns since boot.
+    /// Device clock when the request's first byte was received (UART RX interrupt), ns since
+    /// boot.
     pub t2_ns: u64,
     /// Device clock just before this reply's first byte is written, ns since boot.
     pub t3_ns: u64,

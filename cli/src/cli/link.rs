@@ -41,7 +41,8 @@ pub enum LinkCommand {
         /// base says (docs/protocol.md "Clock sync").
         #[arg(long)]
         device_clock: bool,
-        /// Known floor asymmetry of the link, us (a UART: (request bytes - 1) x 10 / baud).
+        /// Known floor asymmetry of the link (forward minus backward floor), us; 0 on a direct
+        /// UART (every stamp is at a frame's first byte).
         #[arg(long, default_value_t = 0.0)]
         sync_asymmetry_us: f64,
     },

@@ -89,7 +89,7 @@ fn main() -> ! {
             Pushed::Frame(f) => match frame::decode::<HostMsg>(f) {
                 Ok(packet) => {
                     let status_request = matches!(packet.msg, HostMsg::GetStatus);
-                    let rx_ns = uart.frame_end_ns().unwrap_or_else(DeviceClock::now_ns);
+                    let rx_ns = uart.frame_start_ns().unwrap_or_else(DeviceClock::now_ns);
                     session.handle(&mut uart, packet, rx_ns, DeviceClock::now_ns);
                     if status_request {
                         log_ram(&mut logged_peak);
