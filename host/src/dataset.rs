@@ -19,6 +19,7 @@ mod meta;
 mod observed_corners;
 mod pose;
 mod pose_pair;
+mod prior;
 mod result;
 mod yaml;
 
@@ -44,6 +45,7 @@ pub use observed_corners::{
 };
 pub use pose::{read_pose_csv, write_pose_csv, PoseRecord, PoseSensorYaml};
 pub use pose_pair::{PosePairCalibration, CALIBRATION_OF_RECORD_YAML};
+pub use prior::{ExtrinsicPrior, PriorError, PriorFile};
 pub use result::{
     isometry_from_matrix, read_t_world_cam, BadName, CalibrationResult, CameraIntrinsics, Dof,
     ExtrinsicEstimate, ExtrinsicKeys, ResultSection, SectionName, SensorId, SensorKind,
