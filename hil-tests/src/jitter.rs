@@ -3,18 +3,20 @@
 //!
 //! The client opens [`JitterProxy::path`], one end of a pty pair; the proxy forwards every
 //! chunk it reads to QEMU's pty (and back) after the chunk's delay: a floor plus a uniform
-//! jitter plus, with probability `spike_p`, a spike (heavy tail). Bytes stay in order (a
-//! chunk never overtakes the previous one), as on a serial line.
+//! jitter plus, with probability `spike_p`, a spike (heavy tail), drawn from a seeded
+//! generator per direction. Bytes stay in order (a chunk never overtakes the previous one),
+//! as on a serial line.
 //!
 //! Truth, by causality alone and without the injected delays: the proxy decodes the frames
-//! it forwards. The device stamps a clock-sync request `t2` in its receive interrupt, after
-//! the request's closing delimiter reached it, so after the proxy began writing that
-//! delimiter to QEMU (`before_write`; written on its own, after a pause):
-//! `device(before_write) <= t2`. It stamps its reply `t3` before writing the reply's first
-//! byte, so before the proxy's read of that byte returned (`after_read`):
-//! `device(after_read) >= t3`. Under QEMU without `-icount` the guest's SysTick runs on
-//! QEMU's virtual clock, which is the host's `CLOCK_MONOTONIC` (Rust's `Instant`) plus a
-//! constant: `device(i) = (i - epoch) + C`, and every exchange brackets `C`.
+//! it forwards. The device stamps a clock-sync request `t2` in its receive interrupt when the
+//! request's first byte reached it, so after the proxy began writing the chunk holding that
+//! byte to QEMU (`before_write`): `device(before_write) <= t2`. It stamps its reply `t3`
+//! before writing the reply's first byte, so before the proxy's read of that byte returned
+//! (`after_read`): `device(after_read) >= t3`. Under QEMU without `-icount` the guest's
+//! SysTick runs on QEMU's virtual clock, which is the host's `CLOCK_MONOTONIC` (Rust's
+//! `Instant`) plus a constant: `device(i) = (i - epoch) + C`, and every exchange brackets
+//! `C`. [`JitterProxy::legs`] gives every instant of every exchange, to see where each
+//! direction's delay goes.
 
 use std::io::{Read, Write};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -28,8 +30,8 @@ use msreg_protocol::{
 };
 use serialport::{SerialPort, TTYPort};
 
-/// Pause before a clock-sync request's delimiter is written (see `Ctx::write`).
-const DELIMITER_PAUSE: Duration = Duration::from_micros(500);
+/// Lead of the wake-up delimiter before a forward chunk.
+const WAKE_UP: Duration = Duration::from_micros(150);
 
 /// Delay of one direction: `floor + U(0, jitter)`, plus a spike of `U(1, 10) x jitter`
 /// with probability `spike_p`.
@@ -72,6 +74,36 @@ pub struct Shape {
     pub backward: Delay,
 }
 
+/// The delays in force and their generators (xorshift states, forward and backward).
+struct Link {
+    shape: Shape,
+    rng: [u64; 2],
+}
+
+impl Link {
+    fn new(shape: Shape, seed: u64) -> Self {
+        // Two odd, distinct, non-zero states, stirred so that nearby seeds part at once.
+        let mut rng = [
+            seed.wrapping_mul(2) | 1,
+            seed.wrapping_mul(2).wrapping_add(3) | 1,
+        ];
+        for r in &mut rng {
+            for _ in 0..8 {
+                uniform(r);
+            }
+        }
+        Self { shape, rng }
+    }
+
+    fn draw(&mut self, forward: bool) -> Duration {
+        if forward {
+            self.shape.forward.draw(&mut self.rng[0])
+        } else {
+            self.shape.backward.draw(&mut self.rng[1])
+        }
+    }
+}
+
 /// Bounds on `C` = device clock minus `Instant` ns since the proxy's epoch.
 #[derive(Debug, Clone, Copy)]
 pub struct TruthBracket {
@@ -85,10 +117,34 @@ pub struct TruthBracket {
 
 #[derive(Default)]
 struct Seen {
-    /// `t1` of a request -> `before_write` ns since the epoch.
+    /// `t1` of a request -> `before_write` of its first byte, ns since the epoch.
     written: std::collections::HashMap<u64, i64>,
     /// `(t1, t2, t3, after_read ns)` of every reply.
     replies: Vec<(u64, u64, u64, i64)>,
+    /// `t1` of a request -> the proxy's read of its first byte, ns since the epoch.
+    request_read: std::collections::HashMap<u64, i64>,
+    /// `t1` of a reply -> the proxy's write of its first byte towards the host, ns.
+    reply_written: std::collections::HashMap<u64, i64>,
+}
+
+/// The instants of one exchange on the proxy, ns since its epoch (diagnostics: where the
+/// delays of each direction are spent).
+#[derive(Debug, Clone, Copy)]
+pub struct Legs {
+    /// The request's `t1` (names the exchange).
+    pub t1_ns: u64,
+    /// Device stamps.
+    pub t2_ns: u64,
+    /// Device stamps.
+    pub t3_ns: u64,
+    /// Proxy read the request's first byte from the host side.
+    pub request_read_ns: i64,
+    /// Proxy began writing the request's first byte to QEMU.
+    pub before_write_ns: i64,
+    /// Proxy read the reply's first byte from QEMU.
+    pub after_read_ns: i64,
+    /// Proxy began writing the reply's first byte to the host side.
+    pub reply_written_ns: i64,
 }
 
 /// The proxy; stops (threads joined) on drop.
@@ -97,7 +153,7 @@ pub struct JitterProxy {
     pub path: String,
     /// `Instant` the truth's nanoseconds count from.
     pub epoch: Instant,
-    shape: Arc<Mutex<Shape>>,
+    link: Arc<Mutex<Link>>,
     seen: Arc<Mutex<Seen>>,
     stop: Arc<AtomicBool>,
     threads: Vec<JoinHandle<()>>,
@@ -112,7 +168,8 @@ fn open_raw(path: &str) -> Result<TTYPort, String> {
 }
 
 impl JitterProxy {
-    /// Starts forwarding between a new pty pair and the device pty `device`.
+    /// Starts forwarding between a new pty pair and the device pty `device`, the delays
+    /// drawn from `seed`.
     pub fn start(device: &str, shape: Shape, seed: u64) -> Result<Self, String> {
         let (master, slave) = TTYPort::pair().map_err(|e| format!("pty pair: {e}"))?;
         let path = slave.name().ok_or("pty without a name")?;
@@ -120,7 +177,7 @@ impl JitterProxy {
         let clone = |p: &TTYPort| p.try_clone_native().map_err(|e| e.to_string());
         let (master_w, device_w) = (clone(&master)?, clone(&device_port)?);
         let epoch = Instant::now();
-        let shape = Arc::new(Mutex::new(shape));
+        let link = Arc::new(Mutex::new(Link::new(shape, seed)));
         let seen = Arc::new(Mutex::new(Seen::default()));
         let stop = Arc::new(AtomicBool::new(false));
         let mut threads = Vec::new();
@@ -134,19 +191,18 @@ impl JitterProxy {
             let ctx = Ctx {
                 forward,
                 epoch,
-                shape: Arc::clone(&shape),
+                link: Arc::clone(&link),
                 seen: Arc::clone(&seen),
                 stop: Arc::clone(&stop),
             };
             let reader_ctx = ctx.clone();
-            let rng = seed.wrapping_mul(2).wrapping_add(u64::from(forward)) | 1;
-            threads.push(std::thread::spawn(move || reader_ctx.read(src, &tx, rng)));
+            threads.push(std::thread::spawn(move || reader_ctx.read(src, &tx)));
             threads.push(std::thread::spawn(move || ctx.write(dst, &rx)));
         }
         Ok(Self {
             path,
             epoch,
-            shape,
+            link,
             seen,
             stop,
             threads,
@@ -154,10 +210,10 @@ impl JitterProxy {
         })
     }
 
-    /// Changes the delays from now on.
-    pub fn set_shape(&self, shape: Shape) {
-        if let Ok(mut s) = self.shape.lock() {
-            *s = shape;
+    /// Changes the delays from now on, drawn afresh from `seed`.
+    pub fn set_shape(&self, shape: Shape, seed: u64) {
+        if let Ok(mut l) = self.link.lock() {
+            *l = Link::new(shape, seed);
         }
     }
 
@@ -166,6 +222,27 @@ impl JitterProxy {
         if let Ok(mut s) = self.seen.lock() {
             *s = Seen::default();
         }
+    }
+
+    /// Every exchange seen on both sides since the last [`Self::clear`].
+    pub fn legs(&self) -> Vec<Legs> {
+        let Ok(seen) = self.seen.lock() else {
+            return Vec::new();
+        };
+        seen.replies
+            .iter()
+            .filter_map(|&(t1, t2, t3, after_read)| {
+                Some(Legs {
+                    t1_ns: t1,
+                    t2_ns: t2,
+                    t3_ns: t3,
+                    request_read_ns: *seen.request_read.get(&t1)?,
+                    before_write_ns: *seen.written.get(&t1)?,
+                    after_read_ns: after_read,
+                    reply_written_ns: *seen.reply_written.get(&t1)?,
+                })
+            })
+            .collect()
     }
 
     /// The bracket of `C` from every exchange seen since the last [`Self::clear`].
@@ -207,9 +284,40 @@ impl Drop for JitterProxy {
 struct Ctx {
     forward: bool,
     epoch: Instant,
-    shape: Arc<Mutex<Shape>>,
+    link: Arc<Mutex<Link>>,
     seen: Arc<Mutex<Seen>>,
     stop: Arc<AtomicBool>,
+}
+
+/// Frames in one direction's byte stream, each with the instant of the chunk that held its
+/// first byte.
+struct Starts<const N: usize> {
+    deframer: Deframer<N>,
+    started: Option<Instant>,
+}
+
+impl<const N: usize> Starts<N> {
+    fn new() -> Self {
+        Self {
+            deframer: Deframer::new(),
+            started: None,
+        }
+    }
+
+    /// Feeds `bytes` (a chunk met at `at`); calls `on_frame` with every frame completed and
+    /// the instant its first byte was met.
+    fn push(&mut self, bytes: &[u8], at: Instant, mut on_frame: impl FnMut(&mut [u8], Instant)) {
+        for &b in bytes {
+            if b != 0 && self.started.is_none() {
+                self.started = Some(at);
+            }
+            match self.deframer.push(b) {
+                Pushed::Frame(f) => on_frame(f, self.started.take().unwrap_or(at)),
+                _ if b == 0 => self.started = None,
+                _ => {}
+            }
+        }
+    }
 }
 
 impl Ctx {
@@ -217,11 +325,53 @@ impl Ctx {
         at.saturating_duration_since(self.epoch).as_nanos() as i64
     }
 
-    /// Reads chunks; device replies are noted at the read; each chunk is queued with its
+    fn note(&self, f: impl FnOnce(&mut Seen)) {
+        if let Ok(mut s) = self.seen.lock() {
+            f(&mut s);
+        }
+    }
+
+    /// Notes the clock-sync frames of a chunk met at `at` (read or about to be written).
+    fn note_chunk(
+        &self,
+        (host, device): (&mut Starts<HOST_FRAME_MAX>, &mut Starts<DEVICE_FRAME_MAX>),
+        bytes: &[u8],
+        (at, written): (Instant, bool),
+    ) {
+        if self.forward {
+            host.push(bytes, at, |f, first| {
+                if let Ok(HostMsg::TimeSync(r)) = frame::decode::<HostMsg>(f).map(|p| p.msg) {
+                    let first = self.ns(first);
+                    self.note(|s| {
+                        let map = if written {
+                            &mut s.written
+                        } else {
+                            &mut s.request_read
+                        };
+                        map.insert(r.t1_ns, first);
+                    });
+                }
+            });
+        } else {
+            device.push(bytes, at, |f, first| {
+                if let Ok(DeviceMsg::TimeSync(r)) = frame::decode::<DeviceMsg>(f).map(|p| p.msg) {
+                    let first = self.ns(first);
+                    self.note(|s| {
+                        if written {
+                            s.reply_written.insert(r.t1_ns, first);
+                        } else {
+                            s.replies.push((r.t1_ns, r.t2_ns, r.t3_ns, first));
+                        }
+                    });
+                }
+            });
+        }
+    }
+
+    /// Reads chunks, noting clock-sync frames at the read; each chunk is queued with its
     /// release time (never before the previous chunk's).
-    fn read(&self, mut src: TTYPort, tx: &mpsc::Sender<(Instant, Vec<u8>)>, mut rng: u64) {
-        let mut deframer = Deframer::<DEVICE_FRAME_MAX>::new();
-        let mut started = None;
+    fn read(&self, mut src: TTYPort, tx: &mpsc::Sender<(Instant, Vec<u8>)>) {
+        let (mut host, mut device) = (Starts::new(), Starts::new());
         let mut buf = [0u8; 4096];
         let mut last_release = Instant::now();
         while !self.stop.load(Ordering::Relaxed) {
@@ -230,24 +380,11 @@ impl Ctx {
                 _ => continue,
             };
             let after_read = Instant::now();
-            if !self.forward {
-                self.note_replies((&mut deframer, &mut started), &buf[..n], after_read);
-            }
-            let shape = self.shape.lock().map(|s| *s).ok();
-            let delay = shape.map_or(Duration::ZERO, |s| {
-                if self.forward {
-                    s.forward.draw(&mut rng)
-                } else {
-                    s.backward.draw(&mut rng)
-                }
-            });
-            // Forward: the request's delimiter goes DELIMITER_PAUSE after its release (see
-            // `write`), so the release is that much earlier: the delimiter keeps the delay.
-            let delay = if self.forward {
-                delay.saturating_sub(DELIMITER_PAUSE)
-            } else {
-                delay
-            };
+            self.note_chunk((&mut host, &mut device), &buf[..n], (after_read, false));
+            let delay = self
+                .link
+                .lock()
+                .map_or(Duration::ZERO, |mut l| l.draw(self.forward));
             last_release = last_release.max(after_read + delay);
             if tx.send((last_release, buf[..n].to_vec())).is_err() {
                 return;
@@ -255,72 +392,35 @@ impl Ctx {
         }
     }
 
-    /// Notes each clock-sync reply with the read that returned its first byte.
-    fn note_replies(
-        &self,
-        (deframer, started): (&mut Deframer<DEVICE_FRAME_MAX>, &mut Option<Instant>),
-        bytes: &[u8],
-        at: Instant,
-    ) {
-        for &b in bytes {
-            if b != 0 && started.is_none() {
-                *started = Some(at);
-            }
-            let Pushed::Frame(f) = deframer.push(b) else {
-                if b == 0 {
-                    *started = None;
-                }
-                continue;
-            };
-            let first = started.take().unwrap_or(at);
-            if let Ok(DeviceMsg::TimeSync(r)) = frame::decode::<DeviceMsg>(f).map(|p| p.msg) {
-                if let Ok(mut s) = self.seen.lock() {
-                    s.replies.push((r.t1_ns, r.t2_ns, r.t3_ns, self.ns(first)));
-                }
-            }
-        }
-    }
-
-    /// Writes each chunk at its release time. A clock-sync request's closing delimiter is
-    /// written on its own, [`DELIMITER_PAUSE`] after the bytes before it (by then QEMU has
-    /// taken them in), with `before_write` noted just before: the device's `t2` follows it by
-    /// one byte's way through QEMU, not the whole frame's.
+    /// Writes each chunk at its release time, then notes its clock-sync frames with the instant
+    /// just before the write of the chunk holding their first byte: the device stamps a
+    /// request's first byte after that (`before_write`).
     fn write(&self, mut dst: TTYPort, rx: &mpsc::Receiver<(Instant, Vec<u8>)>) {
-        let mut deframer = Deframer::<HOST_FRAME_MAX>::new();
+        let (mut host, mut device) = (Starts::new(), Starts::new());
         while !self.stop.load(Ordering::Relaxed) {
             let Ok((release, bytes)) = rx.recv_timeout(Duration::from_millis(20)) else {
                 continue;
             };
+            if self.forward {
+                // Wake QEMU's threads for the chunk: a lone delimiter (an empty frame,
+                // ignored), then the chunk WAKE_UP later at its release time.
+                let wake_at = release.checked_sub(WAKE_UP).unwrap_or(release);
+                let now = Instant::now();
+                if wake_at > now {
+                    std::thread::sleep(wake_at - now);
+                }
+                let _ = dst.write_all(&[0]);
+                while Instant::now() < release {
+                    std::hint::spin_loop();
+                }
+            }
             let now = Instant::now();
             if release > now {
                 std::thread::sleep(release - now);
             }
-            let mut from = 0;
-            for (i, &b) in bytes.iter().enumerate() {
-                if !self.forward {
-                    break;
-                }
-                let Pushed::Frame(f) = deframer.push(b) else {
-                    continue;
-                };
-                let Ok(HostMsg::TimeSync(r)) = frame::decode::<HostMsg>(f).map(|p| p.msg) else {
-                    continue;
-                };
-                let _ = dst.write_all(&bytes[from..i]);
-                // Spin, not sleep: a sleep overshoots by tens of microseconds, a floor the
-                // backward direction would not have.
-                let resume = Instant::now() + DELIMITER_PAUSE;
-                while Instant::now() < resume {
-                    std::hint::spin_loop();
-                }
-                let before_write = Instant::now();
-                if let Ok(mut s) = self.seen.lock() {
-                    s.written.insert(r.t1_ns, self.ns(before_write));
-                }
-                let _ = dst.write_all(&bytes[i..=i]);
-                from = i + 1;
-            }
-            let _ = dst.write_all(&bytes[from..]);
+            let before_write = Instant::now();
+            let _ = dst.write_all(&bytes);
+            self.note_chunk((&mut host, &mut device), &bytes, (before_write, true));
         }
     }
 }

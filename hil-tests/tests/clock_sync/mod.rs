@@ -1,5 +1,5 @@
 //! HIL of the clock sync (issue 35, item 3): the link firmware's device clock (SysTick,
-//! receive stamps in the UART interrupt) estimated by `msreg_host::link::clock_sync` through
+//! frame-start receive stamps in the UART interrupt) estimated by `msreg_host::link::clock_sync` through
 //! a link with injected delay and jitter ([`msreg_hil_tests::jitter`]), against the truth
 //! bracketed on the QEMU side of the injected delays.
 //!
@@ -9,7 +9,7 @@
 
 use std::time::{Duration, Instant};
 
-use msreg_hil_tests::jitter::{Delay, JitterProxy, Shape, TruthBracket};
+use msreg_hil_tests::jitter::{Delay, JitterProxy, Legs, Shape, TruthBracket};
 use msreg_host::link::clock_sync::{ClockFit, ClockSync, ClockSyncOptions, Exchange};
 use msreg_host::link::{Client, ClientOptions};
 use msreg_protocol::TimeBase;
@@ -22,8 +22,9 @@ const HOST_SKEW: f64 = -50e-6;
 const HOST_EPOCH_NS: i64 = 1_700_000_000_000_000_000;
 /// The issue's acceptance bound, ns.
 const MAX_ERROR_NS: f64 = 100_000.0;
-/// Exchanges per second and length of a phase; the error counts after `SETTLE_S`.
-const RATE_HZ: f64 = 25.0;
+/// Exchanges per second and length of a phase (one per jitter seed); the error counts after
+/// `SETTLE_S`.
+const RATE_HZ: f64 = 50.0;
 const PHASE_S: f64 = 10.0;
 const SETTLE_S: f64 = 4.0;
 
@@ -56,9 +57,15 @@ fn delay(floor_ms: f64, jitter_ms: f64) -> Delay {
     }
 }
 
-/// Runs `PHASE_S` of exchanges through `shape`; the estimator knows `asymmetry_ns`.
-fn phase(client: &mut Client, proxy: &JitterProxy, shape: Shape, asymmetry_ns: i64) -> PhaseResult {
-    proxy.set_shape(shape);
+/// Runs `PHASE_S` of exchanges through `shape` with delays drawn from `seed`; the estimator
+/// knows `asymmetry_ns`.
+fn phase(
+    client: &mut Client,
+    proxy: &JitterProxy,
+    (shape, seed): (Shape, u64),
+    asymmetry_ns: i64,
+) -> PhaseResult {
+    proxy.set_shape(shape, seed);
     std::thread::sleep(Duration::from_millis(100));
     proxy.clear();
     let mut sync = ClockSync::new(ClockSyncOptions {
@@ -67,6 +74,7 @@ fn phase(client: &mut Client, proxy: &JitterProxy, shape: Shape, asymmetry_ns: i
     });
     let start = Instant::now();
     let (mut sent, mut estimates) = (0, Vec::new());
+    let mut host_side = std::collections::HashMap::new();
     let mut fit = None;
     while start.elapsed().as_secs_f64() < PHASE_S {
         let slot = start + Duration::from_secs_f64(sent as f64 / RATE_HZ);
@@ -78,6 +86,13 @@ fn phase(client: &mut Client, proxy: &JitterProxy, shape: Shape, asymmetry_ns: i
             continue;
         };
         assert_eq!(x.reply.time_base, TimeBase::HostStamps);
+        host_side.insert(
+            x.reply.t1_ns,
+            (
+                x.sent.duration_since(proxy.epoch).as_nanos() as i64,
+                x.received.duration_since(proxy.epoch).as_nanos() as i64,
+            ),
+        );
         let e = Exchange {
             t1_ns: host_ns(proxy.epoch, x.sent),
             t2_ns: x.reply.t2_ns as i64,
@@ -93,6 +108,12 @@ fn phase(client: &mut Client, proxy: &JitterProxy, shape: Shape, asymmetry_ns: i
         fit = Some(f);
     }
     let truth = proxy.truth();
+    dump(proxy, &host_side, &truth, asymmetry_ns);
+    legs_report(
+        &proxy.legs(),
+        &host_side,
+        0.5 * (truth.lower_ns as f64 + truth.upper_ns as f64),
+    );
     let mid = 0.5 * (truth.lower_ns as f64 + truth.upper_ns as f64);
     let errors: Vec<f64> = estimates.iter().map(|&c| c as f64 - mid).collect();
     let far: f64 = estimates
@@ -107,6 +128,80 @@ fn phase(client: &mut Client, proxy: &JitterProxy, shape: Shape, asymmetry_ns: i
         max_bound_ns: far,
         truth,
         fit: fit.expect("exchanges answered"),
+    }
+}
+
+/// With `CLOCK_SYNC_DUMP=<path>`, writes every exchange's instants (ns since the proxy's
+/// epoch: host send, t2, t3, host receive, then the proxy's four) and the truth bracket to
+/// `<path>.<asymmetry_ns>`, for study outside the test.
+fn dump(
+    proxy: &JitterProxy,
+    host: &std::collections::HashMap<u64, (i64, i64)>,
+    truth: &TruthBracket,
+    asymmetry_ns: i64,
+) {
+    let Ok(path) = std::env::var("CLOCK_SYNC_DUMP") else {
+        return;
+    };
+    let mut out = String::new();
+    for l in proxy.legs() {
+        if let Some(&(s, r)) = host.get(&l.t1_ns) {
+            out += &format!(
+                "{s} {} {} {r} {} {} {} {}\n",
+                l.t2_ns,
+                l.t3_ns,
+                l.request_read_ns,
+                l.before_write_ns,
+                l.after_read_ns,
+                l.reply_written_ns
+            );
+        }
+    }
+    out += &format!("# truth {} {}\n", truth.lower_ns, truth.upper_ns);
+    let _ = std::fs::write(format!("{path}.{asymmetry_ns}"), out);
+}
+
+/// Minimum / median of each leg of both directions, us.
+fn legs_report(legs: &[Legs], host: &std::collections::HashMap<u64, (i64, i64)>, c: f64) {
+    let mut cols: Vec<(&str, Vec<f64>)> = [
+        "host->proxy",
+        "proxy hold f",
+        "proxy->dev t2",
+        "dev t3->proxy",
+        "proxy hold b",
+        "proxy->host",
+    ]
+    .iter()
+    .map(|n| (*n, Vec::new()))
+    .collect();
+    for l in legs {
+        let Some(&(sent, received)) = host.get(&l.t1_ns) else {
+            continue;
+        };
+        let v = [
+            (l.request_read_ns - sent) as f64,
+            (l.before_write_ns - l.request_read_ns) as f64,
+            l.t2_ns as f64 - c - l.before_write_ns as f64,
+            l.after_read_ns as f64 - (l.t3_ns as f64 - c),
+            (l.reply_written_ns - l.after_read_ns) as f64,
+            (received - l.reply_written_ns) as f64,
+        ];
+        for (col, x) in cols.iter_mut().zip(v) {
+            col.1.push(x);
+        }
+    }
+    for (name, mut v) in cols {
+        v.sort_by(f64::total_cmp);
+        if v.is_empty() {
+            continue;
+        }
+        println!(
+            "  leg {name:>14}: n {} min {:.1} us, p10 {:.1}, median {:.1}",
+            v.len(),
+            v[0] * 1e-3,
+            v[v.len() / 10] * 1e-3,
+            v[v.len() / 2] * 1e-3
+        );
     }
 }
 
@@ -128,7 +223,6 @@ fn report(name: &str, r: &PhaseResult) {
 }
 
 fn check(name: &str, r: &PhaseResult) {
-    report(name, r);
     // The truth is consistent (QEMU's virtual clock is the host's monotonic clock plus a
     // constant: one C satisfies every exchange) and tight enough to judge 0.1 ms
     assert!(
@@ -151,10 +245,15 @@ fn check(name: &str, r: &PhaseResult) {
     );
     // the mapping is within 0.1 ms of every clock the truth allows
     assert!(r.max_bound_ns < MAX_ERROR_NS, "{name}: {r:?}");
-    // and the skew is the host clock's 50 ppm (device / host rate - 1), within 3 ppm
+    // and the skew is the host clock's 50 ppm (device / host rate - 1), within 3 of its
+    // claimed sigmas
     let true_skew = 1.0 / (1.0 + HOST_SKEW) - 1.0;
     assert!(r.fit.skew_fitted);
-    assert!((r.fit.skew - true_skew).abs() < 3e-6, "{name}: {:?}", r.fit);
+    assert!(
+        (r.fit.skew - true_skew).abs() <= 3.0 * r.fit.sigma_skew,
+        "{name}: {:?}",
+        r.fit
+    );
     // and the reported uncertainty is finite and the asymmetry bound covers the error
     assert!(
         r.fit.sigma_ns.is_finite() && r.fit.sigma_skew.is_finite(),
@@ -164,8 +263,11 @@ fn check(name: &str, r: &PhaseResult) {
     assert!(r.max_ns <= r.fit.asymmetry_bound_ns, "{name}: {r:?}");
 }
 
+/// Jitter seeds of the equal-floor phases.
+const SEEDS: [u64; 3] = [35, 36, 37];
+
 #[test]
-#[ignore = "acceptance not met yet: 0.14-0.18 ms error vs 0.1 ms (docs/protocol.md, Clock sync); run with --ignored"]
+#[ignore = "acceptance not reliably met on a loaded 2-core machine: max error 20-133 us per phase, up to 331 us in single runs, vs 0.1 ms (docs/protocol.md, Clock sync); run with --ignored"]
 fn clock_sync_error_under_injected_delay_and_jitter_is_below_a_tenth_of_a_millisecond() {
     // Given the link firmware behind a link that adds 2 ms floors, 2 ms of uniform jitter
     // out and 0.5 ms back, 2 % spikes of 1-10x the jitter each way
@@ -174,27 +276,40 @@ fn clock_sync_error_under_injected_delay_and_jitter_is_below_a_tenth_of_a_millis
         forward: delay(2.0, 2.0),
         backward: delay(2.0, 0.5),
     };
-    let proxy = JitterProxy::start(&qemu.pty, symmetric, 35).expect("proxy");
+    let proxy = JitterProxy::start(&qemu.pty, symmetric, SEEDS[0]).expect("proxy");
     let mut client = Client::connect(&proxy.path, ClientOptions::default(), None).expect("port");
     client
         .handshake(Duration::from_secs(10))
         .expect("handshake");
     let started = Instant::now();
-    // When the host runs 25 exchanges a second for 10 s
-    let a = phase(&mut client, &proxy, symmetric, 0);
-    // Then the mapping is within 0.1 ms of the truth
-    check("equal floors", &a);
-    // Given floors of 3 ms out and 1 ms back, known to the host (as a UART's frame lengths)
+    // When the host runs 50 exchanges a second for 10 s, once per jitter seed
+    let mut results = Vec::new();
+    for seed in SEEDS {
+        let name = format!("equal floors, seed {seed}");
+        results.push((name, phase(&mut client, &proxy, (symmetric, seed), 0)));
+    }
+    // and again behind floors of 3 ms out and 1 ms back, known to the host
     let asymmetric = Shape {
         forward: delay(3.0, 2.0),
         backward: delay(1.0, 0.5),
     };
-    let b = phase(&mut client, &proxy, asymmetric, 2_000_000);
-    // Then too
-    check("3 ms / 1 ms floors, asymmetry known", &b);
+    let name = "3 ms / 1 ms floors, asymmetry known".to_string();
+    results.push((
+        name,
+        phase(&mut client, &proxy, (asymmetric, SEEDS[0]), 2_000_000),
+    ));
+    for (name, r) in &results {
+        report(name, r);
+    }
+    let worst = results.iter().map(|(_, r)| r.max_ns).fold(0.0, f64::max);
     println!(
-        "clock sync HIL: {:.1} s of exchanges; device errors reported: {:?}",
+        "clock sync HIL: {:.1} s of exchanges; worst error vs truth mid {:.1} us; device errors reported: {:?}",
         started.elapsed().as_secs_f64(),
+        worst * 1e-3,
         client.collected.errors
     );
+    // Then in every phase the mapping is within 0.1 ms of the truth
+    for (name, r) in &results {
+        check(name, r);
+    }
 }
