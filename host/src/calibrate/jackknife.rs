@@ -287,8 +287,8 @@ pub fn model_error(
     let data = Matrix7::from_fn(|r, c| {
         full.covariance[(r, c)] * ratio[r].max(0.0).sqrt() * ratio[c].max(0.0).sqrt()
     });
-    let deg = 180.0 / std::f64::consts::PI;
-    let rot = |m: &Matrix7| std::array::from_fn(|i| sd(m, i, deg));
+    // As the result file converts them (`ExtrinsicEstimate::from_covariance`).
+    let rot = |m: &Matrix7| std::array::from_fn(|i| sd(m, i, 1.0).to_degrees());
     let trans = |m: &Matrix7| std::array::from_fn(|i| sd(m, i + 3, 1.0));
     let report = ModelErrorReport {
         method: "time-block spread: the pipeline on each block alone, the blocks' spread about \
