@@ -195,10 +195,10 @@ fn pump_link(session: &mut Session, deframer: &mut Deframer<HOST_FRAME_MAX>, vcp
             Pushed::Pending => {}
             Pushed::Oversize => session.frame_error(vcp, msreg_protocol::FrameError::Oversize),
             Pushed::Frame(f) => match frame::decode::<HostMsg>(f) {
-                // Received when its delimiter arrived (stamped by the USART2 handler);
+                // Received when its first byte arrived (stamped by the USART2 handler);
                 // the session's clock is the device clock of the IMU stamps.
                 Ok(packet) => {
-                    let rx_ns = vcp.frame_end_ns().unwrap_or_else(clock::now_ns);
+                    let rx_ns = vcp.frame_start_ns().unwrap_or_else(clock::now_ns);
                     session.handle(vcp, packet, rx_ns, clock::now_ns);
                 }
                 Err(e) => session.frame_error(vcp, e),

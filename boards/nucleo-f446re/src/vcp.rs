@@ -4,12 +4,15 @@
 //! driven (USART2 RXNE) into the firmware's bounded [`Ring`], as QEMU's UART0 driver does;
 //! transmit blocks on the HAL's `Tx`.
 //!
-//! Receive stamps: the handler stamps each frame delimiter (`0x00`) on the device clock as it
-//! arrives, numbered; the main loop counts the delimiters it takes out of the ring and
-//! [`Vcp::frame_end_ns`] returns the stamp of the last one (the session's `rx_ns`, for the
-//! clock sync), unaffected by how long the loop was busy. The last [`STAMPS`] stamps are
-//! kept; when the ring runs empty the loop's count is re-aligned with the handler's (a byte
-//! dropped in a full ring may have been a delimiter).
+//! Receive stamps: the handler stamps the first byte of each frame (a non-zero byte after a
+//! delimiter `0x00`, or the stream's first) on the device clock as it arrives, numbered; the
+//! main loop counts the frame starts it takes out of the ring and, once the frame's delimiter
+//! is taken, [`Vcp::frame_start_ns`] returns that frame's stamp (the session's `rx_ns`, `t2`
+//! of the clock sync, docs/protocol.md: the frame's start, as the host stamps the start of
+//! what it writes, so the frame's serialisation time is in neither direction's delay),
+//! unaffected by how long the loop was busy. The last [`STAMPS`] stamps are kept; when the
+//! ring runs empty the loop's count is re-aligned with the handler's (a byte dropped in a
+//! full ring may have started a frame).
 
 use core::cell::RefCell;
 use core::convert::Infallible;
@@ -30,18 +33,21 @@ pub const BAUD: u32 = 115_200;
 static RX: Ring<RX_RING> = Ring::new();
 static RX_HALF: Mutex<RefCell<Option<Rx<USART2>>>> = Mutex::new(RefCell::new(None));
 
-/// Delimiter stamps kept (frames that may wait in the ring with their receive time).
+/// Frame-start stamps kept (frames that may wait in the ring with their receive time).
 pub const STAMPS: usize = 16;
 
-/// The handler's delimiters: how many arrived, and `(number, ns)` of the last [`STAMPS`].
-struct Delimiters {
+/// The handler's frame starts: how many arrived, `(number, ns)` of the last [`STAMPS`], and
+/// whether the last byte was a delimiter (the next non-zero byte starts a frame).
+struct FrameStarts {
     count: u32,
     stamps: [(u32, u64); STAMPS],
+    at_start: bool,
 }
 
-static DELIMITERS: Mutex<RefCell<Delimiters>> = Mutex::new(RefCell::new(Delimiters {
+static STARTS: Mutex<RefCell<FrameStarts>> = Mutex::new(RefCell::new(FrameStarts {
     count: 0,
     stamps: [(0, 0); STAMPS],
+    at_start: true,
 }));
 
 /// USART2 RXNE: moves every received byte into the ring. A receive error (overrun,
@@ -54,12 +60,13 @@ fn USART2() {
             loop {
                 match rx.read() {
                     Ok(b) => {
-                        if b == 0 {
-                            let mut d = DELIMITERS.borrow(cs).borrow_mut();
+                        let mut d = STARTS.borrow(cs).borrow_mut();
+                        if b != 0 && d.at_start {
                             d.count = d.count.wrapping_add(1);
                             let n = d.count;
                             d.stamps[n as usize % STAMPS] = (n, crate::clock::now_ns());
                         }
+                        d.at_start = b == 0;
                         RX.push(b);
                     }
                     Err(nb::Error::WouldBlock) => break,
@@ -73,10 +80,14 @@ fn USART2() {
 /// The link's UART.
 pub struct Vcp {
     tx: Tx<USART2>,
-    /// Delimiters taken out of the ring.
+    /// Frame starts taken out of the ring.
     taken: u32,
-    /// Receive stamp of the last delimiter taken, until asked for.
-    frame_end: Option<u64>,
+    /// The last byte taken was a delimiter (or none was taken yet).
+    at_start: bool,
+    /// Receive stamp of the frame being taken, if it was kept.
+    current: Option<u64>,
+    /// Receive stamp of the last complete frame taken, until asked for.
+    frame_start: Option<u64>,
 }
 
 impl Vcp {
@@ -90,7 +101,9 @@ impl Vcp {
         Self {
             tx,
             taken: 0,
-            frame_end: None,
+            at_start: true,
+            current: None,
+            frame_start: None,
         }
     }
 
@@ -103,23 +116,28 @@ impl Vcp {
     pub fn try_read_byte(&mut self) -> Option<u8> {
         let b = RX.pop()?;
         free(|cs| {
-            let d = DELIMITERS.borrow(cs).borrow();
-            if b == 0 {
+            let d = STARTS.borrow(cs).borrow();
+            if b != 0 && self.at_start {
                 self.taken = self.taken.wrapping_add(1);
                 let (n, ns) = d.stamps[self.taken as usize % STAMPS];
-                self.frame_end = (n == self.taken).then_some(ns);
+                self.current = (n == self.taken).then_some(ns);
             }
+            if b == 0 {
+                self.frame_start = self.current.take();
+            }
+            self.at_start = b == 0;
             if RX.is_empty() {
                 self.taken = d.count;
+                self.at_start = d.at_start;
             }
         });
         Some(b)
     }
 
-    /// Device-clock time at which the last frame delimiter taken arrived, if its stamp was
-    /// kept (`None` after more than [`STAMPS`] frames queued behind it).
-    pub fn frame_end_ns(&mut self) -> Option<u64> {
-        self.frame_end.take()
+    /// Device-clock time at which the first byte of the last complete frame taken arrived,
+    /// if its stamp was kept (`None` after more than [`STAMPS`] frames queued behind it).
+    pub fn frame_start_ns(&mut self) -> Option<u64> {
+        self.frame_start.take()
     }
 
     /// True when a received byte waits.
