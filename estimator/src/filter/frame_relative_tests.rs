@@ -261,3 +261,79 @@ fn f32_agrees_with_f64() {
         (pa - pb).amax() / pa.amax()
     );
 }
+
+// The Student-t reweighting of a relative pose (`HealthConfig::odometry_dof`, fuse.rs), here
+// for want of a test file of the relative-pose update's own.
+
+/// A spinning pose-IMU filter with the given Student-t dof, anchored at `T0 + 240 ms` and
+/// propagated until an increment ending 50 ms later is due; that stamp.
+fn anchored_filter(odometry_dof: f64) -> (PoseImuEkf<f64>, u64) {
+    let mut init = InitialState::<f64, 1>::at_rest(Vector3::new(0.0, 0.0, 9.81)).expect("gravity");
+    init.imu.velocity = Vector3::new(0.7, -0.3, 0.2);
+    let mut config = FilterConfig::new(ImuNoise::vn300());
+    config.health.odometry_dof = odometry_dof;
+    let mut ekf = PoseImuEkf::new(&config, &init).expect("prior");
+    let sample = |k: u64| ImuSample {
+        stamp_ns: T0 + k * 2_500_000,
+        gyro: Vector3::new(1.2, -0.8, 0.5),
+        accel: Vector3::new(0.5, 1.0, 9.0),
+    };
+    for k in 0..=104u64 {
+        ekf.propagate(&sample(k)).expect("sample");
+    }
+    let anchor = ekf.time_ns();
+    ekf.anchor(SOLE_SENSOR, anchor).expect("anchor");
+    let stamp = anchor + 50_000_000;
+    let mut k = 105;
+    while !ekf.is_due(SOLE_SENSOR, stamp) {
+        ekf.propagate(&sample(k)).expect("sample");
+        k += 1;
+    }
+    (ekf, stamp)
+}
+
+/// The identity increment (the filter spins at ~1.5 rad/s: a ~4 deg residual) over
+/// `[stamp - 50 ms, stamp]` with covariance `cov`, fused in a fresh filter of `dof`.
+fn fused_increment(
+    dof: f64,
+    cov: &SMatrix<f64, 6, 6>,
+) -> (PoseImuEkf<f64>, crate::UpdateReport<f64>) {
+    let (mut ekf, stamp) = anchored_filter(dof);
+    let m = crate::RelativePose {
+        stamp_from_ns: stamp - 50_000_000,
+        stamp_to_ns: stamp,
+        delta: Pose::identity(),
+        covariance: *cov,
+    };
+    let report = ekf.update_relative_pose(SOLE_SENSOR, &m).expect("update");
+    (ekf, report)
+}
+
+#[test]
+fn an_outlying_increment_is_fused_at_its_student_t_weight() {
+    // A noise that puts the increment's NIS between its dof (6) and the gate (22.5).
+    let cov = SMatrix::<f64, 6, 6>::identity() * 0.03f64.powi(2);
+    let (gaussian, g) = fused_increment(f64::INFINITY, &cov);
+    assert!(g.nis > 6.0 && g.accepted, "premise: {}", g.nis);
+    let (robust, r) = fused_increment(4.0, &cov);
+    // The gate and the report keep the stated noise.
+    assert_eq!(
+        (r.nis, r.accepted, r.threshold),
+        (g.nis, g.accepted, g.threshold)
+    );
+    // The state and covariance are a Gaussian update's at the noise divided by the weight.
+    let w = crate::update::relative_pose::student_t_weight(g.nis, 6, 4.0);
+    let (weighted, _) = fused_increment(f64::INFINITY, &(cov / w));
+    assert_mat_close(&robust.covariance(), &weighted.covariance(), 1e-12);
+    let angle = |e: &PoseImuEkf<f64>| e.extrinsic(SOLE_SENSOR).rotation;
+    assert!(angle(&robust).angle_to(&angle(&weighted)) < 1e-12);
+    // ... and not the unweighted update's: less information gained.
+    let trace = |e: &PoseImuEkf<f64>| e.covariance().trace();
+    assert!(trace(&robust) > trace(&gaussian) + 1e-9);
+    // An inlier (NIS below 6) is fused as by the Gaussian filter.
+    let wide = SMatrix::<f64, 6, 6>::identity() * 0.2f64.powi(2);
+    let (g, _) = fused_increment(f64::INFINITY, &wide);
+    let (r, report) = fused_increment(4.0, &wide);
+    assert!(report.nis < 6.0, "premise: {}", report.nis);
+    assert_eq!(g.covariance(), r.covariance());
+}

@@ -186,19 +186,40 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
         if held_out {
             gain.accepted = false;
         }
-        let innovation = sensor.zip(extrinsic_jacobian).map(|(s, h_e)| {
-            let b = Layout::<S, C>::extrinsic_rotation(s);
-            extrinsic_innovation(
-                (
-                    &h_e.fixed_columns::<3>(0).clone_owned(),
-                    &h_e.fixed_columns::<3>(3).clone_owned(),
-                    end_rotation,
-                ),
-                &gain.innovation_inverse,
-                &gain.weighted_residual,
-                self.cov.fixed_view::<3, 3>(b.idx, b.idx).clone_owned(),
-            )
-        });
+        let project = |gain: &Gain<T, M, N>, end_rotation| {
+            sensor.zip(extrinsic_jacobian).map(|(s, h_e)| {
+                let b = Layout::<S, C>::extrinsic_rotation(s);
+                extrinsic_innovation(
+                    (
+                        &h_e.fixed_columns::<3>(0).clone_owned(),
+                        &h_e.fixed_columns::<3>(3).clone_owned(),
+                        end_rotation,
+                    ),
+                    &gain.innovation_inverse,
+                    &gain.weighted_residual,
+                    self.cov.fixed_view::<3, 3>(b.idx, b.idx).clone_owned(),
+                )
+            })
+        };
+        let mut innovation = project(&gain, end_rotation);
+        let weight = match kind {
+            UpdateKind::RelativePose => {
+                relative_pose::student_t_weight(gain.nis, M, self.config.health.odometry_dof)
+            }
+            _ => T::one(),
+        };
+        if weight < T::one() {
+            self.reweight(&mut gain, meas, weight, &holds[..count])?;
+            // The step detectors see the weighted innovation; the jump test (an outlying
+            // increment read as a knock) keeps the stated noise.
+            innovation = project(&gain, None)
+                .zip(innovation)
+                .map(|(w, n)| ExtrinsicInnovation {
+                    jump_info: n.jump_info,
+                    jump_score: n.jump_score,
+                    ..w
+                });
+        }
         self.correct(&gain)?;
         Ok(self.record_update(
             kind,
@@ -208,6 +229,36 @@ impl<T: Scalar, const S: usize, const C: usize, const N: usize, const F: usize> 
             (gain.accepted, held_out),
             innovation.as_ref(),
         ))
+    }
+
+    /// A relative pose's Student-t reweighting (`HealthConfig::odometry_dof`): `gain`, computed
+    /// at the stated noise, is computed again with the noise divided by `weight` (< 1). What
+    /// the gate decided at the stated noise stands (a rejected or held-out update gets only
+    /// `S^-1` and `S^-1 r` at the weighted noise, for the step detectors, and is not fused),
+    /// and so do its NIS and threshold (the NIS window and the report).
+    fn reweight<const M: usize, const L: usize>(
+        &self,
+        gain: &mut Gain<T, M, N>,
+        meas: &Measurement<T, M, L>,
+        weight: T,
+        holds: &[crate::update::Hold<T>],
+    ) -> Result<(), Error> {
+        let (nis, threshold, accepted) = (gain.nis, gain.threshold, gain.accepted);
+        let weighted = Measurement {
+            noise: meas.noise / weight,
+            ..*meas
+        };
+        // An infinite threshold forms the gain; zero stops after `S^-1 r` (NIS > 0 here).
+        let pass = if accepted {
+            T::lit(f64::INFINITY)
+        } else {
+            T::zero()
+        };
+        gain.compute_into(&self.cov, &weighted, pass, holds)?;
+        gain.nis = nis;
+        gain.threshold = threshold;
+        gain.accepted = accepted;
+        Ok(())
     }
 
     /// Applies a computed update (state and covariance) if the gate accepted it; the state

@@ -158,6 +158,22 @@ pub fn linearize<T: Scalar>(
     }
 }
 
+/// The Student-t weight of a relative pose whose NIS at its stated noise is `nis` (of `dof`
+/// degrees of freedom), for a noise with `nu` degrees of freedom: the conditional mean of the
+/// noise's precision scale `lambda` given the residual, `E[lambda | r] = (nu + m) / (nu +
+/// d^2)` (the E-step of the Student-t as a scale mixture of Gaussians, `lambda ~ Gamma(nu /
+/// 2, nu / 2)`, evaluated at the prior innovation covariance), capped at 1: an increment is
+/// never trusted beyond its stated noise, only down-weighted when it is outlying. 1 for an
+/// infinite or invalid `nu`, or a NIS that is not finite and positive.
+pub fn student_t_weight<T: Scalar>(nis: T, dof: usize, nu: T) -> T {
+    let m = T::lit(dof as f64);
+    let valid = nu.is_finite() && nu > T::zero() && nis.is_finite() && nis > m;
+    if !valid {
+        return T::one();
+    }
+    (nu + m) / (nu + nis)
+}
+
 /// `h(x ⊞ d)` expressed in the tangent space at `h(x)`: used by the Jacobian tests.
 #[cfg(test)]
 fn perturbed_prediction(
@@ -241,6 +257,55 @@ mod tests {
             tangent_at(&nominal, &moved)
         });
         assert_mat_close(&lin.extrinsic_end_rotation, &numeric, 1e-7);
+    }
+
+    #[test]
+    fn student_t_weight_down_weights_only_outlying_increments() {
+        // (4 + 6) / (4 + 46) = 0.2 for a NIS of 46; 1 at or below the dof.
+        assert!((student_t_weight(46.0f64, 6, 4.0) - 0.2).abs() < 1e-15);
+        for nis in [0.0f64, 3.0, 6.0] {
+            assert!((student_t_weight(nis, 6, 4.0) - 1.0).abs() < 1e-15);
+        }
+        // Gaussian (infinite nu) and bad inputs: no weighting.
+        for (nis, nu) in [
+            (50.0, f64::INFINITY),
+            (50.0, 0.0),
+            (f64::NAN, 4.0),
+            (50.0, -1.0),
+        ] {
+            assert!(
+                (student_t_weight(nis, 6, nu) - 1.0).abs() < 1e-15,
+                "{nis} {nu}"
+            );
+        }
+        // Monotone: a larger NIS never gets more weight; f32 alike.
+        let w: [f32; 3] = [7.0, 20.0, 200.0].map(|d| student_t_weight(d, 6, 4.0f32));
+        assert!(w[0] > w[1] && w[1] > w[2] && w[2] > 0.0, "{w:?}");
+    }
+
+    #[test]
+    fn student_t_weight_is_the_posterior_mean_precision() {
+        // With lambda ~ Gamma(nu / 2, rate nu / 2) and r | lambda ~ N(0, S / lambda) in m
+        // dof, the posterior is Gamma((nu + m) / 2, rate (nu + d^2) / 2): its mean, by
+        // numerical integration of lambda p(lambda) p(r | lambda) over lambda.
+        let (nu, m) = (4.0f64, 6usize);
+        for d2 in [8.0, 30.0, 120.0] {
+            let density =
+                |l: f64| l.powf((nu + m as f64) / 2.0 - 1.0) * (-(nu + d2) * l / 2.0).exp();
+            let (mut num, mut den) = (0.0, 0.0);
+            let h = 1e-4;
+            for k in 1..200_000 {
+                let l = k as f64 * h;
+                num += l * density(l) * h;
+                den += density(l) * h;
+            }
+            let w = student_t_weight(d2, m, nu);
+            assert!(
+                (num / den - w).abs() < 1e-4 * w,
+                "{d2}: {} vs {w}",
+                num / den
+            );
+        }
     }
 
     #[test]
