@@ -222,9 +222,9 @@ pub(crate) fn start_filter_with_health<T: Scalar>(
         health,
         ..FilterConfig::new(convert::imu_noise::<T>(imu_noise))
     };
-    let initial = match planar {
-        Some(p) => p.with_lever_arm_prior(initial),
-        None => initial,
+    let initial = match (planar, options.start) {
+        (Some(p), None) => p.with_lever_arm_prior(initial),
+        _ => initial,
     };
     let mut ekf = PoseImuEkf::<T>::new(&config, &initial)
         .map_err(|error| InputError::InvalidNoise { error })?;
@@ -456,10 +456,17 @@ pub(crate) fn initial_state<T: Scalar>(
             state.sigma_velocity = T::lit(velocity);
         }
     }
-    let extrinsic = msreg_estimator::Pose::new(
-        convert::pose::<T>(&Isometry3::from_parts(Default::default(), *rotation)).rotation,
-        Vector3::zeros(),
-    );
+    let (extrinsic, time_offset) = match &options.start {
+        Some(s) => (convert::pose::<T>(&s.t_imu_sensor), T::lit(s.time_offset_s)),
+        None => (
+            msreg_estimator::Pose::new(
+                convert::pose::<T>(&Isometry3::from_parts(Default::default(), *rotation))
+                    .rotation,
+                Vector3::zeros(),
+            ),
+            T::zero(),
+        ),
+    };
     Ok(state
         .with_extrinsic(
             SOLE_SENSOR,
@@ -467,5 +474,5 @@ pub(crate) fn initial_state<T: Scalar>(
             T::lit(options.rotation_sigma_rad),
             T::lit(options.translation_sigma_m),
         )
-        .with_time_offset(SOLE_SENSOR, T::zero(), T::lit(time_offset_sigma_s(options))))
+        .with_time_offset(SOLE_SENSOR, time_offset, T::lit(time_offset_sigma_s(options))))
 }

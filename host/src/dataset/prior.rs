@@ -36,6 +36,8 @@ type Matrix = [[f64; 4]; 4];
 
 /// A section as stored: the result file's extrinsic keys and the prior's sigmas. Other keys
 /// a result file may carry are accepted and unused, so a result file reads as a prior.
+// The result-file keys a prior does not use are read only to be accepted.
+#[allow(dead_code)]
 #[derive(Deserialize, Default)]
 #[serde(deny_unknown_fields)]
 struct RawPrior {

@@ -24,6 +24,19 @@ pub struct PoseImuOptions {
     /// (docs/planar.md, "The start from the direction of travel, and the yaw constraint
     /// on"), off otherwise.
     pub constrain_yaw: Option<bool>,
+    /// The start of the extrinsic and time offset from a prior file (`--prior`), in place of
+    /// the hand-eye rotation, a zero lever arm and a zero time offset; its sigmas are the
+    /// fields above (a zero translation sigma fixes the lever arm).
+    pub start: Option<ExtrinsicStart>,
+}
+
+/// A given start of `T_imu_sensor` and the time offset (`PoseImuOptions::start`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ExtrinsicStart {
+    /// `T_imu_sensor`.
+    pub t_imu_sensor: nalgebra::Isometry3<f64>,
+    /// Time offset, s.
+    pub time_offset_s: f64,
 }
 
 impl Default for PoseImuOptions {
@@ -35,6 +48,7 @@ impl Default for PoseImuOptions {
             translation_sigma_m: 0.5,
             min_standstill_s: 0.3,
             constrain_yaw: None,
+            start: None,
         }
     }
 }
