@@ -3,8 +3,8 @@
 //! cam0's per-frame PnP pose as ONE pose sensor (`calibrate::pnp_odometry`, MoCal's odometry) and Kalibr's
 //! extrinsic as the calibration of record. Healthy: no alarm, the final estimate near the
 //! record. Knocked: the poses after `t` rotated by 1 deg (the camera's mount turned), flagged
-//! on the sensor within 5 s. Numbers: docs/monitor.md, "A real recording" (not met yet: the
-//! test is ignored and fails).
+//! on the sensor within 5 s. Numbers: docs/monitor.md, "A real recording" (the healthy half
+//! is met and runs by default; the knock half is not met yet: ignored, fails).
 
 // A test crate: its helpers may panic on bad fixtures.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
@@ -90,23 +90,23 @@ fn alarms(r: &MonitorReport) -> Vec<(f64, &str, &str, f64)> {
         .collect()
 }
 
-/// The acceptance of issue 34 item 3 on this recording. It FAILS today (2026-12-02): the
-/// healthy recording raises 4 alarms (rotation steps at 21.8 and 51.0 s, translation steps at
-/// 39.8 and 44.0 s; drift 0.223 deg / 12.7 mm), so no knock is "flagged within 5 s" on its
-/// own. Scaling the stated noise does not mend it (x3 silences the healthy recording but
-/// then no 1 deg knock is flagged): the monitor needs a heavy-tailed measurement model
-/// (docs/monitor.md, "A real recording"). Ignored until then; not in the acceptance list.
+/// The healthy recording: no alarm, the final estimate within 0.3 deg of the record (the
+/// issue's bounds). Measured (2026-12-02, Student-t odometry, 4 dof): 0 alarms, 0.185 deg /
+/// 13.6 mm; with the Gaussian model before: 4 alarms, 0.223 deg. ~0.5 s in release.
 #[test]
-#[ignore = "fails today: 4 false alarms on the healthy real recording (docs/monitor.md)"]
-fn real_camera_monitor_is_quiet_when_healthy_and_flags_a_knock() {
+fn real_camera_monitor_is_quiet_when_healthy() {
     let Some(real) = &load() else {
         return;
     };
     let healthy = run(real, &real.odometry);
     let s = &healthy.sensors[0];
+    let mut nis: Vec<f64> = s.nis.iter().map(|p| p.nis_per_dof).collect();
+    nis.sort_by(f64::total_cmp);
+    let q = |f: f64| nis[((nis.len() - 1) as f64 * f) as usize];
     println!(
         "{} PnP poses, increment noise {:.4} deg / {:.2} mm; {:.1} s; healthy: alarms {:?}, \
-         warnings {}, drift {:.3} deg / {:.1} mm, accepted {} rejected {} held out {}",
+         warnings {}, drift {:.3} deg / {:.1} mm, accepted {} rejected {} held out {}; \
+         NIS/dof quantiles 10/50/90/99 %: {:.2} {:.2} {:.2} {:.2}",
         real.odometry.len(),
         real.pose_noise.rotation_noise_rad.to_degrees(),
         real.pose_noise.translation_noise_m * 1e3,
@@ -117,8 +117,34 @@ fn real_camera_monitor_is_quiet_when_healthy_and_flags_a_knock() {
         s.translation_change_m * 1e3,
         s.accepted,
         s.rejected,
-        s.held_out
+        s.held_out,
+        q(0.1),
+        q(0.5),
+        q(0.9),
+        q(0.99),
     );
+    assert!(
+        healthy.alarms.is_empty(),
+        "false alarm: {:?}",
+        alarms(&healthy)
+    );
+    assert!(
+        s.rotation_change_deg < MAX_DRIFT_DEG,
+        "drift {:.3} deg",
+        s.rotation_change_deg
+    );
+}
+
+/// A 1 deg knock, flagged on the sensor within 5 s. FAILS today (2026-12-02): with the
+/// Student-t odometry the knocks about y (+2.03 s) and about x+y at 25 s (+1.33 s) are
+/// flagged in time, those about x (+8.48 s) and z (+7.44 s) late (docs/monitor.md, "A real
+/// recording"). Ignored until then; not in the acceptance list.
+#[test]
+#[ignore = "fails today: knocks about x and z flagged after 8.5 s and 7.4 s (docs/monitor.md)"]
+fn real_camera_monitor_flags_a_knock_within_5_s() {
+    let Some(real) = &load() else {
+        return;
+    };
     let mut latencies = Vec::new();
     for (at_s, axis) in [
         (40.0, Vector3::x()),
@@ -137,16 +163,6 @@ fn real_camera_monitor_is_quiet_when_healthy_and_flags_a_knock() {
         );
         latencies.push(first);
     }
-    assert!(
-        healthy.alarms.is_empty(),
-        "false alarm: {:?}",
-        alarms(&healthy)
-    );
-    assert!(
-        s.rotation_change_deg < MAX_DRIFT_DEG,
-        "drift {:.3} deg",
-        s.rotation_change_deg
-    );
     for l in &latencies {
         let l = l.expect("knock not flagged");
         assert!((0.0..=MAX_LATENCY_S).contains(&l), "flagged {l:.2} s after");
