@@ -154,6 +154,9 @@ acceptance=(
   "msreg-host infra_calibrate acceptance_five_seeds"
   "msreg-host camera_imu_rig two_camera_rig_is_accurate_and_consistent_over_ten_seeds"
   "msreg-host monitor_pose_sensors one_pose_sensor_false_alarms_in_forty_unknocked_drives"
+  "msreg-host camera_imu_real_halves euroc_halves_agree_within_the_written_sigma"
+  "msreg-host pose_imu_real real_pnp_pose_imu_halves_agree_within_the_written_sigma"
+  "msreg euroc_camera_imu_real euroc_imu_april_matches_kalibr"
 )
 step "acceptance runs (${#acceptance[@]} ignored tests by name, --run-ignored only)"
 if ((use_nextest)); then
