@@ -8,7 +8,7 @@
 #![allow(clippy::unwrap_used)]
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 use msreg_host::camera_yaml::Target;
 use msreg_host::dataset::{read_corners_csv, CalibrationResult};
@@ -17,12 +17,9 @@ use msreg_host::sim::camera::{simulate_camera_imu, CameraImuSimConfig};
 use msreg_host::vision::aprilgrid::{detect_aprilgrid, AprilGridParams};
 use msreg_host::vision::GrayImage;
 
-fn msreg(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_msreg"))
-        .args(args)
-        .output()
-        .unwrap()
-}
+#[path = "support/run.rs"]
+mod run;
+use run::msreg;
 
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()

@@ -8,24 +8,12 @@
 #![allow(clippy::unwrap_used)]
 
 use std::path::Path;
-use std::process::{Command, Output};
 
 use serde_json::Value;
 
-fn msreg(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_msreg"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn ok(out: &Output) {
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
+#[path = "support/run.rs"]
+mod run;
+use run::{msreg, ok};
 
 /// A two-camera recording of `duration` s (seed 5, camera 0 at -4 ms, camera 1 at -1 ms).
 fn simulate(dir: &Path, duration: &str) -> String {

@@ -6,12 +6,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::OnceLock;
 
-fn msreg(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_msreg"))
-        .args(args)
-        .output()
-        .expect("the msreg binary runs")
-}
+#[path = "support/run.rs"]
+mod run;
+use run::msreg;
 
 fn text(out: &Output) -> String {
     format!(

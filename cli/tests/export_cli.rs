@@ -2,17 +2,14 @@
 //! with exit code 2 (missing file, unknown format, a key the format needs).
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
+
+#[path = "support/run.rs"]
+mod run;
+use run::msreg;
 
 const RESULT: &str = "cam0:\n  T_cam_imu: [[0, -1, 0, 0.05], [0, 0, -1, 0.01], [1, 0, 0, -0.02], [0, 0, 0, 1]]\n  \
                       timeshift_cam_imu: 0.004\nlidar0:\n  T_imu_lidar: [[1, 0, 0, 0.3], [0, 1, 0, 0], [0, 0, 1, 0.2], [0, 0, 0, 1]]\n";
-
-fn msreg(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_msreg"))
-        .args(args)
-        .output()
-        .expect("msreg runs")
-}
 
 fn stderr(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()

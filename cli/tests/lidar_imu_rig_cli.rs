@@ -7,24 +7,11 @@
 // A test crate: its helpers may panic on bad fixtures.
 #![allow(clippy::unwrap_used)]
 
-use std::process::{Command, Output};
-
 use serde_json::Value;
 
-fn msreg(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_msreg"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn ok(out: &Output) {
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
+#[path = "support/run.rs"]
+mod run;
+use run::{msreg, ok};
 
 #[test]
 fn a_simulated_two_lidar_rig_is_calibrated_and_scored() {

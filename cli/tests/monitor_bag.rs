@@ -6,20 +6,16 @@
 mod bag_common;
 
 use std::path::Path;
-use std::process::{Command, Output};
 
 use bag_common::{imu_msg, odometry_msg, write_mcap, write_ros1_bag, Recorded};
 use msreg_host::bag::wire::Dialect;
 use msreg_host::dataset::{read_imu_csv, read_pose_csv};
 
-type TestResult = Result<(), Box<dyn std::error::Error>>;
+#[path = "support/run.rs"]
+mod run;
+use run::msreg;
 
-fn msreg(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_msreg"))
-        .args(args)
-        .output()
-        .expect("run msreg")
-}
+type TestResult = Result<(), Box<dyn std::error::Error>>;
 
 const TOPICS: [&str; 3] = ["/vehicle/imu", "/lidar/odometry", "/camera/vo"];
 

@@ -2,14 +2,11 @@
 //! a changed calibration, 0 on a healthy drive, 2 on bad input), the re-estimated calibration.
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
-fn msreg(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_msreg"))
-        .args(args)
-        .output()
-        .expect("run msreg")
-}
+#[path = "support/run.rs"]
+mod run;
+use run::msreg;
 
 fn text(o: &Output) -> (String, String) {
     (

@@ -4,18 +4,15 @@
 
 use std::fs;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 use std::sync::OnceLock;
 
 use msreg_host::dataset::read_t_world_cam;
 use msreg_host::mi::prior_map::init::camera_yaw;
 
-fn msreg(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_msreg"))
-        .args(args)
-        .output()
-        .expect("msreg runs")
-}
+#[path = "support/run.rs"]
+mod run;
+use run::msreg;
 
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()

@@ -8,17 +8,13 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use std::path::Path;
-use std::process::{Command, Output};
 
 use msreg_host::dataset::CalibrationResult;
 use nalgebra::{Matrix3, Rotation3};
 
-fn msreg(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_msreg"))
-        .args(args)
-        .output()
-        .expect("msreg runs")
-}
+#[path = "support/run.rs"]
+mod run;
+use run::msreg;
 
 fn run_ok(args: &[&str]) {
     let out = msreg(args);

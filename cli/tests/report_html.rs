@@ -5,16 +5,13 @@
 //! figures were drawn from. Without Chromium the browser half prints a skip notice.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 
 use serde_json::Value;
 
-fn msreg(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_msreg"))
-        .args(args)
-        .output()
-        .expect("msreg runs")
-}
+#[path = "support/run.rs"]
+mod run;
+use run::msreg;
 
 fn run_ok(args: &[&str]) {
     let out = msreg(args);

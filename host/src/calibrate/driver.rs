@@ -460,8 +460,7 @@ pub(crate) fn initial_state<T: Scalar>(
         Some(s) => (convert::pose::<T>(&s.t_imu_sensor), T::lit(s.time_offset_s)),
         None => (
             msreg_estimator::Pose::new(
-                convert::pose::<T>(&Isometry3::from_parts(Default::default(), *rotation))
-                    .rotation,
+                convert::pose::<T>(&Isometry3::from_parts(Default::default(), *rotation)).rotation,
                 Vector3::zeros(),
             ),
             T::zero(),
@@ -474,5 +473,9 @@ pub(crate) fn initial_state<T: Scalar>(
             T::lit(options.rotation_sigma_rad),
             T::lit(options.translation_sigma_m),
         )
-        .with_time_offset(SOLE_SENSOR, time_offset, T::lit(time_offset_sigma_s(options))))
+        .with_time_offset(
+            SOLE_SENSOR,
+            time_offset,
+            T::lit(time_offset_sigma_s(options)),
+        ))
 }

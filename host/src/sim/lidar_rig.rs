@@ -154,7 +154,10 @@ mod tests {
         for other in [b, c] {
             assert_eq!(other.imu, a.imu);
             // Each fires every 100 ms of its own clock, its first stamp inside the IMU record.
-            assert!(other.scan_stamps.windows(2).all(|w| w[1] - w[0] == 100_000_000));
+            assert!(other
+                .scan_stamps
+                .windows(2)
+                .all(|w| w[1] - w[0] == 100_000_000));
             assert!(other.scan_stamps.len().abs_diff(a.scan_stamps.len()) <= 1);
             assert!(other.t_imu_lidar.rotation.angle_to(&a.t_imu_lidar.rotation) > 1e-3);
         }
