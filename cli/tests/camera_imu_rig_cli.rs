@@ -86,6 +86,20 @@ fn a_simulated_stereo_rig_is_calibrated_in_one_filter_and_scored() {
         assert!(held > 0.0 && held < 0.15, "cam{n}: {held} px");
     }
     assert_eq!(report["chain"][0]["name"], "cam1.T_cn_cnm1");
+    // The chain's sigmas in the report are the result file's (the written, honest ones).
+    let yaml: serde_yaml::Value =
+        serde_yaml::from_str(&std::fs::read_to_string(&result).unwrap()).unwrap();
+    for (report_key, yaml_key) in [
+        ("sigma_rot_deg", "sigma_rot_deg_cn_cnm1"),
+        ("sigma_trans_m", "sigma_trans_m_cn_cnm1"),
+    ] {
+        let reported = report["chain"][0][report_key].as_array().unwrap();
+        let written = yaml["cam1"][yaml_key].as_sequence().unwrap();
+        for (r, w) in reported.iter().zip(written) {
+            let (r, w) = (r.as_f64().unwrap(), w.as_f64().unwrap());
+            assert!((r - w).abs() <= 1e-12 * w.abs(), "{report_key}: {r} vs {w}");
+        }
+    }
 }
 
 #[test]

@@ -166,7 +166,12 @@ fn report(calibration: &MultiCameraImuCalibration, loaded: &[LoadedFrames]) -> R
         .enumerate()
         .map(|(k, link)| {
             let m = link.t_cn_cnm1.to_homogeneous();
-            let sd = |i: usize| link.covariance[(i, i)].max(0.0).sqrt();
+            // The result file's covariance (the larger of the filter's and the data's sigma).
+            let covariance = calibration
+                .chain_model_error
+                .get(k)
+                .map_or(link.covariance, |e| e.written);
+            let sd = |i: usize| covariance[(i, i)].max(0.0).sqrt();
             ChainReport {
                 name: format!("cam{}.T_cn_cnm1", k + 1),
                 t_cn_cnm1: std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)])),
