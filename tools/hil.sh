@@ -22,9 +22,12 @@ command -v qemu-system-arm >/dev/null || {
   exit 1
 }
 tools/firmware.sh build
+# --workspace, not -p msreg-hil-tests: the dependencies' features are then unified as for the
+# workspace's test build, whose artifacts are reused (with -p, msreg-host and much of its
+# dependency tree were compiled a second time: minutes in a clean CI run).
 status=0
 timeout --kill-after=10 "$timeout_s" \
-  cargo test -p msreg-hil-tests --release --test hil -- --nocapture "$@" || status=$?
+  cargo test --workspace --release --test hil -- --nocapture "$@" || status=$?
 if ((status == 124 || status == 137)); then
   echo "tools/hil.sh: HIL suite timed out after ${timeout_s}s (a hung firmware or link)" >&2
   exit 1

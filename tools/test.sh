@@ -66,7 +66,7 @@ step "lint (cargo clippy --release --workspace --all-targets -D warnings; the HI
 cargo clippy --release --workspace --all-targets -- -D warnings
 # `--all-targets` skips `test = false` targets: the HIL suite (run by tools/hil.sh below)
 # is linted, and so compiled, here, before the long steps.
-cargo clippy --release -p msreg-hil-tests --test hil -- -D warnings
+cargo clippy --release --workspace --test hil -- -D warnings
 
 step "import graph (tools/import_graph.py: imports point down, no cycle, no CLI crate in the library)"
 python3 tools/import_graph.py
