@@ -10,11 +10,13 @@
 
 #[path = "support/common.rs"]
 mod common;
+#[path = "support/lidar.rs"]
+mod lidar_support;
 
 use common::chi_square_band;
+use lidar_support::{config, error};
 use msreg_host::calibrate::lidar_imu::{self, LidarImuInput, LidarImuOptions};
-use msreg_host::sim::{simulate_lidar_rig, LidarImuSim, LidarImuSimConfig, LidarSimConfig};
-use nalgebra::{Isometry3, Vector6};
+use msreg_host::sim::{simulate_lidar_rig, LidarImuSim, LidarImuSimConfig};
 
 /// One LiDAR's calibration against its truth.
 struct Outcome {
@@ -25,26 +27,6 @@ struct Outcome {
     inside: bool,
     nees: f64,
     converged: bool,
-}
-
-fn config(seed: u64, duration_s: f64, rings: usize, columns: usize) -> LidarImuSimConfig {
-    LidarImuSimConfig {
-        seed,
-        duration_s,
-        lidar: LidarSimConfig {
-            rings,
-            columns,
-            time_offset_s: ((seed * 7919) % 21) as f64 * 1e-3 - 0.010,
-            ..LidarSimConfig::default()
-        },
-        ..LidarImuSimConfig::default()
-    }
-}
-
-fn error(estimate: &Isometry3<f64>, truth: &Isometry3<f64>) -> Vector6<f64> {
-    let r = (estimate.rotation.inverse() * truth.rotation).scaled_axis();
-    let p = truth.translation.vector - estimate.translation.vector;
-    Vector6::new(r.x, r.y, r.z, p.x, p.y, p.z)
 }
 
 fn calibrate(lidar: &LidarImuSim, options: &LidarImuOptions) -> Outcome {
